@@ -1,0 +1,25 @@
+#pragma once
+// How a subcommand joins the `formloop` binary.
+//
+// Each subcommand lives in app/cmd_<name>.cc and provides one Add<Name>Command function that declares
+// its options on a CLI11 subcommand (name, help, default declared once) and, when the user picks it,
+// stores the work to do in *action. main() parses, runs the action, prints a non-ok Status on
+// stderr and exits with Status::ExitCode(). The work itself is a library function the tests call
+// directly; the command is a thin layer over it.
+
+#include <functional>
+
+#include <CLI/CLI.hpp>
+
+#include "core/status.h"
+
+namespace formloop::app {
+
+using CommandAction = std::function<Status()>;
+
+void AddRunCommand(CLI::App& root, CommandAction* action);
+void AddRegressCommand(CLI::App& root, CommandAction* action);
+void AddSurfacesCommand(CLI::App& root, CommandAction* action);
+void AddKbCommand(CLI::App& root, CommandAction* action);
+
+}  // namespace formloop::app

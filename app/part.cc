@@ -1,0 +1,223 @@
+#include "app/part.h"
+
+#include "core/json_io.h"
+#include "reconstruction/analytic_surface.h"
+
+namespace formloop::app {
+namespace {
+
+Status ReadVec3(const JsonFields& f, const std::string& key, Eigen::Vector3d* out) {
+  if (!f.Has(key)) return Status::Ok();
+  const Json& v = f.json().at(key);
+  if (!v.is_array() || v.size() != 3 || !v[0].is_number() || !v[1].is_number() || !v[2].is_number()) {
+    return Status::BadInput(Where{.file = f.source(), .field = f.Path(key)}, "expected [x, y, z] in mm",
+                            "write three numbers, e.g. [-300, -300, -200]");
+  }
+  *out = Eigen::Vector3d(v[0].get<double>(), v[1].get<double>(), v[2].get<double>());
+  return Status::Ok();
+}
+
+Status ReadInt(const JsonFields& f, const std::string& key, int* out, int min, int max) {
+  long long value = *out;
+  FL_RETURN_IF_ERROR(f.OptionalInteger(key, &value, min, max));
+  *out = static_cast<int>(value);
+  return Status::Ok();
+}
+
+constexpr NumberRange kPositive{.min = 0, .exclusive_min = true};
+constexpr NumberRange kNonNegative{.min = 0};
+
+}  // namespace
+
+Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source) {
+  PartSpec part;
+  JsonFields top(json, source);
+  FL_RETURN_IF_ERROR(top.CheckKnown({"name", "surface", "material", "tolerance_mm", "seed", "fit", "tool", "toolpath",
+                                     "machine", "probing", "analysis", "loops", "comment"}));
+  FL_RETURN_IF_ERROR(top.String("name", &part.name));
+  if (part.name.empty() || part.name.find_first_of("/\\()") != std::string::npos) {
+    return Status::BadInput(Where{.file = source, .field = "name"}, "must be non-empty without / \\ ( )",
+                            "use letters, digits, '-' and '_'");
+  }
+  FL_RETURN_IF_ERROR(top.OptionalString("material", &part.material));
+  FL_RETURN_IF_ERROR(top.Number("tolerance_mm", &part.tolerance_mm, kPositive));
+  long long seed = static_cast<long long>(part.seed);
+  FL_RETURN_IF_ERROR(top.OptionalInteger("seed", &seed, 0));
+  part.seed = static_cast<unsigned long long>(seed);
+
+  std::optional<JsonFields> surface;
+  FL_RETURN_IF_ERROR(top.Object("surface", &surface));
+  if (!surface) {
+    return Status::BadInput(Where{.file = source, .field = "surface"}, "required field is missing",
+                            "add \"surface\": {\"reference\": \"saddle\"} (see `formloop surfaces list`)");
+  }
+  FL_RETURN_IF_ERROR(surface->CheckKnown({"reference"}));
+  FL_RETURN_IF_ERROR(surface->String("reference", &part.surface_reference));
+  if (auto made = recon::MakeReferenceSurface(part.surface_reference); !made.ok()) {
+    return Status::BadInput(Where{.file = source, .field = "surface.reference"}, made.status().message());
+  }
+
+  std::optional<JsonFields> f;
+  FL_RETURN_IF_ERROR(top.Object("fit", &f));
+  if (f) {
+    FL_RETURN_IF_ERROR(f->CheckKnown({"samples_u", "samples_v", "tolerance_mm", "check_points"}));
+    FL_RETURN_IF_ERROR(ReadInt(*f, "samples_u", &part.fit_samples_u, 4, 2000));
+    FL_RETURN_IF_ERROR(ReadInt(*f, "samples_v", &part.fit_samples_v, 4, 2000));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("tolerance_mm", &part.fit.tolerance_mm, kPositive));
+    FL_RETURN_IF_ERROR(ReadInt(*f, "check_points", &part.fit_check_points, 0, 1000000));
+  }
+
+  FL_RETURN_IF_ERROR(top.Object("tool", &f));
+  if (f) {
+    FL_RETURN_IF_ERROR(f->CheckKnown({"number", "radius_mm"}));
+    FL_RETURN_IF_ERROR(ReadInt(*f, "number", &part.toolpath.tool.number, 1, 9999));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("radius_mm", &part.toolpath.tool.radius_mm, kPositive));
+  }
+  FL_RETURN_IF_ERROR(top.Object("toolpath", &f));
+  if (f) {
+    auto& t = part.toolpath;
+    FL_RETURN_IF_ERROR(f->CheckKnown({"scallop_um", "chord_tolerance_um", "max_point_spacing_mm", "zigzag",
+                                      "feed_mm_per_min", "plunge_feed_mm_per_min", "spindle_rpm", "clearance_mm"}));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("scallop_um", &t.scallop_um, kPositive));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("chord_tolerance_um", &t.chord_tolerance_um, kPositive));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("max_point_spacing_mm", &t.max_point_spacing_mm, kPositive));
+    FL_RETURN_IF_ERROR(f->OptionalBool("zigzag", &t.zigzag));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("feed_mm_per_min", &t.feed_mm_per_min, kPositive));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("plunge_feed_mm_per_min", &t.plunge_feed_mm_per_min, kPositive));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("spindle_rpm", &t.spindle_rpm, kPositive));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("clearance_mm", &t.clearance_mm, kPositive));
+  }
+  FL_RETURN_IF_ERROR(top.Object("machine", &f));
+  if (f) {
+    FL_RETURN_IF_ERROR(f->CheckKnown({"name", "travel_min_mm", "travel_max_mm", "max_feed_mm_per_min",
+                                      "max_spindle_rpm", "effects", "probe"}));
+    FL_RETURN_IF_ERROR(ReadVec3(*f, "travel_min_mm", &part.limits.travel_min_mm));
+    FL_RETURN_IF_ERROR(ReadVec3(*f, "travel_max_mm", &part.limits.travel_max_mm));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("max_feed_mm_per_min", &part.limits.max_feed_mm_per_min, kPositive));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("max_spindle_rpm", &part.limits.max_spindle_rpm, kPositive));
+    std::optional<JsonFields> e;
+    FL_RETURN_IF_ERROR(f->Object("effects", &e));
+    if (e) {
+      auto& x = part.effects;
+      FL_RETURN_IF_ERROR(e->CheckKnown({"tool_radius_error_um", "deflection_um", "thermal_amplitude_um",
+                                        "thermal_tau_s", "surface_noise_um", "probe_noise_um"}));
+      FL_RETURN_IF_ERROR(e->OptionalNumber("tool_radius_error_um", &x.tool_radius_error_um));
+      FL_RETURN_IF_ERROR(e->OptionalNumber("deflection_um", &x.deflection_um));
+      FL_RETURN_IF_ERROR(e->OptionalNumber("thermal_amplitude_um", &x.thermal_amplitude_um));
+      FL_RETURN_IF_ERROR(e->OptionalNumber("thermal_tau_s", &x.thermal_tau_s, kPositive));
+      FL_RETURN_IF_ERROR(e->OptionalNumber("surface_noise_um", &x.surface_noise_um, kNonNegative));
+      FL_RETURN_IF_ERROR(e->OptionalNumber("probe_noise_um", &x.probe_noise_um, kNonNegative));
+    }
+    std::optional<JsonFields> p;
+    FL_RETURN_IF_ERROR(f->Object("probe", &p));
+    if (p) {
+      FL_RETURN_IF_ERROR(p->CheckKnown({"ball_radius_mm", "pretravel_mm"}));
+      FL_RETURN_IF_ERROR(p->OptionalNumber("ball_radius_mm", &part.true_probe.ball_radius_mm, kPositive));
+      FL_RETURN_IF_ERROR(p->OptionalNumber("pretravel_mm", &part.true_probe.pretravel_mm));
+    }
+  }
+  FL_RETURN_IF_ERROR(top.Object("probing", &f));
+  bool true_probe_given = json.contains("machine") && json["machine"].contains("probe");
+  if (f) {
+    FL_RETURN_IF_ERROR(f->CheckKnown({"grid", "inset_fraction", "ball_radius_mm", "pretravel_mm", "clearance_mm",
+                                      "search_mm", "feed_mm_per_min"}));
+    if (f->Has("grid")) {
+      const Json& g = f->json().at("grid");
+      if (!g.is_array() || g.size() != 2 || !g[0].is_number_integer() || !g[1].is_number_integer() ||
+          g[0].get<int>() < 5 || g[1].get<int>() < 5 || g[0].get<int>() > 1000 || g[1].get<int>() > 1000) {
+        return Status::BadInput(Where{.file = source, .field = "probing.grid"}, "expected [nu, nv]",
+                                "write two integers from 5 to 1000, e.g. [20, 20]");
+      }
+      part.probe_nu = g[0].get<int>();
+      part.probe_nv = g[1].get<int>();
+    }
+    FL_RETURN_IF_ERROR(f->OptionalNumber("inset_fraction", &part.probe_inset_fraction, {.min = 0, .max = 0.45}));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("ball_radius_mm", &part.probe.ball_radius_mm, kPositive));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("pretravel_mm", &part.probe.pretravel_mm));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("clearance_mm", &part.probe_program.clearance_mm, kPositive));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("search_mm", &part.probe_program.search_mm, kPositive));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("feed_mm_per_min", &part.probe_program.probe_feed_mm_per_min, kPositive));
+  }
+  if (!true_probe_given) part.true_probe = part.probe;
+  part.probe_program.ball_radius_mm = part.probe.ball_radius_mm;
+  FL_RETURN_IF_ERROR(top.Object("analysis", &f));
+  if (f) {
+    FL_RETURN_IF_ERROR(f->CheckKnown({"neighbours", "max_degree", "coverage_factor"}));
+    FL_RETURN_IF_ERROR(ReadInt(*f, "neighbours", &part.analysis.neighbours, 1, 64));
+    FL_RETURN_IF_ERROR(ReadInt(*f, "max_degree", &part.analysis.max_degree, 0, 10));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("coverage_factor", &part.analysis.coverage_factor, kPositive));
+  }
+  FL_RETURN_IF_ERROR(top.Object("loops", &f));
+  if (f) {
+    FL_RETURN_IF_ERROR(f->CheckKnown({"max", "max_offset_um"}));
+    FL_RETURN_IF_ERROR(ReadInt(*f, "max", &part.max_loops, 1, 20));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("max_offset_um", &part.compensation.max_offset_um, kPositive));
+  }
+  // Cross-field validation, reported against the part file.
+  auto in_file = [&](Status s) { return s.ok() ? s : Status(s.code(), source + ": " + s.message()); };
+  FL_RETURN_IF_ERROR(in_file(part.toolpath.Validate()));
+  FL_RETURN_IF_ERROR(in_file(part.limits.Validate()));
+  FL_RETURN_IF_ERROR(in_file(part.effects.Validate()));
+  FL_RETURN_IF_ERROR(in_file(part.probe.Validate()));
+  FL_RETURN_IF_ERROR(in_file(part.true_probe.Validate()));
+  FL_RETURN_IF_ERROR(in_file(part.analysis.Validate()));
+  FL_RETURN_IF_ERROR(in_file(part.fit.Validate()));
+  return part;
+}
+
+Result<PartSpec> ReadPart(const std::filesystem::path& path) {
+  FL_ASSIGN_OR_RETURN(Json json, ReadJsonFile(path));
+  return ParsePart(json, path.string());
+}
+
+nlohmann::json PartSpec::ToJson() const {
+  const auto& t = toolpath;
+  return {{"name", name},
+          {"surface", {{"reference", surface_reference}}},
+          {"material", material},
+          {"tolerance_mm", tolerance_mm},
+          {"seed", seed},
+          {"fit",
+           {{"samples_u", fit_samples_u},
+            {"samples_v", fit_samples_v},
+            {"tolerance_mm", fit.tolerance_mm},
+            {"check_points", fit_check_points}}},
+          {"tool", {{"number", t.tool.number}, {"radius_mm", t.tool.radius_mm}}},
+          {"toolpath",
+           {{"scallop_um", t.scallop_um},
+            {"chord_tolerance_um", t.chord_tolerance_um},
+            {"max_point_spacing_mm", t.max_point_spacing_mm},
+            {"zigzag", t.zigzag},
+            {"feed_mm_per_min", t.feed_mm_per_min},
+            {"plunge_feed_mm_per_min", t.plunge_feed_mm_per_min},
+            {"spindle_rpm", t.spindle_rpm},
+            {"clearance_mm", t.clearance_mm}}},
+          {"machine",
+           {{"travel_min_mm", {limits.travel_min_mm.x(), limits.travel_min_mm.y(), limits.travel_min_mm.z()}},
+            {"travel_max_mm", {limits.travel_max_mm.x(), limits.travel_max_mm.y(), limits.travel_max_mm.z()}},
+            {"max_feed_mm_per_min", limits.max_feed_mm_per_min},
+            {"max_spindle_rpm", limits.max_spindle_rpm},
+            {"effects",
+             {{"tool_radius_error_um", effects.tool_radius_error_um},
+              {"deflection_um", effects.deflection_um},
+              {"thermal_amplitude_um", effects.thermal_amplitude_um},
+              {"thermal_tau_s", effects.thermal_tau_s},
+              {"surface_noise_um", effects.surface_noise_um},
+              {"probe_noise_um", effects.probe_noise_um}}},
+            {"probe", {{"ball_radius_mm", true_probe.ball_radius_mm}, {"pretravel_mm", true_probe.pretravel_mm}}}}},
+          {"probing",
+           {{"grid", {probe_nu, probe_nv}},
+            {"inset_fraction", probe_inset_fraction},
+            {"ball_radius_mm", probe.ball_radius_mm},
+            {"pretravel_mm", probe.pretravel_mm},
+            {"clearance_mm", probe_program.clearance_mm},
+            {"search_mm", probe_program.search_mm},
+            {"feed_mm_per_min", probe_program.probe_feed_mm_per_min}}},
+          {"analysis",
+           {{"neighbours", analysis.neighbours},
+            {"max_degree", analysis.max_degree},
+            {"coverage_factor", analysis.coverage_factor}}},
+          {"loops", {{"max", max_loops}, {"max_offset_um", compensation.max_offset_um}}}};
+}
+
+}  // namespace formloop::app

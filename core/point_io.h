@@ -1,0 +1,62 @@
+#pragma once
+// Point-set files: CSV, XYZ, PLY (ASCII and binary) and PCD (through PCL).
+//
+// CSV: a header row naming the columns, ',' separated; lines starting with '#' and blank lines are
+//   comments. Columns x, y, z are required; nx, ny, nz (all three or none), id and t are optional;
+//   every other column becomes a named scalar. Numbers are parsed without the locale.
+// XYZ: whitespace-separated "x y z" or "x y z nx ny nz" per line, '#' comments, no header.
+// PLY: element "vertex" with properties x, y, z, optional nx, ny, nz, id, t and any other scalar
+//   properties (char..double types); ascii, binary_little_endian and binary_big_endian are read;
+//   ascii or binary_little_endian are written (doubles). Other elements (faces) are skipped on read.
+// PCD: through pcl::PCDReader / pcl::PCDWriter; fields map like PLY properties.
+//
+// Readers reject bad files with a message naming file, line (or byte offset) and field: missing
+// columns, non-numbers, NaN/inf, empty files, truncated binary data. Writers write atomically
+// (core/atomic_file.h): on error no output file is left.
+
+#include <filesystem>
+#include <string>
+
+#include "core/point_set.h"
+#include "core/status.h"
+
+namespace formloop {
+
+enum class PointFormat { kCsv, kXyz, kPly, kPcd };
+
+// From the extension (.csv .xyz .txt .ply .pcd, case-insensitive); BadInput names the path otherwise.
+Result<PointFormat> PointFormatFromPath(const std::filesystem::path& path);
+
+struct PointWriteOptions {
+  bool binary = true;   // PLY and PCD: binary (little-endian) rather than ASCII
+  int precision = 9;    // CSV/XYZ/ASCII PLY/ASCII PCD: digits after the decimal point (mm -> 1 nm at 6);
+                        // negative: shortest text that reads back exactly (FormatExact)
+};
+
+Result<PointSet> ReadCsv(const std::filesystem::path& path);
+Result<PointSet> ReadXyz(const std::filesystem::path& path);
+Result<PointSet> ReadPly(const std::filesystem::path& path);
+Result<PointSet> ReadPcd(const std::filesystem::path& path);
+Status WriteCsv(const std::filesystem::path& path, const PointSet& points, const PointWriteOptions& options = {});
+Status WriteXyz(const std::filesystem::path& path, const PointSet& points, const PointWriteOptions& options = {});
+Status WritePly(const std::filesystem::path& path, const PointSet& points, const PointWriteOptions& options = {});
+Status WritePcd(const std::filesystem::path& path, const PointSet& points, const PointWriteOptions& options = {});
+
+// Dispatch on the extension.
+Result<PointSet> ReadPoints(const std::filesystem::path& path);
+Status WritePoints(const std::filesystem::path& path, const PointSet& points, const PointWriteOptions& options = {});
+
+// Binary PLY/PCD store ids as 4-byte ints when every id fits, else as doubles (exact to ±2^53).
+// Returns whether they fit; BadInput naming the file when an id cannot be stored exactly.
+Result<bool> IdsFitInt32(const PointSet& points, const std::string& file, const std::string& format);
+
+// Locale-independent number formatting and parsing shared by every text writer in formloop.
+// FormatFixed(1.5, 3) == "1.500"; never "1,500" whatever the global locale. A result that rounds to
+// zero carries no sign ("0.000", not "-0.000"). decimals < 0 counts as 0.
+std::string FormatFixed(double value, int decimals);
+// Shortest text that reads back to exactly the same double.
+std::string FormatExact(double value);
+// Parses the whole string as a finite or non-finite double; false on anything else (" 1", "1x", "").
+bool ParseDouble(std::string_view text, double* value);
+
+}  // namespace formloop

@@ -1,0 +1,77 @@
+#!/usr/bin/env bash
+# formloop set-up, build and run — the one entry point behind the README's quick start.
+#
+#   scripts/setup.sh demo    install what is missing, build (Release, all cores), run the demo job
+#   scripts/setup.sh test    install what is missing, build, run the whole test suite (ctest)
+#   scripts/setup.sh deps    only install what is missing
+#   scripts/setup.sh build   install what is missing and build
+#
+# Every dependency is a Debian 12 package; nothing is downloaded at build or run time.
+# Idempotent: when every package is present no apt command runs at all.
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+BUILD_DIR="${FORMLOOP_BUILD_DIR:-$ROOT/build}"
+JOBS="${FORMLOOP_JOBS:-$(nproc)}"
+
+# Keep this list in step with docs/ARCHITECTURE.md ("Dependencies").
+PACKAGES=(
+  build-essential cmake ninja-build pkg-config
+  libeigen3-dev libcgal-dev
+  libocct-foundation-dev libocct-modeling-data-dev libocct-modeling-algorithms-dev libocct-data-exchange-dev
+  libsqlite3-dev libpcl-dev
+  libgtest-dev libgmock-dev libbenchmark-dev
+  nlohmann-json3-dev libcli11-dev libfmt-dev libspdlog-dev
+)
+
+log() { printf '[setup] %s\n' "$*" >&2; }
+
+install_deps() {
+  local missing=()
+  for p in "${PACKAGES[@]}"; do
+    if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+      missing+=("$p")
+    fi
+  done
+  if [ ${#missing[@]} -eq 0 ]; then
+    log "all ${#PACKAGES[@]} packages present"
+    return
+  fi
+  log "installing ${#missing[@]} missing package(s): ${missing[*]}"
+  local SUDO=""
+  if [ "$(id -u)" -ne 0 ]; then
+    command -v sudo >/dev/null || { log "not root and no sudo: install as root: apt-get install ${missing[*]}"; exit 2; }
+    SUDO="sudo"
+  fi
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+  log "packages installed"
+}
+
+build() {
+  local gen=()
+  command -v ninja >/dev/null && gen=(-G Ninja)
+  if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
+    cmake -S "$ROOT" -B "$BUILD_DIR" "${gen[@]}" -DCMAKE_BUILD_TYPE=Release >&2
+  fi
+  cmake --build "$BUILD_DIR" --parallel "$JOBS" >&2
+}
+
+cmd="${1:-demo}"
+case "$cmd" in
+  deps)  install_deps ;;
+  build) install_deps; build ;;
+  demo)
+    install_deps; build
+    out="${FORMLOOP_DEMO_OUT:-$ROOT/runs/demo}"
+    "$BUILD_DIR/app/formloop" run "$ROOT/data/parts/demo-saddle.json" --out "$out" --force
+    log "demo finished: open $out/summary.json (stage reports are in $out/)"
+    ;;
+  test)
+    install_deps; build
+    cd "$BUILD_DIR"
+    ctest --output-on-failure --parallel "$JOBS" --timeout 900
+    ;;
+  *) echo "usage: scripts/setup.sh demo|test|deps|build" >&2; exit 2 ;;
+esac

@@ -1,0 +1,191 @@
+// The end-to-end run: every stage writes its report, the loop reaches tolerance, runs repeat
+// byte for byte, bad parts are refused before anything is written, and the binary behaves.
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <unistd.h>
+#include <sys/wait.h>
+
+#include <gtest/gtest.h>
+
+#include "app/part.h"
+#include "app/pipeline.h"
+#include "core/atomic_file.h"
+#include "core/json_io.h"
+#include "core/log.h"
+
+namespace formloop::app {
+namespace {
+
+namespace fs = std::filesystem;
+const fs::path kDemo = fs::path(FORMLOOP_SOURCE_DIR) / "data" / "parts" / "demo-saddle.json";
+
+class RunTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    log::SetLevel(log::Level::kWarn);
+    dir_ = fs::temp_directory_path() / ("formloop-run-" + std::to_string(::getpid()) + "-" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  fs::path dir_;
+};
+
+TEST_F(RunTest, DemoRunsEveryStageAndCompensatesIntoTolerance) {
+  const auto part = ReadPart(kDemo);
+  ASSERT_TRUE(part.ok()) << part.status().message();
+  RunOptions options;
+  options.out = dir_ / "demo";
+  const auto summary = RunPart(*part, options);
+  ASSERT_TRUE(summary.ok()) << summary.status().message();
+  for (const char* file : {"summary.json", "formloop.log", "inputs/part.json", "surface/Q.step", "surface/surface.json",
+                           "surface/samples.csv", "toolpath/program.ngc", "toolpath/probe.ngc",
+                           "toolpath/probing_plan.json", "toolpath/toolpath.json", "loop-0/probe_log.csv",
+                           "loop-0/machine.json", "loop-0/deviations.csv", "loop-0/deviations.ply",
+                           "loop-0/analysis.json", "loop-0/program_compensated.ngc", "loop-0/compensation_side.csv",
+                           "loop-0/compensation.json", "loop-1/analysis.json"}) {
+    EXPECT_TRUE(fs::exists(options.out / file)) << file;
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "demo.partial"));
+  // The injected error is systematic and out of tolerance; one mirror compensation brings it in.
+  ASSERT_EQ(summary->loops.size(), 2u);
+  const LoopSummary& first = summary->loops[0];
+  const LoopSummary& second = summary->loops[1];
+  EXPECT_GT(first.raw_moran_z, 2.326);
+  EXPECT_GT(first.form_error_um, 10.0);
+  EXPECT_TRUE(first.compensated);
+  EXPECT_TRUE(second.within_tolerance);
+  EXPECT_LT(second.form_error_um, 0.4 * first.form_error_um);
+  EXPECT_LT(second.raw_moran_z, 2.326) << "what is left after compensation should be random";
+  // Residual σ stays at the injected noise level: roughness 1 µm, probe 0.5 µm, and the scallop
+  // (0..3 µm between passes) → about 1.4 µm.
+  EXPECT_NEAR(second.random_sigma_um, std::hypot(1.0, 0.5, 3.0 / std::sqrt(12.0) * 1.0), 0.4);
+  // The resolved inputs reproduce the part.
+  const auto resolved = ReadPart(options.out / "inputs" / "part.json");
+  ASSERT_TRUE(resolved.ok()) << resolved.status().message();
+  EXPECT_EQ(resolved->ToJson(), part->ToJson());
+  // The compensated program moves the tool, the side file's offsets check out from the programs.
+  const auto comp = ReadJsonFile(options.out / "loop-0" / "compensation.json");
+  ASSERT_TRUE(comp.ok());
+  EXPECT_GT((*comp)["max_offset_um"].get<double>(), 5.0);
+  EXPECT_LT((*comp)["side_file_check_max_disagreement_um"].get<double>(), 0.2);
+}
+
+std::string Slurp(const fs::path& p) { return ReadFile(p).value(); }
+
+TEST_F(RunTest, SameInputsGiveByteIdenticalOutputs) {
+  const auto part = ReadPart(kDemo);
+  ASSERT_TRUE(part.ok());
+  for (const char* name : {"a", "b"}) {
+    RunOptions options;
+    options.out = dir_ / name;
+    ASSERT_TRUE(RunPart(*part, options).ok());
+  }
+  int compared = 0;
+  for (const auto& entry : fs::recursive_directory_iterator(dir_ / "a")) {
+    if (!entry.is_regular_file() || entry.path().filename() == "formloop.log") continue;  // the log has timestamps
+    const fs::path rel = fs::relative(entry.path(), dir_ / "a");
+    ASSERT_TRUE(fs::exists(dir_ / "b" / rel)) << rel;
+    EXPECT_EQ(Slurp(entry.path()), Slurp(dir_ / "b" / rel)) << rel;
+    ++compared;
+  }
+  EXPECT_GE(compared, 18);
+}
+
+TEST_F(RunTest, BadPartsAreRefusedWithTheFieldAndNothingIsWritten) {
+  auto json = ReadJsonFile(kDemo).value();
+  struct Case {
+    std::function<void(Json&)> edit;
+    std::string expect;
+  };
+  const std::vector<Case> cases = {
+      {[](Json& j) { j.erase("tolerance_mm"); }, "field 'tolerance_mm': required field is missing"},
+      {[](Json& j) { j["tool"]["radius_mm"] = -3; }, "field 'tool.radius_mm'"},
+      {[](Json& j) { j["surface"]["reference"] = "teapot"; }, "field 'surface.reference'"},
+      {[](Json& j) { j["toolpath"]["scallop"] = 3; }, "field 'toolpath.scallop': unknown field"},
+      {[](Json& j) { j["probing"]["grid"] = {20}; }, "field 'probing.grid'"},
+      {[](Json& j) { j["machine"]["travel_min_mm"] = "far"; }, "field 'machine.travel_min_mm'"},
+  };
+  for (const Case& c : cases) {
+    Json edited = json;
+    c.edit(edited);
+    const auto part = ParsePart(edited, "bad.json");
+    ASSERT_FALSE(part.ok()) << c.expect;
+    EXPECT_EQ(part.status().code(), StatusCode::kBadInput);
+    EXPECT_EQ(part.status().message().rfind("bad.json", 0), 0u) << part.status().message();
+    EXPECT_NE(part.status().message().find(c.expect), std::string::npos) << part.status().message();
+  }
+  EXPECT_TRUE(fs::is_empty(dir_));
+}
+
+TEST_F(RunTest, SafetyLimitStopsTheRunAndLeavesNoRunFolder) {
+  auto json = ReadJsonFile(kDemo).value();
+  json["machine"]["travel_max_mm"] = {30, 300, 150};  // the saddle spans X -50..50
+  const auto part = ParsePart(json, "tight.json");
+  ASSERT_TRUE(part.ok());
+  RunOptions options;
+  options.out = dir_ / "tight";
+  const auto summary = RunPart(*part, options);
+  ASSERT_FALSE(summary.ok());
+  EXPECT_EQ(summary.status().code(), StatusCode::kSafetyLimit);
+  EXPECT_NE(summary.status().message().find("outside the travel"), std::string::npos) << summary.status().message();
+  EXPECT_FALSE(fs::exists(options.out));
+  EXPECT_FALSE(fs::exists(dir_ / "tight" / "toolpath" / "program.ngc"));
+  EXPECT_TRUE(fs::exists(dir_ / "tight.failed" / "formloop.log"));
+  EXPECT_FALSE(fs::exists(dir_ / "tight.failed" / "toolpath" / "program.ngc")) << "no program beyond the limits";
+}
+
+TEST_F(RunTest, ExistingRunFolderNeedsForce) {
+  fs::create_directories(dir_ / "taken");
+  const auto part = ReadPart(kDemo);
+  RunOptions options;
+  options.out = dir_ / "taken";
+  const auto r = RunPart(*part, options);
+  EXPECT_EQ(r.status().code(), StatusCode::kBadInput);
+  EXPECT_NE(r.status().message().find("--force"), std::string::npos);
+}
+
+// Runs the formloop binary; returns the exit code and stdout.
+int RunBinary(const std::string& args, std::string* out) {
+  const std::string command = std::string(FORMLOOP_BINARY) + " " + args + " 2>/dev/null";
+  FILE* pipe = ::popen(command.c_str(), "r");
+  if (pipe == nullptr) return -1;
+  std::array<char, 4096> buffer{};
+  out->clear();
+  std::size_t n;
+  while ((n = std::fread(buffer.data(), 1, buffer.size(), pipe)) > 0) out->append(buffer.data(), n);
+  const int status = ::pclose(pipe);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+TEST_F(RunTest, BinaryHelpExitCodesAndCleanStdout) {
+  std::string out;
+  EXPECT_EQ(RunBinary("--help", &out), 0);
+  for (const char* sub : {"run", "regress", "surfaces", "kb"}) EXPECT_NE(out.find(sub), std::string::npos) << sub;
+  EXPECT_EQ(RunBinary("run --help", &out), 0);
+  EXPECT_NE(out.find("--out"), std::string::npos);
+  EXPECT_EQ(RunBinary("run " + (dir_ / "missing.json").string(), &out), 2);
+  EXPECT_EQ(RunBinary("no-such-command", &out), 2);
+  EXPECT_EQ(RunBinary("surfaces sample teapot --out " + (dir_ / "x.csv").string(), &out), 2);
+  // stdout carries only JSON.
+  ASSERT_EQ(RunBinary("surfaces list", &out), 0);
+  const auto listed = ParseJson(out, "stdout");
+  ASSERT_TRUE(listed.ok()) << out;
+  EXPECT_EQ(listed->size(), 9u);
+  ASSERT_EQ(RunBinary("kb init " + (dir_ / "cases.db").string(), &out), 0);
+  const auto kb = ParseJson(out, "stdout");
+  ASSERT_TRUE(kb.ok()) << out;
+  EXPECT_EQ((*kb)["journal_mode"], "wal");
+  ASSERT_EQ(RunBinary("surfaces export franke --out " + (dir_ / "franke.step").string(), &out), 0);
+  EXPECT_TRUE(out.empty()) << "STEP banners must not reach stdout: " << out;
+  EXPECT_TRUE(fs::exists(dir_ / "franke.step"));
+}
+
+}  // namespace
+}  // namespace formloop::app
