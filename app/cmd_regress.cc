@@ -8,6 +8,7 @@
 #include "core/json_io.h"
 #include "core/log.h"
 #include "core/point_io.h"
+#include "core/progress.h"
 #include "reconstruction/analytic_surface.h"
 
 namespace formloop::app {
@@ -34,6 +35,7 @@ void AddRegressCommand(CLI::App& root, CommandAction* action) {
       std::vector<std::string> names = opts->surfaces.empty() ? recon::ReferenceSurfaceNames() : opts->surfaces;
       nlohmann::json table = nlohmann::json::array();
       int failures = 0;
+      Progress progress("regress", names.size());
       for (const std::string& name : names) {
         Json part_json = base;
         part_json["name"] = base.value("name", std::string("part")) + "-" + name;
@@ -64,7 +66,9 @@ void AddRegressCommand(CLI::App& root, CommandAction* action) {
         }
         log::Info("regress {:<18} {}", name, row.dump());
         table.push_back(row);
+        progress.Advance();
       }
+      progress.Finish();
       std::cout << nlohmann::json({{"surfaces", table}, {"failures", failures}}).dump(2) << std::endl;
       if (failures > 0) return Status::Failed(std::to_string(failures) + " reference surface(s) failed the regression");
       return Status::Ok();

@@ -1,5 +1,6 @@
 // Status/Result, JSON field access, atomic files, the seeded RNG and the log facade.
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -11,6 +12,7 @@
 #include "core/atomic_file.h"
 #include "core/json_io.h"
 #include "core/log.h"
+#include "core/progress.h"
 #include "core/random.h"
 #include "core/status.h"
 
@@ -178,6 +180,34 @@ TEST(LogTest, FileSinkRecordsMessages) {
   EXPECT_FALSE(log::ParseLevel("loud").ok());
   // A folder cannot be opened as a log file.
   EXPECT_EQ(log::StartFileLog(dir.path()).code(), StatusCode::kIoError);
+}
+
+}  // namespace
+}  // namespace formloop
+
+namespace formloop {
+namespace {
+
+TEST(ProgressTest, PlainLinesWhenStderrIsNotATerminal) {
+  // Under ctest stderr is a pipe or file, so the reporter prints plain lines: none before the
+  // interval has passed, and one final line with the totals.
+  ::testing::internal::CaptureStderr();
+  {
+    Progress progress("projecting points", 1000, /*plain_interval_s=*/3600);
+    for (int i = 0; i < 1000; ++i) progress.Advance();
+  }  // the destructor finishes
+  const std::string text = ::testing::internal::GetCapturedStderr();
+  if (::isatty(STDERR_FILENO)) GTEST_SKIP() << "stderr is a terminal";
+  EXPECT_EQ(text.find("projecting points: 1000/1000 (100%)"), 0u) << text;
+  EXPECT_EQ(std::count(text.begin(), text.end(), '\n'), 1);
+  ::testing::internal::CaptureStderr();
+  Progress::SetEnabled(false);
+  {
+    Progress quiet("quiet", 5);
+    quiet.Finish();
+  }
+  Progress::SetEnabled(true);
+  EXPECT_TRUE(::testing::internal::GetCapturedStderr().empty());
 }
 
 }  // namespace
