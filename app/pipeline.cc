@@ -101,7 +101,7 @@ Status RunStages(const PartSpec& part, const fs::path& dir, RunSummary* summary)
   FL_ASSIGN_OR_RETURN(nc::Toolpath nominal, nc::PlanRaster(q, part.toolpath));
   nc::PostOptions post;
   post.limits = part.limits;
-  post.title = "formloop " + std::string(kVersion) + " part " + part.name + " loop 0 (nominal)";
+  post.title = "formloop " + std::string(kVersion) + " part " + part.name + " loop 0, nominal";
   FL_ASSIGN_OR_RETURN(std::string program, nc::PostLinuxCnc(nominal, post));
   FL_RETURN_IF_ERROR(MakeDir(dir / "toolpath"));
   FL_RETURN_IF_ERROR(WriteFileAtomic(dir / "toolpath" / "program.ngc", program));
@@ -199,7 +199,7 @@ Status RunStages(const PartSpec& part, const fs::path& dir, RunSummary* summary)
                           nc::CompensateToolpath(nominal, field, source, part.compensation));
       nc::PostOptions post_k = post;
       post_k.title = "formloop " + std::string(kVersion) + " part " + part.name + " loop " + std::to_string(loop + 1) +
-                     " (mirror-compensated)";
+                     ", mirror-compensated";
       FL_ASSIGN_OR_RETURN(std::string compensated_program, nc::PostLinuxCnc(compensation.path, post_k));
       FL_ASSIGN_OR_RETURN(std::vector<nc::ProgramMove> nominal_moves,
                           nc::ReadLinuxCncMoves(program, (dir / "toolpath" / "program.ngc").string()));

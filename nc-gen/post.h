@@ -45,6 +45,10 @@ struct ProgramMove {
   std::string comment;                            // a comment on the same line, if any
 };
 
+// Text safe inside an RS274NGC comment: LinuxCNC rejects nested parentheses ("Nested comment
+// found"), so ( ) become [ ] and control characters become spaces.
+std::string CommentText(const std::string& text);
+
 // RS274NGC text for LinuxCNC. The i-th feed move after the "(cut)" marker is the i-th CL point.
 Result<std::string> PostLinuxCnc(const Toolpath& path, const PostOptions& options);
 

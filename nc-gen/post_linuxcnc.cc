@@ -39,6 +39,16 @@ Status CheckTravel(const MachineLimits& limits, const Eigen::Vector3d& tip, cons
   return Status::Ok();
 }
 
+std::string CommentText(const std::string& text) {
+  std::string out = text;
+  for (char& c : out) {
+    if (c == '(') c = '[';
+    if (c == ')') c = ']';
+    if (static_cast<unsigned char>(c) < 0x20) c = ' ';
+  }
+  return out;
+}
+
 namespace {
 
 class Writer {
@@ -91,7 +101,7 @@ Result<std::string> PostLinuxCnc(const Toolpath& path, const PostOptions& option
 
   Writer w(options);
   w.Line("%");
-  w.Line("(" + options.title + ")");
+  w.Line("(" + CommentText(options.title) + ")");
   w.Line("(ball-end tool T" + std::to_string(tp.tool.number) + " radius " + w.Num(tp.tool.radius_mm) +
          " mm; programmed point = ball tip; " + std::to_string(path.passes) + " passes)");
   w.Line("G21 G90 G17 G94 G40 G49 G80");

@@ -25,12 +25,12 @@ Result<std::string> PostLinuxCncProbing(const metrology::ProbingPlan& plan, cons
     return Status::SafetyLimit("probe feed exceeds the machine's feed limit; no probing program was written");
   }
   std::ostringstream out;
-  out << "%\n(" << options.post.title << ")\n";
+  out << "%\n(" << CommentText(options.post.title) << ")\n";
   out << "(stylus ball radius " << FormatFixed(options.ball_radius_mm, 4)
       << " mm; programmed point = ball centre; " << plan.points.size() << " points)\n";
   out << "G21 G90 G17 G94 G40 G49 G80\n";
   out << "G0 Z" << FormatFixed(options.safe_z_mm, dec) << "\n";
-  out << "(PROBEOPEN " << options.results_file << ")\n";
+  out << "(PROBEOPEN " << CommentText(options.results_file) << ")\n";
   for (const metrology::ProbePoint& p : plan.points) {
     const Eigen::Vector3d centre_on_surface = p.point + options.ball_radius_mm * p.normal;
     const Eigen::Vector3d start = centre_on_surface + options.clearance_mm * p.normal;

@@ -22,6 +22,7 @@ PACKAGES=(
   libsqlite3-dev libpcl-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   nlohmann-json3-dev libcli11-dev libfmt-dev libspdlog-dev
+  linuxcnc-uspace   # reference tool: its rs274 interpreter checks our LinuxCNC programs in the tests
 )
 
 log() { printf '[setup] %s\n' "$*" >&2; }

@@ -173,3 +173,81 @@ TEST(CompensationTest, MirrorOffsetIsMinusDsAlongTheNormalAndVerifiesFromTheProg
 
 }  // namespace
 }  // namespace formloop::nc
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include <unistd.h>
+#include <sys/wait.h>
+
+namespace formloop::nc {
+namespace {
+
+TEST(PostTest, CommentsNeverNestParentheses) {
+  EXPECT_EQ(CommentText("part a (loop 0) \n"), "part a [loop 0]  ");
+  PostOptions post;
+  post.title = "title (with parentheses)";
+  const auto text = PostLinuxCnc(PlanRaster(Saddle(), CoarseOptions()).value(), post);
+  ASSERT_TRUE(text.ok());
+  EXPECT_NE(text->find("(title [with parentheses])"), std::string::npos);
+}
+
+// LinuxCNC's own interpreter (Debian linuxcnc-uspace, installed by scripts/setup.sh) must accept the
+// cutting and the probing program and turn them into exactly our moves.
+std::string RunRs274(const std::filesystem::path& program, int* exit_code) {
+  const std::filesystem::path canon = program.string() + ".canon";
+  const std::string command = "rs274 -g " + program.string() + " " + canon.string() + " </dev/null 2>&1";
+  FILE* pipe = ::popen(command.c_str(), "r");
+  std::string out;
+  std::array<char, 4096> buffer{};
+  std::size_t n;
+  while (pipe != nullptr && (n = std::fread(buffer.data(), 1, buffer.size(), pipe)) > 0) out.append(buffer.data(), n);
+  const int status = pipe != nullptr ? ::pclose(pipe) : -1;
+  *exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  std::ifstream in(canon);
+  std::string canon_text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::filesystem::remove(canon);
+  return canon_text + "\n--- rs274 output ---\n" + out;
+}
+
+std::size_t Count(const std::string& text, const std::string& word) {
+  std::size_t count = 0;
+  for (std::size_t pos = text.find(word); pos != std::string::npos; pos = text.find(word, pos + 1)) ++count;
+  return count;
+}
+
+TEST(PostTest, LinuxCncInterpreterAcceptsProgramsAndProbing) {
+  ASSERT_EQ(std::system("command -v rs274 >/dev/null 2>&1"), 0)
+      << "rs274 not found: install Debian's linuxcnc-uspace (scripts/setup.sh does)";
+  const auto q = Saddle();
+  const auto path = PlanRaster(q, CoarseOptions());
+  ASSERT_TRUE(path.ok());
+  PostOptions post;
+  post.title = "formloop test (nested) program";
+  const auto text = PostLinuxCnc(*path, post);
+  const auto plan = metrology::PlanProbingGrid(q, 6, 5, 0.05);
+  ProbeProgramOptions probe_options;
+  probe_options.safe_z_mm = 40;
+  probe_options.post.title = "probing (test)";
+  const auto probe_text = PostLinuxCncProbing(*plan, probe_options);
+  ASSERT_TRUE(text.ok() && probe_text.ok());
+  const auto dir = std::filesystem::temp_directory_path() / ("formloop-rs274-" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  std::ofstream(dir / "p.ngc") << *text;
+  std::ofstream(dir / "probe.ngc") << *probe_text;
+  int code = 0;
+  const std::string canon = RunRs274(dir / "p.ngc", &code);
+  EXPECT_EQ(code, 0) << canon.substr(canon.size() > 2000 ? canon.size() - 2000 : 0);
+  EXPECT_EQ(Count(canon, "STRAIGHT_FEED"), path->points.size());
+  EXPECT_GE(Count(canon, "USE_LENGTH_UNITS(CANON_UNITS_MM)"), 1u);  // at start-up and for our G21
+  EXPECT_EQ(Count(canon, "CANON_UNITS_INCHES"), 0u);
+  const std::string probe_canon = RunRs274(dir / "probe.ngc", &code);
+  EXPECT_EQ(code, 0) << probe_canon.substr(probe_canon.size() > 2000 ? probe_canon.size() - 2000 : 0);
+  EXPECT_EQ(Count(probe_canon, "STRAIGHT_PROBE"), 30u);
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace formloop::nc
