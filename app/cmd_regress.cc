@@ -7,7 +7,6 @@
 #include "app/pipeline.h"
 #include "core/json_io.h"
 #include "core/log.h"
-#include "core/point_io.h"
 #include "core/progress.h"
 #include "reconstruction/analytic_surface.h"
 

@@ -1,6 +1,13 @@
 // Tool path, LinuxCNC post and its reader, safety limits, probing program, mirror compensation.
 
+#include <array>
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <gtest/gtest.h>
 
@@ -170,20 +177,6 @@ TEST(CompensationTest, MirrorOffsetIsMinusDsAlongTheNormalAndVerifiesFromTheProg
   const SystematicField huge = [](double, double) { return 0.5; };
   EXPECT_EQ(CompensateToolpath(*path, huge, "x", {}).status().code(), StatusCode::kSafetyLimit);
 }
-
-}  // namespace
-}  // namespace formloop::nc
-
-#include <array>
-#include <cstdio>
-#include <filesystem>
-#include <fstream>
-
-#include <unistd.h>
-#include <sys/wait.h>
-
-namespace formloop::nc {
-namespace {
 
 TEST(PostTest, CommentsNeverNestParentheses) {
   EXPECT_EQ(CommentText("part a (loop 0) \n"), "part a [loop 0]  ");
