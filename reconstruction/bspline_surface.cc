@@ -179,7 +179,7 @@ nlohmann::json FitReport::ToJson() const {
   return nlohmann::json{
       {"method", method},
       {"n_points", n_points},
-      {"residual", "parametric: |Q(u_i, v_j) - sample_ij| at the grid nodes (an upper bound of the distance)"},
+      {"residual", residual},
       {"rms_mm", rms_mm},
       {"max_mm", max_mm},
       {"max_at_mm", {max_at.x(), max_at.y(), max_at.z()}},
@@ -187,6 +187,9 @@ nlohmann::json FitReport::ToJson() const {
       {"check", "distance from the analytic S(u, v) to its foot point on Q at seeded random (u, v)"},
       {"check_rms_mm", check_rms_mm},
       {"check_max_mm", check_max_mm},
+      {"check_max_at_mm", {check_max_at.x(), check_max_at.y(), check_max_at.z()}},
+      {"details", details},
+      {"notes", notes},
   };
 }
 
@@ -289,7 +292,10 @@ Result<BSplineSurface> FitAnalytic(const AnalyticSurface& surface, int nu, int n
     FL_ASSIGN_OR_RETURN(FootPoint foot, ProjectFrom(q, p, u, v));
     const double e = (p - foot.foot).norm();
     sum2 += e * e;
-    max = std::max(max, e);
+    if (e > max) {
+      max = e;
+      local.check_max_at = p;
+    }
   }
   local.n_check = n_check;
   local.check_rms_mm = n_check > 0 ? std::sqrt(sum2 / n_check) : 0;

@@ -68,6 +68,8 @@ struct GridFitOptions {
 struct FitReport {
   std::string method;               // e.g. "occt-grid-approximation"
   int n_points = 0;
+  // What rms_mm/max_mm measure; FitGrid: the parametric residual |Q(u_i, v_j) - sample_ij|.
+  std::string residual = "parametric: |Q(u_i, v_j) - sample_ij| at the grid nodes (an upper bound of the distance)";
   double rms_mm = 0;                // residual at the fitted samples
   double max_mm = 0;
   Eigen::Vector3d max_at = Eigen::Vector3d::Zero();  // sample where the max residual occurs
@@ -75,6 +77,13 @@ struct FitReport {
   int n_check = 0;
   double check_rms_mm = 0;
   double check_max_mm = 0;
+  Eigen::Vector3d check_max_at = Eigen::Vector3d::Zero();  // check point where check_max_mm occurs
+  // Method-specific facts (control net, smoothing weight, GCV score, iterations, knots inserted...),
+  // copied into the JSON report as "details".
+  nlohmann::json details = nlohmann::json::object();
+  // Plain-language statements the user must see, e.g. that the control net cannot represent the
+  // surface to the requested tolerance, with the figure reached.
+  std::vector<std::string> notes;
   nlohmann::json ToJson() const;
 };
 
