@@ -11,11 +11,10 @@
 #include <nlohmann/json.hpp>
 
 #include "app/command.h"
-#include "core/atomic_file.h"
+#include "app/surface_fit.h"
 #include "core/log.h"
 #include "core/point_io.h"
 #include "reconstruction/analytic_surface.h"
-#include "reconstruction/bspline_surface.h"
 
 namespace formloop::app {
 namespace {
@@ -75,36 +74,24 @@ struct ExportArgs {
 constexpr int kCheckPoints = 1000;
 constexpr unsigned long long kCheckSeed = 20240611ULL;
 
+// `surfaces export NAME` is `fit analytic:NAME --method grid` with this command's grid and check size.
 Status ExportSurface(const ExportArgs& args) {
   FL_RETURN_IF_ERROR(CheckGrid(args.nu, args.nv));
-  FL_ASSIGN_OR_RETURN(auto surface, recon::MakeReferenceSurface(args.name));
-  recon::GridFitOptions options;
-  options.tolerance_mm = args.tolerance_mm;
   if (!(args.tolerance_mm > 0)) {
     return Status::BadInput(Where{.field = "--tolerance-mm"}, "the tolerance must be positive", "use e.g. 1e-4");
   }
-  recon::FitReport report;
-  FL_ASSIGN_OR_RETURN(recon::BSplineSurface q,
-                      recon::FitAnalytic(*surface, args.nu, args.nv, options, kCheckPoints, kCheckSeed, &report));
-  FL_RETURN_IF_ERROR(recon::WriteStep(args.out, q, args.name));
-  if (!args.report.empty()) {
-    nlohmann::json json = {
-        {"surface", surface->name()},
-        {"description", surface->description()},
-        {"domain", DomainJson(surface->domain())},
-        {"grid", {{"nu", args.nu}, {"nv", args.nv}}},
-        {"tolerance_mm", args.tolerance_mm},
-        {"degree", {{"u", q.u_degree()}, {"v", q.v_degree()}}},
-        {"poles", {{"u", q.u_poles()}, {"v", q.v_poles()}}},
-        {"step", args.out},
-        {"fit", report.ToJson()},
-    };
-    FL_RETURN_IF_ERROR(WriteFileAtomic(args.report, json.dump(2) + "\n"));
-  }
-  log::Info("exported {} -> {}: degree {}x{}, {}x{} poles, fit check max {:.3g} mm (rms {:.3g} mm) at {} points",
-            args.name, args.out, q.u_degree(), q.v_degree(), q.u_poles(), q.v_poles(), report.check_max_mm,
-            report.check_rms_mm, report.n_check);
-  return Status::Ok();
+  FitRequest request;
+  request.input = "analytic:" + args.name;
+  request.method = FitMethod::kGrid;
+  request.grid_nu = args.nu;
+  request.grid_nv = args.nv;
+  request.grid.tolerance_mm = args.tolerance_mm;
+  request.check_points = kCheckPoints;
+  request.seed = kCheckSeed;
+  request.out_step = args.out;
+  request.out_report = args.report;
+  request.name = args.name;
+  return RunFit(request);
 }
 
 std::string NamesHelp() {

@@ -21,5 +21,7 @@ void AddRunCommand(CLI::App& root, CommandAction* action);
 void AddRegressCommand(CLI::App& root, CommandAction* action);
 void AddSurfacesCommand(CLI::App& root, CommandAction* action);
 void AddKbCommand(CLI::App& root, CommandAction* action);
+// `fit` and `project` (app/cmd_fit.cc).
+void AddFitCommand(CLI::App& root, CommandAction* action);
 
 }  // namespace formloop::app

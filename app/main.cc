@@ -28,6 +28,7 @@ int main(int argc, char** argv) {
   app::AddRunCommand(app, &action);
   app::AddRegressCommand(app, &action);
   app::AddSurfacesCommand(app, &action);
+  app::AddFitCommand(app, &action);
   app::AddKbCommand(app, &action);
 
   try {

@@ -1,2 +1,343 @@
-// Placeholder: filled in by the issue-3 work.
-int main() { return 0; }
+// Foot-point projection of 100,000 points (spec/reconstruction.md §4): formloop's FootPointProjector
+// (kd-tree start + Newton, ProjectAll on one thread) next to OpenCASCADE's GeomAPI_ProjectPointOnSurf,
+// used two ways:
+//   occt_new_per_point:  GeomAPI_ProjectPointOnSurf(P, surface) for every point, as a user would write it;
+//   occt_init_once:      one object, Init(surface, bounds) once, Perform(P) per point (OpenCASCADE's
+//                        documented "projection for many points"; it keeps its sample grid).
+// The surfaces are the pipeline's Q: B-spline fits (61 × 61 grid, tolerance 1e-4 mm) of the franke and
+// egg_box reference surfaces. The points are p = Q(u, v) + t n(u, v) with seeded (u, v) over the whole
+// domain and t uniform in [-2, 2] mm, so every foot point is (u, v) and every deviation is t.
+//
+// Also measured: building the projector, the start-grid density (seed_grid), and the two B-spline
+// evaluators (Geom_BSplineSurface::D2, GeomAdaptor_Surface::D2 with its span cache) on Newton-like
+// clusters of parameters.
+//
+// After the runs it prints, per surface, the times side by side, the speed-ups, and the agreement with
+// OpenCASCADE over all points: max |d_ours - d_occt| with d_occt = (p - q_occt)·n(q_occt), how often
+// OpenCASCADE found no point or a farther one, and the max |d_ours - t|.
+//
+//   ./build/bench/formloop_bench_projection     (all: about 6 minutes, nearly all of it OpenCASCADE
+//                                                constructing a projector for each of 2 × 100,000 points)
+//   ./build/bench/formloop_bench_projection --benchmark_filter='build|ours|occt_init_once'   (about 1 minute)
+
+#include <benchmark/benchmark.h>
+
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <GeomAPI_ProjectPointOnSurf.hxx>
+#include <GeomAdaptor_Surface.hxx>
+#include <Standard_Failure.hxx>
+
+#include "core/random.h"
+#include "reconstruction/bspline_surface.h"
+#include "reconstruction/foot_point.h"
+
+namespace formloop::recon {
+namespace {
+
+using Eigen::Vector3d;
+
+constexpr std::size_t kPoints = 100'000;
+const char* const kSurfaces[] = {"franke", "egg_box"};
+
+struct Case {
+  BSplineSurface q;
+  std::vector<Vector3d> points;
+  std::vector<double> offsets_mm;  // t: the exact deviation of each point
+};
+
+const Case& GetCase(const std::string& name) {
+  static std::map<std::string, Case> cases;
+  auto it = cases.find(name);
+  if (it != cases.end()) return it->second;
+  Case c;
+  auto surface = MakeReferenceSurface(name);
+  if (!surface.ok()) std::abort();
+  auto q = FitAnalytic(**surface, 61, 61, GridFitOptions{}, 0, 1, nullptr);
+  if (!q.ok()) std::abort();
+  c.q = *q;
+  const ParamDomain d = c.q.domain();
+  Rng rng(20240612);
+  for (std::size_t k = 0; k < kPoints; ++k) {
+    const double u = rng.Uniform(d.u_min, d.u_max), v = rng.Uniform(d.v_min, d.v_max), t = rng.Uniform(-2, 2);
+    c.points.push_back(c.q.Point(u, v) + t * c.q.Normal(u, v));
+    c.offsets_mm.push_back(t);
+  }
+  return cases.emplace(name, std::move(c)).first->second;
+}
+
+// Answers of the last run of each method, kept for the comparison table.
+struct Answers {
+  std::vector<double> deviation_mm, distance_mm;  // NaN where the method found no point
+};
+std::map<std::string, Answers>& AllAnswers() {
+  static std::map<std::string, Answers> answers;
+  return answers;
+}
+
+FootPointProjector BuildOrDie(const BSplineSurface& q, int seed_grid) {
+  auto projector = FootPointProjector::Build(q, ProjectorOptions{.seed_grid = seed_grid});
+  if (!projector.ok()) {
+    std::fprintf(stderr, "%s\n", projector.status().ToString().c_str());
+    std::abort();
+  }
+  return *projector;
+}
+
+void BM_Build(benchmark::State& state, const std::string& name) {
+  const Case& c = GetCase(name);
+  for (auto _ : state) benchmark::DoNotOptimize(BuildOrDie(c.q, 0));
+  const FootPointProjector projector = BuildOrDie(c.q, 0);
+  state.counters["samples"] = static_cast<double>(projector.seed_grid_u()) * projector.seed_grid_v();
+  state.counters["delta_mm"] = projector.seed_cover_mm();
+}
+
+void BM_Ours(benchmark::State& state, const std::string& name) {
+  const Case& c = GetCase(name);
+  const FootPointProjector projector = BuildOrDie(c.q, 0);
+  std::vector<FootPoint> feet;
+  for (auto _ : state) {
+    auto result = projector.ProjectAll(c.points);
+    if (!result.ok()) {
+      state.SkipWithError(result.status().ToString().c_str());
+      return;
+    }
+    feet = std::move(result).value();
+  }
+  Answers& answers = AllAnswers()["ours/" + name];
+  answers = {};
+  for (const FootPoint& f : feet) {
+    answers.deviation_mm.push_back(f.deviation_mm);
+    answers.distance_mm.push_back(f.distance_mm);
+  }
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * kPoints));
+}
+
+// Build + ProjectAll with a given start grid (0 = automatic).
+void BM_OursSeedGrid(benchmark::State& state, const std::string& name) {
+  const Case& c = GetCase(name);
+  int samples = 0;
+  for (auto _ : state) {
+    const FootPointProjector projector = BuildOrDie(c.q, static_cast<int>(state.range(0)));
+    samples = projector.seed_grid_u() * projector.seed_grid_v();
+    benchmark::DoNotOptimize(projector.ProjectAll(c.points));
+  }
+  state.counters["samples"] = samples;
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * kPoints));
+}
+
+// What OpenCASCADE returned for one point: recorded inside the timed loop (cheap), turned into a
+// deviation afterwards.
+struct OcctRaw {
+  bool found = false;
+  double u = 0, v = 0, distance_mm = 0;
+};
+
+OcctRaw ReadOcct(const GeomAPI_ProjectPointOnSurf& projection) {
+  OcctRaw raw;
+  if (!projection.IsDone() || projection.NbPoints() == 0) return raw;
+  raw.found = true;
+  projection.LowerDistanceParameters(raw.u, raw.v);
+  raw.distance_mm = projection.LowerDistance();
+  return raw;
+}
+
+// Signed deviation of p from OpenCASCADE's nearest point, along our normal there.
+Answers ToAnswers(const std::vector<OcctRaw>& raw, const Case& c) {
+  Answers answers;
+  for (std::size_t k = 0; k < raw.size(); ++k) {
+    const OcctRaw& r = raw[k];
+    answers.deviation_mm.push_back(r.found ? (c.points[k] - c.q.Point(r.u, r.v)).dot(c.q.Normal(r.u, r.v))
+                                           : std::nan(""));
+    answers.distance_mm.push_back(r.found ? r.distance_mm : std::nan(""));
+  }
+  return answers;
+}
+
+void BM_OcctNewPerPoint(benchmark::State& state, const std::string& name) {
+  const Case& c = GetCase(name);
+  std::vector<OcctRaw> raw;
+  raw.reserve(kPoints);
+  for (auto _ : state) {
+    raw.clear();
+    for (const Vector3d& p : c.points) {
+      try {
+        const GeomAPI_ProjectPointOnSurf projection(gp_Pnt(p.x(), p.y(), p.z()), c.q.geom());
+        raw.push_back(ReadOcct(projection));
+      } catch (const Standard_Failure&) {
+        raw.emplace_back();
+      }
+    }
+  }
+  AllAnswers()["occt_new_per_point/" + name] = ToAnswers(raw, c);
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * kPoints));
+}
+
+void BM_OcctInitOnce(benchmark::State& state, const std::string& name) {
+  const Case& c = GetCase(name);
+  const ParamDomain d = c.q.domain();
+  std::vector<OcctRaw> raw;
+  raw.reserve(kPoints);
+  for (auto _ : state) {
+    raw.clear();
+    GeomAPI_ProjectPointOnSurf projection;
+    projection.Init(c.q.geom(), d.u_min, d.u_max, d.v_min, d.v_max);
+    for (const Vector3d& p : c.points) {
+      try {
+        projection.Perform(gp_Pnt(p.x(), p.y(), p.z()));
+        raw.push_back(ReadOcct(projection));
+      } catch (const Standard_Failure&) {
+        raw.emplace_back();
+      }
+    }
+  }
+  AllAnswers()["occt_init_once/" + name] = ToAnswers(raw, c);
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * kPoints));
+}
+
+// Newton-like evaluation pattern: clusters of 5 evaluations within 0.05 mm of a random (u, v).
+std::vector<std::pair<double, double>> EvalParameters(const BSplineSurface& q) {
+  const ParamDomain d = q.domain();
+  Rng rng(5);
+  std::vector<std::pair<double, double>> uv;
+  for (int k = 0; k < 20'000; ++k) {
+    const double u = rng.Uniform(d.u_min + 0.1, d.u_max - 0.1), v = rng.Uniform(d.v_min + 0.1, d.v_max - 0.1);
+    for (int i = 0; i < 5; ++i) uv.emplace_back(u + rng.Uniform(-0.05, 0.05), v + rng.Uniform(-0.05, 0.05));
+  }
+  return uv;
+}
+
+void BM_EvalGeomD2(benchmark::State& state, const std::string& name) {
+  const Case& c = GetCase(name);
+  const auto uv = EvalParameters(c.q);
+  gp_Pnt p;
+  gp_Vec su, sv, suu, svv, suv;
+  for (auto _ : state) {
+    for (const auto& [u, v] : uv) {
+      c.q.geom()->D2(u, v, p, su, sv, suu, svv, suv);
+      benchmark::DoNotOptimize(p);
+    }
+  }
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * uv.size()));
+}
+
+void BM_EvalAdaptorD2(benchmark::State& state, const std::string& name) {
+  const Case& c = GetCase(name);
+  const auto uv = EvalParameters(c.q);
+  gp_Pnt p;
+  gp_Vec su, sv, suu, svv, suv;
+  for (auto _ : state) {
+    GeomAdaptor_Surface adaptor(c.q.geom());
+    for (const auto& [u, v] : uv) {
+      adaptor.D2(u, v, p, su, sv, suu, svv, suv);
+      benchmark::DoNotOptimize(p);
+    }
+  }
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * uv.size()));
+}
+
+// Collects each benchmark's CPU time per iteration (ms) for the table. CPU time, because the machine
+// may be shared: wall time then includes other processes' turns.
+class TableReporter : public benchmark::ConsoleReporter {
+ public:
+  void ReportRuns(const std::vector<Run>& runs) override {
+    for (const Run& run : runs) {
+      if (run.error_occurred) continue;
+      std::string name = run.benchmark_name();
+      name = name.substr(0, name.find("/iterations:"));
+      times_ms_[name] = run.GetAdjustedCPUTime() * benchmark::GetTimeUnitMultiplier(benchmark::kMillisecond) /
+                        benchmark::GetTimeUnitMultiplier(run.time_unit);
+    }
+    ConsoleReporter::ReportRuns(runs);
+  }
+  double TimeMs(const std::string& name) const {
+    auto it = times_ms_.find(name);
+    return it == times_ms_.end() ? std::nan("") : it->second;
+  }
+
+ private:
+  std::map<std::string, double> times_ms_;
+};
+
+void PrintTable(const TableReporter& reporter) {
+  std::printf("\nFoot points of %zu points within 2 mm of Q, single thread, CPU ms\n", kPoints);
+  std::printf("%-9s %12s %12s %12s %10s %10s | %12s %12s %9s %9s %9s\n", "surface", "ours_ms", "occt_new_ms",
+              "occt_init_ms", "x_new", "x_init", "max|d-docc|", "max|d-t|", "occt_fail", "occt_far", "ours_far");
+  for (const char* name : kSurfaces) {
+    const double ours = reporter.TimeMs("ours/" + std::string(name));
+    const double occt_new = reporter.TimeMs("occt_new_per_point/" + std::string(name));
+    const double occt_init = reporter.TimeMs("occt_init_once/" + std::string(name));
+    const auto& all = AllAnswers();
+    auto ours_it = all.find("ours/" + std::string(name));
+    if (ours_it == all.end()) continue;
+    const Answers& a = ours_it->second;
+    const Case& c = GetCase(name);
+    double max_truth = 0;
+    for (std::size_t k = 0; k < a.deviation_mm.size(); ++k) {
+      max_truth = std::max(max_truth, std::abs(a.deviation_mm[k] - c.offsets_mm[k]));
+    }
+    // Agreement with each OpenCASCADE variant that ran: where OpenCASCADE found a point at least as
+    // close as ours (to 1e-7 mm), the deviations must agree; elsewhere count who is closer.
+    double max_diff = 0;
+    long fail = 0, occt_far = 0, ours_far = 0;
+    for (const char* method : {"occt_new_per_point/", "occt_init_once/"}) {
+      auto it = all.find(method + std::string(name));
+      if (it == all.end()) continue;
+      const Answers& o = it->second;
+      for (std::size_t k = 0; k < o.deviation_mm.size(); ++k) {
+        if (std::isnan(o.deviation_mm[k])) {
+          ++fail;
+        } else if (o.distance_mm[k] > a.distance_mm[k] + 1e-7) {
+          ++occt_far;
+        } else if (a.distance_mm[k] > o.distance_mm[k] + 1e-7) {
+          ++ours_far;
+        } else {
+          max_diff = std::max(max_diff, std::abs(a.deviation_mm[k] - o.deviation_mm[k]));
+        }
+      }
+    }
+    std::printf("%-9s %12.1f %12.1f %12.1f %10.1f %10.1f | %12.2e %12.2e %9ld %9ld %9ld\n", name, ours, occt_new,
+                occt_init, occt_new / ours, occt_init / ours, max_diff, max_truth, fail, occt_far, ours_far);
+  }
+  std::printf(
+      "x_new, x_init: OpenCASCADE time / ours. occt_fail: no point found; occt_far / ours_far: that side's\n"
+      "point is farther by more than 1e-7 mm (summed over both OpenCASCADE variants that ran).\n");
+}
+
+void Register() {
+  for (const char* name_text : kSurfaces) {
+    const std::string name = name_text;
+    benchmark::RegisterBenchmark(("build/" + name).c_str(), BM_Build, name)->Unit(benchmark::kMillisecond);
+    benchmark::RegisterBenchmark(("ours/" + name).c_str(), BM_Ours, name)->Unit(benchmark::kMillisecond);
+    auto* seed_grid = benchmark::RegisterBenchmark(("ours_seed_grid/" + name).c_str(), BM_OursSeedGrid, name);
+    for (int n : {0, 16, 24, 32, 48, 64, 96, 128, 256, 512}) seed_grid->Arg(n);
+    seed_grid->Unit(benchmark::kMillisecond);
+    benchmark::RegisterBenchmark(("occt_new_per_point/" + name).c_str(), BM_OcctNewPerPoint, name)
+        ->Iterations(1)
+        ->Unit(benchmark::kMillisecond);
+    benchmark::RegisterBenchmark(("occt_init_once/" + name).c_str(), BM_OcctInitOnce, name)
+        ->Iterations(1)
+        ->Unit(benchmark::kMillisecond);
+    benchmark::RegisterBenchmark(("EvalGeomD2/" + name).c_str(), BM_EvalGeomD2, name)->Unit(benchmark::kMicrosecond);
+    benchmark::RegisterBenchmark(("EvalAdaptorD2/" + name).c_str(), BM_EvalAdaptorD2, name)
+        ->Unit(benchmark::kMicrosecond);
+  }
+}
+
+}  // namespace
+}  // namespace formloop::recon
+
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  formloop::recon::Register();
+  formloop::recon::TableReporter reporter;
+  benchmark::RunSpecifiedBenchmarks(&reporter);
+  formloop::recon::PrintTable(reporter);
+  benchmark::Shutdown();
+  return 0;
+}

@@ -16,6 +16,7 @@
 #include "core/point_set.h"
 #include "core/status.h"
 #include "reconstruction/analytic_surface.h"
+#include "reconstruction/foot_point.h"
 
 namespace formloop::recon {
 
@@ -103,17 +104,7 @@ Status WriteStep(const std::filesystem::path& path, const BSplineSurface& surfac
 // (converted when the face holds another surface type).
 Result<BSplineSurface> ReadStep(const std::filesystem::path& path, int face_index = 0);
 
-// Foot point of p on Q: q = Q(u, v) nearest to p, the unit normal there and the signed deviation
-// d = (p - q)·n (positive = material left / point outside).
-struct FootPoint {
-  double u = 0, v = 0;
-  Eigen::Vector3d foot = Eigen::Vector3d::Zero();
-  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
-  double deviation_mm = 0;
-  bool on_boundary = false;  // foot point clamped to the domain edge
-};
-Result<FootPoint> Project(const BSplineSurface& surface, const Eigen::Vector3d& p);
-// Same, but starting the search near (u0, v0) (e.g. the planned parameters of a probe point).
-Result<FootPoint> ProjectFrom(const BSplineSurface& surface, const Eigen::Vector3d& p, double u0, double v0);
+// Foot points on Q (spec §4): FootPoint, FootPointProjector, Project and ProjectFrom are declared in
+// reconstruction/foot_point.h, included above.
 
 }  // namespace formloop::recon

@@ -1,1 +1,1209 @@
-// Placeholder: filled in by the issue-3 work.
+#include "reconstruction/scattered_fit.h"
+
+#include <pcl/kdtree/kdtree_flann.h>
+#include <pcl/point_cloud.h>
+#include <pcl/point_types.h>
+
+#include <Eigen/Dense>
+#include <Geom_BSplineSurface.hxx>
+#include <Standard_Failure.hxx>
+#include <TColStd_Array1OfInteger.hxx>
+#include <TColStd_Array1OfReal.hxx>
+#include <TColgp_Array2OfPnt.hxx>
+#include <algorithm>
+#include <cmath>
+#include <gp_Pnt.hxx>
+#include <limits>
+#include <locale>
+#include <numeric>
+#include <sstream>
+#include <string>
+
+#include "reconstruction/point_checks.h"
+
+namespace formloop::recon {
+
+using scattered_internal::Ldlt;
+using scattered_internal::SparseMatrix;
+
+namespace {
+
+using Eigen::Vector3d;
+
+constexpr int kMinDegree = 2;  // the thin-plate energy needs second derivatives inside the spans
+constexpr int kMaxDegree = 7;
+constexpr int kMaxPoles = 1000;
+// log10 of the dimensionless λ searched by GCV and kTolerance. Below 1e-12 the penalty is lost in
+// the rounding of AᵀA (its entries carry ~1e-16 relative error, times the net's conditioning);
+// above 1e6 the surface is the penalty's limit (the polynomial trend) to many digits.
+constexpr double kLogLambdaMin = -12;
+constexpr double kLogLambdaMax = 6;
+// Smallest margin beyond the points' parameter box, in point spacings: scattered samples stop
+// short of the true boundary (by ~side/m along an edge and by about a spacing at a corner) and the
+// projected boundary of a curved patch is curved, so without a margin the boundary of the sampled
+// surface would project onto Q's edge and be clamped. See DataKnots for the margin's span.
+constexpr double kMarginSpacings = 2;
+// Width of the end spans inside the data, relative to the other spans (see DataKnots).
+constexpr double kEndSpanWidth = 2;
+// Total degree of the polynomial trend whose deviation the thin-plate energy measures (at most the
+// spline degree), see TensorLsq::Solve. Cubic: measured with 5 µm noise on franke (10,000
+// points), the worst error in the outer 5 % band (inside the samples' hull) over the interior
+// worst fell from 2.0 (quadratic trend) to 1.33.
+constexpr int kTrendDegree = 3;
+// A gap in the points wider than this many point spacings is reported (Poisson-scattered points
+// leave interior gaps of up to ~1.7 spacings for 10^3..10^5 points; corners are worse).
+constexpr double kGapSpacings = 2;
+// Parameter correction stops when the orthogonal RMS falls by less than this (relative).
+constexpr double kCorrectionStall = 1e-3;
+// kTolerance stops correcting when the orthogonal RMS is this close to the target (relative).
+constexpr double kToleranceMatch = 5e-3;
+
+// Messages print numbers like the other fits.
+std::string Num(double value, int precision = 6) { return NumberText(value, precision); }
+
+nlohmann::json JsonVector(const Vector3d& v) { return {v.x(), v.y(), v.z()}; }
+
+// ---------------------------------------------------------------------------------------------
+// Sparse pattern of the tensor-product normal matrix: pole k = a + n_u b couples with the poles
+// (a', b') with |a − a'| ≤ p and |b − b'| ≤ p (their supports overlap). Full symmetric pattern,
+// rows sorted within each column, explicit zeros kept so N, R and N + λR share one pattern.
+
+SparseMatrix BandPattern(int nu, int nv, int p) {
+  const int n = nu * nv;
+  SparseMatrix pattern(n, n);
+  Eigen::VectorXi per_column(n);
+  for (int col = 0; col < n; ++col) {
+    const int a = col % nu, b = col / nu;
+    per_column(col) =
+        (std::min(nu - 1, a + p) - std::max(0, a - p) + 1) * (std::min(nv - 1, b + p) - std::max(0, b - p) + 1);
+  }
+  pattern.reserve(per_column);
+  for (int col = 0; col < n; ++col) {
+    const int a0 = col % nu, b0 = col / nu;
+    for (int b = std::max(0, b0 - p); b <= std::min(nv - 1, b0 + p); ++b) {
+      for (int a = std::max(0, a0 - p); a <= std::min(nu - 1, a0 + p); ++a) pattern.insert(a + nu * b, col) = 0.0;
+    }
+  }
+  pattern.makeCompressed();
+  return pattern;
+}
+
+// R(k, k') from the 1-D Gram matrices over `region`, written into the values of the band pattern r.
+void FillThinPlate(const KnotVector& ku, const KnotVector& kv, const ParamDomain& region, SparseMatrix* r) {
+  const int nu = ku.n_poles();
+  const double u0 = region.u_min, u1 = region.u_max, v0 = region.v_min, v1 = region.v_max;
+  const Eigen::MatrixXd g0u = GramMatrix(ku, 0, u0, u1), g1u = GramMatrix(ku, 1, u0, u1),
+                        g2u = GramMatrix(ku, 2, u0, u1);
+  const Eigen::MatrixXd g0v = GramMatrix(kv, 0, v0, v1), g1v = GramMatrix(kv, 1, v0, v1),
+                        g2v = GramMatrix(kv, 2, v0, v1);
+  for (int col = 0; col < r->outerSize(); ++col) {
+    const int a1 = col % nu, b1 = col / nu;
+    for (SparseMatrix::InnerIterator it(*r, col); it; ++it) {
+      const int a = static_cast<int>(it.row()) % nu, b = static_cast<int>(it.row()) / nu;
+      it.valueRef() = g2u(a, a1) * g0v(b, b1) + 2 * g1u(a, a1) * g1v(b, b1) + g0u(a, a1) * g2v(b, b1);
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The penalised least-squares problem for fixed knots and parameters.
+
+class TensorLsq {
+ public:
+  // The thin-plate energy is integrated over `region` (Q's whole domain, see DataKnots).
+  TensorLsq(KnotVector ku, KnotVector kv, const ParamDomain& region) : ku_(std::move(ku)), kv_(std::move(kv)) {
+    p_ = ku_.degree();
+    nu_ = ku_.n_poles();
+    nv_ = kv_.n_poles();
+    normal_ = BandPattern(nu_, nv_, p_);
+    thin_plate_ = normal_;
+    FillThinPlate(ku_, kv_, region, &thin_plate_);
+    system_ = normal_;
+    // The trend's monomials s^a t^b (a + b ≤ K) in scaled parameters s = (u − cu)/Lu,
+    // t = (v − cv)/Lv, as B-spline coefficients (one column each) and their image under R.
+    cu_ = 0.5 * (ku_.lo() + ku_.hi());
+    lu_ = 0.5 * (ku_.hi() - ku_.lo());
+    cv_ = 0.5 * (kv_.lo() + kv_.hi());
+    lv_ = 0.5 * (kv_.hi() - kv_.lo());
+    const int degree = std::min(p_, kTrendDegree);
+    for (int total = 0; total <= degree; ++total) {
+      for (int b = 0; b <= total; ++b) monomials_.emplace_back(total - b, b);
+    }
+    const Eigen::MatrixXd mu = MonomialCoefficients(ku_, cu_, lu_, degree);
+    const Eigen::MatrixXd mv = MonomialCoefficients(kv_, cv_, lv_, degree);
+    trend_basis_.resize(n(), static_cast<Eigen::Index>(monomials_.size()));
+    for (int b = 0; b < nv_; ++b) {
+      for (int a = 0; a < nu_; ++a) {
+        for (std::size_t k = 0; k < monomials_.size(); ++k) {
+          trend_basis_(a + nu_ * b, static_cast<Eigen::Index>(k)) =
+              mu(a, monomials_[k].first) * mv(b, monomials_[k].second);
+        }
+      }
+    }
+    thin_plate_trend_ = thin_plate_ * trend_basis_;
+  }
+
+  int n() const { return nu_ * nv_; }
+  const KnotVector& ku() const { return ku_; }
+  const KnotVector& kv() const { return kv_; }
+  double lambda_scale() const { return lambda_scale_; }
+
+  // Coefficients of s^j, j = 0 .. K (s = (x − c)/l), in the clamped basis `k` (degree p ≥ K),
+  // n_poles × (K + 1), from their blossoms (Marsden's identity; de Boor, A Practical Guide to
+  // Splines, ch. IX): coefficient i of s^j is e_j(τ_{i+1}, ..., τ_{i+p}) / C(p, j), e_j the
+  // elementary symmetric polynomial of the scaled knots τ.
+  static Eigen::MatrixXd MonomialCoefficients(const KnotVector& k, double c, double l, int degree) {
+    const int p = k.degree(), n = k.n_poles();
+    Eigen::MatrixXd out(n, degree + 1);
+    std::vector<double> e(static_cast<std::size_t>(degree + 1));
+    for (int i = 0; i < n; ++i) {
+      std::fill(e.begin(), e.end(), 0.0);
+      e[0] = 1;
+      for (int j = 1; j <= p; ++j) {
+        const double tau = (k.knots()[static_cast<std::size_t>(i + j)] - c) / l;
+        for (int d = degree; d >= 1; --d) e[static_cast<std::size_t>(d)] += tau * e[static_cast<std::size_t>(d - 1)];
+      }
+      double binomial = 1;  // C(p, d)
+      for (int d = 0; d <= degree; ++d) {
+        out(i, d) = e[static_cast<std::size_t>(d)] / binomial;
+        binomial = binomial * (p - d) / (d + 1);
+      }
+    }
+    return out;
+  }
+
+  // Basis values at every (u_i, v_i), AᵀA and AᵀX (x centred by the caller).
+  void Assemble(const std::vector<double>& u, const std::vector<double>& v, const std::vector<Vector3d>& x) {
+    const int m = static_cast<int>(x.size()), q = p_ + 1, w = 2 * p_ + 1;
+    span_u_.resize(static_cast<std::size_t>(m));
+    span_v_.resize(static_cast<std::size_t>(m));
+    basis_u_.resize(static_cast<std::size_t>(m) * q);
+    basis_v_.resize(static_cast<std::size_t>(m) * q);
+    x_ = &x;
+    // Dense band accumulator: band[k * w² + (db + p) w + (da + p)] = N(k, k + da + n_u db).
+    std::vector<double> band(static_cast<std::size_t>(n()) * w * w, 0.0);
+    rhs_ = Eigen::MatrixXd::Zero(n(), 3);
+    int index[64];
+    double value[64];
+    for (int i = 0; i < m; ++i) {
+      const std::size_t si = static_cast<std::size_t>(i);
+      const int su = ku_.FindSpan(u[si]), sv = kv_.FindSpan(v[si]);
+      span_u_[si] = su;
+      span_v_[si] = sv;
+      double* bu = &basis_u_[si * q];
+      double* bv = &basis_v_[si * q];
+      ku_.BasisFunctions(su, u[si], bu);
+      kv_.BasisFunctions(sv, v[si], bv);
+      int t = 0;
+      for (int jb = 0; jb < q; ++jb) {
+        for (int ja = 0; ja < q; ++ja, ++t) {
+          index[t] = (su - p_ + ja) + nu_ * (sv - p_ + jb);
+          value[t] = bu[ja] * bv[jb];
+          rhs_.row(index[t]) += value[t] * x[si].transpose();
+        }
+      }
+      for (int t1 = 0; t1 < q * q; ++t1) {
+        double* row = &band[static_cast<std::size_t>(index[t1]) * w * w];
+        const int ja1 = t1 % q, jb1 = t1 / q;
+        for (int t2 = 0; t2 < q * q; ++t2) {
+          const int ja2 = t2 % q, jb2 = t2 / q;
+          row[(jb2 - jb1 + p_) * w + (ja2 - ja1 + p_)] += value[t1] * value[t2];
+        }
+      }
+    }
+    // Least-squares quadratic trend of the points in (s, t): a = G⁻¹ Φᵀ X, G = ΦᵀΦ; also ΦᵀA
+    // (6 × n) for the trace of the influence matrix.
+    const Eigen::Index nt = static_cast<Eigen::Index>(monomials_.size());
+    Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(nt, nt);
+    Eigen::MatrixXd phi_x = Eigen::MatrixXd::Zero(nt, 3);
+    phi_a_ = Eigen::MatrixXd::Zero(nt, n());
+    Eigen::VectorXd phi(nt);
+    for (int i = 0; i < m; ++i) {
+      const std::size_t si = static_cast<std::size_t>(i);
+      const double ss = (u[si] - cu_) / lu_, tt = (v[si] - cv_) / lv_;
+      for (Eigen::Index k = 0; k < nt; ++k) {
+        phi(k) = std::pow(ss, monomials_[static_cast<std::size_t>(k)].first) *
+                 std::pow(tt, monomials_[static_cast<std::size_t>(k)].second);
+      }
+      gram.noalias() += phi * phi.transpose();
+      phi_x.noalias() += phi * x[si].transpose();
+      const double* bu = &basis_u_[si * q];
+      const double* bv = &basis_v_[si * q];
+      for (int jb = 0; jb < q; ++jb) {
+        for (int ja = 0; ja < q; ++ja) {
+          phi_a_.col((span_u_[si] - p_ + ja) + nu_ * (span_v_[si] - p_ + jb)) += (bu[ja] * bv[jb]) * phi;
+        }
+      }
+    }
+    // Rank-revealing: points on a few lines of (u, v) do not determine every cubic monomial; any
+    // least-squares trend then serves (minimum norm).
+    const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(gram);
+    gram_inv_ = cod.pseudoInverse();
+    const Eigen::MatrixXd trend = cod.solve(phi_x);
+    thin_plate_trend_rhs_ = thin_plate_trend_ * trend;  // R c₀, c₀ = C a
+
+    double trace_n = 0, trace_r = 0;
+    for (int col = 0; col < normal_.outerSize(); ++col) {
+      const int a1 = col % nu_, b1 = col / nu_;
+      for (SparseMatrix::InnerIterator it(normal_, col); it; ++it) {
+        const int a = static_cast<int>(it.row()) % nu_, b = static_cast<int>(it.row()) / nu_;
+        it.valueRef() = band[static_cast<std::size_t>(col) * w * w + (b - b1 + p_) * w + (a - a1 + p_)];
+        if (it.row() == col) trace_n += it.value();
+      }
+    }
+    for (int k = 0; k < n(); ++k) trace_r += thin_plate_.coeff(k, k);
+    lambda_scale_ = trace_r > 0 ? trace_n / trace_r : 1.0;
+  }
+
+  struct Trial {
+    double lambda = 0;  // dimensionless
+    bool ok = false;
+    Eigen::MatrixXd poles;  // n × 3, centred coordinates
+    double rss = 0;         // Σ_i |x_i − S(u_i, v_i)|² (parametric)
+    double trace = 0;       // tr H
+    double gcv = std::numeric_limits<double>::infinity();
+  };
+
+  // Solves (AᵀA + λ_s R) P = AᵀX + λ_s R c₀: the penalty is the thin-plate energy of S − S₀, S₀ the
+  // least-squares polynomial trend of the points (degree kTrendDegree in (u, v); c₀ its
+  // coefficients). The energy's natural boundary conditions drive the curvature (and at corners
+  // the twist) towards zero at the domain's edge, which biases any curved surface there; measured
+  // against the trend they bend only the part the trend does not explain (saddle with 5 µm noise
+  // at its GCV weight: 11 µm of bias in the outer 0.5 mm without the trend, none with it). For
+  // λ → 0 the trend has no effect. with_trace adds tr H and the GCV score.
+  Trial Solve(double lambda, bool with_trace) {
+    Trial trial;
+    trial.lambda = lambda;
+    const double lambda_s = lambda * lambda_scale_;
+    const double* nv = normal_.valuePtr();
+    const double* rv = thin_plate_.valuePtr();
+    double* sv = system_.valuePtr();
+    for (Eigen::Index k = 0; k < system_.nonZeros(); ++k) sv[k] = nv[k] + lambda_s * rv[k];
+    if (!analysed_) {
+      ldlt_.analyzePattern(system_);
+      analysed_ = true;
+    }
+    ldlt_.factorize(system_);
+    if (ldlt_.info() != Eigen::Success || !(ldlt_.vectorD().minCoeff() > 0)) return trial;
+    trial.poles = ldlt_.solve(rhs_ + lambda_s * thin_plate_trend_rhs_);
+    if (!trial.poles.allFinite()) return trial;
+    trial.rss = 0;
+    const int m = static_cast<int>(x_->size());
+    for (int i = 0; i < m; ++i) {
+      const Vector3d r = (*x_)[static_cast<std::size_t>(i)] - Evaluate(trial.poles, i);
+      trial.rss += r.squaredNorm();
+    }
+    trial.ok = true;
+    if (with_trace) {
+      const Result<double> trace = scattered_internal::TraceOfInverseTimes(ldlt_, normal_);
+      if (!trace.ok()) {
+        trial.ok = false;
+        return trial;
+      }
+      // H = A M⁻¹ (Aᵀ + λ_s R C G⁻¹ Φᵀ): the trend adds λ_s tr(G⁻¹ ΦᵀA M⁻¹ R C), between 0 and the
+      // number of trend monomials the energy no longer penalises (10 − 3 for a cubic trend).
+      const Eigen::MatrixXd w = ldlt_.solve(thin_plate_trend_);
+      trial.trace = *trace + lambda_s * (gram_inv_ * (phi_a_ * w)).trace();
+      const double dof_left = 1.0 - trial.trace / m;
+      trial.gcv =
+          dof_left > 0 ? (trial.rss / (3.0 * m)) / (dof_left * dof_left) : std::numeric_limits<double>::infinity();
+    }
+    return trial;
+  }
+
+  // S(u_i, v_i) from the stored basis values.
+  Vector3d Evaluate(const Eigen::MatrixXd& poles, int i) const {
+    const int q = p_ + 1;
+    const std::size_t si = static_cast<std::size_t>(i);
+    const double* bu = &basis_u_[si * q];
+    const double* bv = &basis_v_[si * q];
+    Vector3d s = Vector3d::Zero();
+    for (int jb = 0; jb < q; ++jb) {
+      Vector3d row = Vector3d::Zero();
+      const int base = (span_u_[si] - p_) + nu_ * (span_v_[si] - p_ + jb);
+      for (int ja = 0; ja < q; ++ja) row += bu[ja] * poles.row(base + ja).transpose();
+      s += bv[jb] * row;
+    }
+    return s;
+  }
+
+ private:
+  KnotVector ku_, kv_;
+  int p_ = 3, nu_ = 0, nv_ = 0;
+  SparseMatrix normal_, thin_plate_, system_;
+  Ldlt ldlt_;
+  bool analysed_ = false;
+  double lambda_scale_ = 1;
+  Eigen::MatrixXd rhs_;
+  double cu_ = 0, lu_ = 1, cv_ = 0, lv_ = 1;
+  std::vector<std::pair<int, int>> monomials_;  // (a, b) of s^a t^b
+  Eigen::MatrixXd trend_basis_;                 // n × T: B-spline coefficients of the monomials
+  Eigen::MatrixXd thin_plate_trend_;            // R · trend_basis_
+  Eigen::MatrixXd thin_plate_trend_rhs_;        // R c₀ (n × 3)
+  Eigen::MatrixXd phi_a_;                       // ΦᵀA, T × n
+  Eigen::MatrixXd gram_inv_;                    // (ΦᵀΦ)⁻¹, T × T
+  const std::vector<Vector3d>* x_ = nullptr;
+  std::vector<int> span_u_, span_v_;
+  std::vector<double> basis_u_, basis_v_;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Choice of λ for fixed parameters.
+
+struct LambdaChoice {
+  TensorLsq::Trial trial;
+  std::string note;  // set when the target could not be met
+};
+
+// GCV: a grid over log10 λ, then golden-section search around the best grid point (see below for
+// the grid); previous_log is the choice of the previous correction round, NaN for the first.
+LambdaChoice ChooseByGcv(TensorLsq& lsq, double previous_log) {
+  std::vector<std::pair<double, TensorLsq::Trial>> grid;
+  auto eval = [&](double log_lambda) {
+    for (const auto& [x, t] : grid) {
+      if (x == log_lambda) return t.gcv;
+    }
+    grid.emplace_back(log_lambda, lsq.Solve(std::pow(10.0, log_lambda), true));
+    return grid.back().second.gcv;
+  };
+  auto best_index = [&] {
+    std::size_t best = 0;
+    for (std::size_t k = 1; k < grid.size(); ++k) {
+      if (grid[k].second.gcv < grid[best].second.gcv) best = k;
+    }
+    return best;
+  };
+  // First choice: every second decade of the range (V is smooth in log λ), then golden section
+  // over ±2 decades. Later rounds (same data, parameters moved): a ±1 decade window around the
+  // previous choice in half decades, widened while its minimum sits on an edge that is not the
+  // range's.
+  double lo = kLogLambdaMin, hi = kLogLambdaMax, step = 2;
+  if (std::isfinite(previous_log)) {
+    // Usually the choice does not move: keep it when it is still a local minimum at ±1/4 decade
+    // (the GCV curve is flat to a few per cent over that distance).
+    const double x0 = std::clamp(previous_log, kLogLambdaMin, kLogLambdaMax);
+    const double f0 = eval(x0);
+    const double below = x0 - 0.25 >= kLogLambdaMin ? eval(x0 - 0.25) : std::numeric_limits<double>::infinity();
+    const double above = x0 + 0.25 <= kLogLambdaMax ? eval(x0 + 0.25) : std::numeric_limits<double>::infinity();
+    if (std::isfinite(f0) && f0 <= below && f0 <= above) return LambdaChoice{grid[best_index()].second, ""};
+    lo = std::max(kLogLambdaMin, previous_log - 1);
+    hi = std::min(kLogLambdaMax, previous_log + 1);
+    step = 0.5;
+  }
+  for (double x = lo; x <= hi + 1e-9; x += step) eval(std::min(x, hi));
+  // No λ in the window gave a positive definite system (poles without data need smoothing):
+  // search upwards.
+  while (!std::isfinite(grid[best_index()].second.gcv) && hi < kLogLambdaMax) {
+    hi = std::min(kLogLambdaMax, hi + 1);
+    lo = hi;
+    eval(hi);
+  }
+  if (!std::isfinite(grid[best_index()].second.gcv)) return LambdaChoice{grid[best_index()].second, ""};
+  for (;;) {
+    const double x = grid[best_index()].first;
+    if (x <= lo && lo > kLogLambdaMin) {
+      lo = std::max(kLogLambdaMin, lo - step);
+      eval(lo);
+    } else if (x >= hi && hi < kLogLambdaMax) {
+      hi = std::min(kLogLambdaMax, hi + step);
+      eval(hi);
+    } else {
+      break;
+    }
+  }
+  const double centre = grid[best_index()].first;
+  double a = std::max(kLogLambdaMin, centre - step), b = std::min(kLogLambdaMax, centre + step);
+  const double ratio = (std::sqrt(5.0) - 1) / 2;
+  double c = b - ratio * (b - a), d = a + ratio * (b - a);
+  double fc = eval(c), fd = eval(d);
+  while (b - a > 0.1) {
+    if (fc <= fd) {
+      b = d;
+      d = c;
+      fd = fc;
+      c = b - ratio * (b - a);
+      fc = eval(c);
+    } else {
+      a = c;
+      c = d;
+      fc = fd;
+      d = a + ratio * (b - a);
+      fd = eval(d);
+    }
+  }
+  LambdaChoice choice;
+  choice.trial = grid[best_index()].second;
+  return choice;
+}
+
+// kTolerance: bisection on log10 λ for RMS(λ) = tolerance (RMS grows with λ).
+LambdaChoice ChooseByTolerance(TensorLsq& lsq, double tolerance_mm, int m) {
+  auto rms = [&](const TensorLsq::Trial& t) {
+    return t.ok ? std::sqrt(t.rss / m) : std::numeric_limits<double>::infinity();
+  };
+  LambdaChoice choice;
+  TensorLsq::Trial low = lsq.Solve(std::pow(10.0, kLogLambdaMin), false);
+  if (!(rms(low) < tolerance_mm)) {
+    choice.trial = low;
+    choice.note = "smoothing to a tolerance: even the smallest weight (lambda = 1e-12) leaves an RMS residual of " +
+                  Num(rms(low)) + " mm > the target " + Num(tolerance_mm) +
+                  " mm: the points scatter more than that about any surface of this net (noise, or a net too "
+                  "coarse for the shape: then more poles or adaptive refinement help)";
+    return choice;
+  }
+  TensorLsq::Trial high = lsq.Solve(std::pow(10.0, kLogLambdaMax), false);
+  if (rms(high) <= tolerance_mm) {
+    choice.trial = high;
+    choice.note =
+        "smoothing to a tolerance: the smoothest surface searched (lambda = 1e6) already has an RMS "
+        "residual of " +
+        Num(rms(high)) + " mm <= the target " + Num(tolerance_mm) + " mm";
+    return choice;
+  }
+  double a = kLogLambdaMin, b = kLogLambdaMax;
+  TensorLsq::Trial best = low;
+  for (int iter = 0; iter < 60 && b - a > 1e-4; ++iter) {
+    const double mid = 0.5 * (a + b);
+    TensorLsq::Trial t = lsq.Solve(std::pow(10.0, mid), false);
+    const double r = rms(t);
+    if (r <= tolerance_mm) {
+      a = mid;
+      best = std::move(t);
+      if (r >= tolerance_mm * (1 - 1e-3)) break;
+    } else {
+      b = mid;
+    }
+  }
+  choice.trial = std::move(best);
+  return choice;
+}
+
+// target_mm: the parametric RMS kTolerance aims at (see FitWithCorrection).
+LambdaChoice ChooseLambda(TensorLsq& lsq, const ScatteredFitOptions& options, double previous_log, int m,
+                          double target_mm) {
+  switch (options.smoothing) {
+    case ScatteredFitOptions::Smoothing::kGcv:
+      return ChooseByGcv(lsq, previous_log);
+    case ScatteredFitOptions::Smoothing::kTolerance: {
+      // The search needs no trace; the chosen fit gets it for the report.
+      LambdaChoice choice = ChooseByTolerance(lsq, target_mm, m);
+      if (choice.trial.ok) choice.trial = lsq.Solve(choice.trial.lambda, true);
+      return choice;
+    }
+    case ScatteredFitOptions::Smoothing::kFixed:
+      break;
+  }
+  LambdaChoice choice;
+  choice.trial = lsq.Solve(options.lambda, true);
+  return choice;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Geometry of the point set.
+
+struct Frame {
+  Vector3d origin = Vector3d::Zero();
+  Vector3d u_axis = Vector3d::UnitX(), v_axis = Vector3d::UnitY(), normal = Vector3d::UnitZ();
+};
+
+double Cross2(const Eigen::Vector2d& o, const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+  return (a.x() - o.x()) * (b.y() - o.y()) - (a.y() - o.y()) * (b.x() - o.x());
+}
+
+// Convex hull (Andrew's monotone chain), counter-clockwise, without repeated end point.
+std::vector<Eigen::Vector2d> ConvexHull(std::vector<Eigen::Vector2d> pts) {
+  std::sort(pts.begin(), pts.end(), [](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+    return a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
+  });
+  std::vector<Eigen::Vector2d> hull(2 * pts.size());
+  std::size_t k = 0;
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    while (k >= 2 && Cross2(hull[k - 2], hull[k - 1], pts[i]) <= 0) --k;
+    hull[k++] = pts[i];
+  }
+  for (std::size_t i = pts.size() - 1, t = k + 1; i > 0; --i) {
+    while (k >= t && Cross2(hull[k - 2], hull[k - 1], pts[i - 1]) <= 0) --k;
+    hull[k++] = pts[i - 1];
+  }
+  hull.resize(k > 1 ? k - 1 : k);
+  return hull;
+}
+
+// Direction (unit, in the plane) of one side of the minimum-area rectangle enclosing pts: one side
+// of that rectangle lies on a hull edge (Freeman & Shapira 1975), so every edge is tried.
+Eigen::Vector2d MinAreaRectangleDirection(const std::vector<Eigen::Vector2d>& pts) {
+  const std::vector<Eigen::Vector2d> hull = ConvexHull(pts);
+  Eigen::Vector2d best_dir(1, 0);
+  double best_area = std::numeric_limits<double>::infinity();
+  for (std::size_t e = 0; e < hull.size(); ++e) {
+    const Eigen::Vector2d edge = hull[(e + 1) % hull.size()] - hull[e];
+    if (!(edge.norm() > 0)) continue;
+    const Eigen::Vector2d d = edge.normalized(), nrm(-d.y(), d.x());
+    double a0 = std::numeric_limits<double>::infinity(), a1 = -a0, b0 = a0, b1 = -a0;
+    for (const Eigen::Vector2d& h : hull) {
+      a0 = std::min(a0, h.dot(d));
+      a1 = std::max(a1, h.dot(d));
+      b0 = std::min(b0, h.dot(nrm));
+      b1 = std::max(b1, h.dot(nrm));
+    }
+    const double area = (a1 - a0) * (b1 - b0);
+    if (area < best_area * (1 - 1e-12)) {
+      best_area = area;
+      best_dir = d;
+    }
+  }
+  return best_dir;
+}
+
+// Frame of the parameter plane (see the header): PCA plane, rotated to the minimum-area rectangle,
+// u along its longer side, signs fixed so that the result does not depend on the eigen-solver.
+Frame PcaFrame(const std::vector<Vector3d>& points, const Vector3d& mean, const Eigen::Matrix3d& axes) {
+  const Vector3d e1 = axes.col(0), e2 = axes.col(1);
+  std::vector<Eigen::Vector2d> projected;
+  projected.reserve(points.size());
+  for (const Vector3d& p : points) projected.emplace_back((p - mean).dot(e1), (p - mean).dot(e2));
+  const Eigen::Vector2d d = MinAreaRectangleDirection(projected);
+  Vector3d a = d.x() * e1 + d.y() * e2;
+  Vector3d b = -d.y() * e1 + d.x() * e2;
+  double ext_a0 = std::numeric_limits<double>::infinity(), ext_a1 = -ext_a0, ext_b0 = ext_a0, ext_b1 = -ext_a0;
+  for (const Vector3d& p : points) {
+    ext_a0 = std::min(ext_a0, (p - mean).dot(a));
+    ext_a1 = std::max(ext_a1, (p - mean).dot(a));
+    ext_b0 = std::min(ext_b0, (p - mean).dot(b));
+    ext_b1 = std::max(ext_b1, (p - mean).dot(b));
+  }
+  if (ext_b1 - ext_b0 > (ext_a1 - ext_a0) * (1 + 1e-9)) std::swap(a, b);
+  // u axis: its largest component positive (u = x for a patch spread along x).
+  Eigen::Index largest = 0;
+  a.cwiseAbs().maxCoeff(&largest);
+  if (a(largest) < 0) a = -a;
+  Frame frame;
+  frame.origin = mean;
+  frame.u_axis = a.normalized();
+  frame.normal = frame.u_axis.cross(b).normalized();
+  // Normal towards +z (tool and probe side): flip v, which keeps u.
+  if (frame.normal.z() < 0) frame.normal = -frame.normal;
+  frame.v_axis = frame.normal.cross(frame.u_axis).normalized();
+  return frame;
+}
+
+Handle(Geom_BSplineSurface)
+    MakeGeom(const KnotVector& ku, const KnotVector& kv, const Eigen::MatrixXd& poles, const Vector3d& origin) {
+  const int nu = ku.n_poles(), nv = kv.n_poles();
+  TColgp_Array2OfPnt net(1, nu, 1, nv);
+  for (int b = 0; b < nv; ++b) {
+    for (int a = 0; a < nu; ++a) {
+      const int k = a + nu * b;
+      net(a + 1, b + 1) = gp_Pnt(poles(k, 0) + origin.x(), poles(k, 1) + origin.y(), poles(k, 2) + origin.z());
+    }
+  }
+  auto knots = [](const KnotVector& kvec, TColStd_Array1OfReal* values, TColStd_Array1OfInteger* mults) {
+    std::vector<double> t;
+    std::vector<int> m;
+    kvec.Distinct(&t, &m);
+    values->Resize(1, static_cast<int>(t.size()), false);
+    mults->Resize(1, static_cast<int>(t.size()), false);
+    for (std::size_t k = 0; k < t.size(); ++k) {
+      (*values)(static_cast<int>(k) + 1) = t[k];
+      (*mults)(static_cast<int>(k) + 1) = m[k];
+    }
+  };
+  TColStd_Array1OfReal uk(1, 1), vk(1, 1);
+  TColStd_Array1OfInteger um(1, 1), vm(1, 1);
+  knots(ku, &uk, &um);
+  knots(kv, &vk, &vm);
+  return new Geom_BSplineSurface(net, uk, vk, um, vm, ku.degree(), kv.degree());
+}
+
+nlohmann::json DistinctKnotsJson(const KnotVector& k) {
+  std::vector<double> t;
+  std::vector<int> m;
+  k.Distinct(&t, &m);
+  return t;
+}
+
+// Knots for n poles of degree p over the data interval [a, b].
+//
+// Inside [a, b] the spans are uniform except the two end spans, which are kEndSpanWidth times as
+// wide: the piece at an edge, and above all at a corner, sees data from one side only and carries
+// coefficients that only points near the edge determine; scattered points often leave a corner
+// hole a few spacings wide, and a standard-width corner span then extrapolates a free coefficient
+// (measured with 5,000 points on the reference surfaces: 2 to 36 µm of error at the corner, against
+// < 3 µm with double width).
+//
+// With a margin (PCA parameters, whose box comes from the points), one more span of width
+// max(min_margin, h) lies beyond each end of [a, b] (h = interior span width). It lets the
+// boundary of the sampled surface, which the points miss by up to a spacing (more where a curved
+// patch's boundary projects onto a curve), project inside Q rather than onto its clamped edge. It
+// has no data; the thin-plate energy, integrated over the whole domain, decides it, which also
+// moves the energy's boundary (and its natural boundary conditions, see TensorLsq::Solve) off the
+// data: the edge bias of a 5 µm-noise fit of the saddle without a trend fell from 4.6 to 3.9 µm
+// RMS in the outer 0.5 mm. The margin spans count in n (n − p − 2 spans cover the data).
+Result<KnotVector> DataKnots(int p, int n, double a, double b, bool margin, double min_margin) {
+  const int spans = n - p - (margin ? 2 : 0);
+  if (spans < 1) return KnotVector::Uniform(p, n, a - min_margin, b + min_margin);
+  std::vector<double> interior;
+  double h = (b - a) / spans;
+  if (spans >= 3) {
+    h = (b - a) / (spans - 2 + 2 * kEndSpanWidth);
+    for (int k = 1; k < spans; ++k) interior.push_back(a + h * (kEndSpanWidth + (k - 1)));
+  } else {
+    for (int k = 1; k < spans; ++k) interior.push_back(a + h * k);
+  }
+  if (!margin) return KnotVector::WithInteriorKnots(p, a, b, std::move(interior));
+  const double mu = std::max(min_margin, h);
+  interior.push_back(a);
+  interior.push_back(b);
+  return KnotVector::WithInteriorKnots(p, a - mu, b + mu, std::move(interior));
+}
+
+// The largest empty disc of the parameter points inside `box`: the largest distance from a node of
+// a grid with the point spacing as step to its nearest point (parameter units, mm), and where.
+// Beyond about two spacings from every point Q is extrapolated (typically at a corner of the
+// patch), and the residuals at the points say nothing about it.
+struct Gap {
+  double radius_mm = 0;
+  double u = 0, v = 0;
+};
+
+Gap LargestGap(const std::vector<double>& u, const std::vector<double>& v, const ParamDomain& box, double spacing) {
+  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
+  cloud->reserve(u.size());
+  const double cu = 0.5 * (box.u_min + box.u_max), cv = 0.5 * (box.v_min + box.v_max);  // float precision
+  for (std::size_t i = 0; i < u.size(); ++i) {
+    cloud->push_back(pcl::PointXYZ(static_cast<float>(u[i] - cu), static_cast<float>(v[i] - cv), 0.0f));
+  }
+  pcl::KdTreeFLANN<pcl::PointXYZ> tree;
+  tree.setInputCloud(cloud);
+  constexpr int kMaxNodes = 400;  // per direction
+  const int nu = std::clamp(static_cast<int>(std::ceil(box.u_span() / spacing)) + 1, 2, kMaxNodes);
+  const int nv = std::clamp(static_cast<int>(std::ceil(box.v_span() / spacing)) + 1, 2, kMaxNodes);
+  std::vector<int> nearest(1);
+  std::vector<float> d2(1);
+  Gap gap;
+  for (int j = 0; j < nv; ++j) {
+    for (int i = 0; i < nu; ++i) {
+      const double gu = box.u_min + box.u_span() * i / (nu - 1), gv = box.v_min + box.v_span() * j / (nv - 1);
+      tree.nearestKSearch(pcl::PointXYZ(static_cast<float>(gu - cu), static_cast<float>(gv - cv), 0.0f), 1, nearest,
+                          d2);
+      const std::size_t k = static_cast<std::size_t>(nearest[0]);
+      const double r = std::hypot(u[k] - gu, v[k] - gv);
+      if (r > gap.radius_mm) gap = Gap{r, gu, gv};
+    }
+  }
+  return gap;
+}
+
+// One fit with parameter correction, for fixed knots.
+struct CorrectedFit {
+  BSplineSurface surface;
+  Eigen::MatrixXd poles;
+  TensorLsq::Trial trial;
+  double lambda_scale = 1;          // tr AᵀA / tr R of the final system
+  std::vector<double> u, v;         // foot-point parameters of the points on `surface`
+  std::vector<double> distance_mm;  // orthogonal residuals
+  double rms_mm = 0;
+  int rounds = 0;  // refits after the first
+  int failed_projections = 0;
+  int boundary_feet = 0;
+  std::vector<double> rms_history;
+  std::vector<std::string> notes;
+};
+
+Result<CorrectedFit> FitWithCorrection(const std::vector<Vector3d>& points, const std::vector<Vector3d>& centred,
+                                       const Vector3d& origin, const KnotVector& ku, const KnotVector& kv,
+                                       const ParamDomain& data_box, std::vector<double> u, std::vector<double> v,
+                                       const ScatteredFitOptions& options, double* previous_log_lambda) {
+  const int m = static_cast<int>(points.size());
+  TensorLsq lsq(ku, kv, ParamDomain{ku.lo(), ku.hi(), kv.lo(), kv.hi()});
+  CorrectedFit best;
+  bool have_best = false;
+  // kTolerance aims at an orthogonal RMS of tolerance_mm, but λ is chosen on the parametric RMS at
+  // the current parameters, which the projection then lowers (by 5-6 % measured on franke with 5 µm
+  // noise). Each round rescales the parametric target by tolerance / orthogonal RMS reached.
+  const bool to_tolerance = options.smoothing == ScatteredFitOptions::Smoothing::kTolerance;
+  double target_mm = options.tolerance_mm;
+  for (int round = 0; round <= options.max_correction_iterations; ++round) {
+    lsq.Assemble(u, v, centred);
+    LambdaChoice choice = ChooseLambda(lsq, options, *previous_log_lambda, m, target_mm);
+    if (!choice.trial.ok) {
+      if (have_best) break;  // keep the previous round's surface
+      return Status::Failed(
+          "scattered fit: the penalised normal matrix is not positive definite (lambda = " + Num(choice.trial.lambda) +
+          "); some control points have no data and no smoothing; use smoothing (kGcv) or fewer "
+          "poles");
+    }
+    CorrectedFit fit;
+    try {
+      fit.surface = BSplineSurface(MakeGeom(ku, kv, choice.trial.poles, origin));
+    } catch (const Standard_Failure& failure) {
+      return Status::Internal(std::string("scattered fit: OpenCASCADE refused the surface: ") +
+                              failure.DynamicType()->Name());
+    }
+    fit.poles = choice.trial.poles;
+    fit.lambda_scale = lsq.lambda_scale();
+    if (!choice.note.empty()) fit.notes.push_back(choice.note);
+    fit.trial = std::move(choice.trial);
+    fit.u = u;
+    fit.v = v;
+    fit.distance_mm.assign(static_cast<std::size_t>(m), 0.0);
+    double sum2 = 0;
+    for (int i = 0; i < m; ++i) {
+      const std::size_t si = static_cast<std::size_t>(i);
+      const Result<FootPoint> foot = ProjectFrom(fit.surface, points[si], u[si], v[si]);
+      if (foot.ok()) {
+        fit.u[si] = foot->u;
+        fit.v[si] = foot->v;
+        fit.distance_mm[si] = (points[si] - foot->foot).norm();
+        fit.boundary_feet += foot->on_boundary ? 1 : 0;
+      } else {
+        // Keep the parameters; the parametric distance bounds the orthogonal one.
+        fit.distance_mm[si] = (points[si] - fit.surface.Point(u[si], v[si])).norm();
+        ++fit.failed_projections;
+      }
+      sum2 += fit.distance_mm[si] * fit.distance_mm[si];
+    }
+    fit.rms_mm = std::sqrt(sum2 / m);
+    if (fit.trial.lambda > 0) *previous_log_lambda = std::log10(fit.trial.lambda);
+    const std::vector<double> history = have_best ? best.rms_history : std::vector<double>{};
+    if (to_tolerance) {
+      // Keep the round closest to the target; stop within kToleranceMatch of it.
+      const double miss = std::abs(fit.rms_mm / options.tolerance_mm - 1);
+      const double reached_mm = fit.rms_mm;
+      u = fit.u;
+      v = fit.v;
+      if (!have_best || miss < std::abs(best.rms_mm / options.tolerance_mm - 1)) {
+        fit.rounds = round;
+        fit.rms_history = history;
+        fit.rms_history.push_back(fit.rms_mm);
+        best = std::move(fit);
+        have_best = true;
+      } else {
+        best.rms_history.push_back(fit.rms_mm);
+      }
+      if (miss < kToleranceMatch || !(reached_mm > 0)) break;
+      target_mm *= options.tolerance_mm / reached_mm;
+      continue;
+    }
+    const bool improved = !have_best || fit.rms_mm < best.rms_mm;
+    const bool stalled = have_best && fit.rms_mm > best.rms_mm * (1 - kCorrectionStall);
+    if (improved) {
+      fit.rounds = round;
+      fit.rms_history = history;
+      fit.rms_history.push_back(fit.rms_mm);
+      best = std::move(fit);
+      have_best = true;
+    } else {
+      best.rms_history.push_back(fit.rms_mm);
+    }
+    if (stalled) break;
+    u = best.u;
+    v = best.v;
+  }
+  return best;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// Building blocks
+
+namespace scattered_internal {
+
+SparseMatrix ThinPlateMatrix(const KnotVector& u_knots, const KnotVector& v_knots, const ParamDomain* region) {
+  SparseMatrix r = BandPattern(u_knots.n_poles(), v_knots.n_poles(), u_knots.degree());
+  FillThinPlate(u_knots, v_knots,
+                region != nullptr ? *region : ParamDomain{u_knots.lo(), u_knots.hi(), v_knots.lo(), v_knots.hi()}, &r);
+  return r;
+}
+
+Result<double> TraceOfInverseTimes(const Ldlt& ldlt, const SparseMatrix& b) {
+  // P M Pᵀ = L D Lᵀ (L unit lower, strictly lower part stored by columns, rows ascending).
+  // Z = (L D Lᵀ)⁻¹ satisfies Z = D⁻¹L⁻¹ + (I − Lᵀ) Z, hence for j from n − 1 down to 0 and the rows
+  // i > j of column j of L:  Z_ij = −Σ_k L_kj Z_ik,  Z_jj = 1/D_j − Σ_k L_kj Z_kj  (k over the same
+  // rows). Every Z_ik needed lies on L's pattern (i, k > j both in column j ⇒ L_ik is structurally
+  // non-zero), so Z is formed on that pattern only.
+  const SparseMatrix& l = ldlt.matrixL().nestedExpression();
+  if (!l.isCompressed()) return Status::Internal("selected inversion: the LDLT factor is not compressed");
+  const int n = static_cast<int>(l.cols());
+  const int* lp = l.outerIndexPtr();
+  const int* li = l.innerIndexPtr();
+  const double* lx = l.valuePtr();
+  const Eigen::VectorXd d = ldlt.vectorD();
+  std::vector<double> zx(static_cast<std::size_t>(l.nonZeros()), 0.0), zd(static_cast<std::size_t>(n), 0.0);
+  // Position of (row, col), row > col, in L's storage, or −1.
+  auto find = [&](int row, int col) -> int {
+    const int* begin = li + lp[col];
+    const int* end = li + lp[col + 1];
+    const int* it = std::lower_bound(begin, end, row);
+    return it != end && *it == row ? static_cast<int>(it - li) : -1;
+  };
+  // For column j with rows R_j: s_i = Σ_{k ∈ R_j} L_kj Z_ik. Each pair k < i of R_j is visited once,
+  // scanning column k of Z (which holds R_j ∩ (k, n), see above) against a scatter map of R_j; the
+  // cost is Σ_j Σ_{k ∈ R_j} |column k|: measured about three times the numeric factorisation.
+  bool missing = false;
+  std::vector<double> s;
+  std::vector<int> where(static_cast<std::size_t>(n), -1);
+  for (int j = n - 1; j >= 0; --j) {
+    const int begin = lp[j], count = lp[j + 1] - lp[j];
+    const int* rows = li + begin;
+    const double* l_col = lx + begin;
+    s.assign(static_cast<std::size_t>(count), 0.0);
+    for (int a = 0; a < count; ++a) where[static_cast<std::size_t>(rows[a])] = a;
+    for (int a = 0; a < count; ++a) {
+      const int k = rows[a];
+      const double l_kj = l_col[a];
+      double s_a = l_kj * zd[static_cast<std::size_t>(k)];
+      int matched = 0;
+      for (int q = lp[k]; q < lp[k + 1]; ++q) {
+        const int pos = where[static_cast<std::size_t>(li[q])];
+        if (pos < 0) continue;
+        const double z_ik = zx[static_cast<std::size_t>(q)];
+        s[static_cast<std::size_t>(pos)] += l_kj * z_ik;
+        s_a += l_col[pos] * z_ik;
+        ++matched;
+      }
+      s[static_cast<std::size_t>(a)] += s_a;
+      missing = missing || matched != count - a - 1;
+    }
+    double diag = 0;
+    for (int a = 0; a < count; ++a) {
+      where[static_cast<std::size_t>(rows[a])] = -1;
+      zx[static_cast<std::size_t>(begin + a)] = -s[static_cast<std::size_t>(a)];
+      diag += l_col[a] * zx[static_cast<std::size_t>(begin + a)];
+    }
+    zd[static_cast<std::size_t>(j)] = 1.0 / d(j) - diag;
+  }
+  if (missing) return Status::Internal("selected inversion: an entry of the inverse lies off the factor's pattern");
+  // (M⁻¹)_rc = Z_{π(r), π(c)} with π = P's index map.
+  const auto& perm = ldlt.permutationP().indices();
+  double trace = 0;
+  for (int col = 0; col < b.outerSize(); ++col) {
+    for (SparseMatrix::InnerIterator it(b, col); it; ++it) {
+      const int r = perm(static_cast<int>(it.row())), c = perm(col);
+      double z;
+      if (r == c) {
+        z = zd[static_cast<std::size_t>(r)];
+      } else {
+        const int pos = find(std::max(r, c), std::min(r, c));
+        if (pos < 0) return Status::Internal("selected inversion: B has an entry off the factor's pattern");
+        z = zx[static_cast<std::size_t>(pos)];
+      }
+      trace += z * it.value();
+    }
+  }
+  return trace;
+}
+
+}  // namespace scattered_internal
+
+// ---------------------------------------------------------------------------------------------
+// Options
+
+Status ScatteredFitOptions::Validate() const {
+  if (degree < kMinDegree || degree > kMaxDegree) {
+    return Status::BadInput(Where{.field = "degree"}, "degree " + std::to_string(degree) + " is out of range",
+                            "use a degree between " + std::to_string(kMinDegree) + " and " +
+                                std::to_string(kMaxDegree) + " (3 = cubic; the thin-plate energy needs degree >= 2)");
+  }
+  for (const auto& [name, poles] : {std::pair<const char*, int>{"u_poles", u_poles}, {"v_poles", v_poles}}) {
+    if (poles != 0 && (poles < degree + 1 || poles > kMaxPoles)) {
+      return Status::BadInput(Where{.field = name}, std::to_string(poles) + " poles is out of range",
+                              "use 0 (automatic) or between degree + 1 = " + std::to_string(degree + 1) + " and " +
+                                  std::to_string(kMaxPoles));
+    }
+  }
+  if ((u_poles == 0) != (v_poles == 0)) {
+    return Status::BadInput(Where{.field = u_poles == 0 ? "u_poles" : "v_poles"},
+                            "only one direction's pole count is given", "give both u_poles and v_poles, or neither");
+  }
+  if (!std::isfinite(lambda) || lambda < 0) {
+    return Status::BadInput(Where{.field = "lambda"}, "lambda = " + Num(lambda) + " must be a finite number >= 0",
+                            "use e.g. 1e-6 (dimensionless; see scattered_fit.h)");
+  }
+  if (!std::isfinite(tolerance_mm) || !(tolerance_mm > 0)) {
+    return Status::BadInput(Where{.field = "tolerance_mm"}, "tolerance must be a positive finite number of mm",
+                            "use e.g. 1e-3");
+  }
+  if (max_correction_iterations < 0 || max_correction_iterations > 100) {
+    return Status::BadInput(Where{.field = "max_correction_iterations"},
+                            std::to_string(max_correction_iterations) + " is out of range", "use 0 to 100");
+  }
+  if (max_refinements < 0 || max_refinements > 20) {
+    return Status::BadInput(Where{.field = "max_refinements"}, std::to_string(max_refinements) + " is out of range",
+                            "use 0 to 20");
+  }
+  return Status::Ok();
+}
+
+// ---------------------------------------------------------------------------------------------
+// FitScattered
+
+Result<BSplineSurface> FitScattered(const std::vector<Vector3d>& points, const ScatteredFitOptions& options,
+                                    FitReport* report, const BSplineSurface* base) {
+  FL_RETURN_IF_ERROR(options.Validate().WithContext("scattered fit options"));
+  const int m = static_cast<int>(points.size());
+  const int p = options.degree;
+  const int min_unknowns = options.u_poles > 0 ? options.u_poles * options.v_poles : (p + 1) * (p + 1);
+  if (m < min_unknowns) {
+    return Status::BadInput(
+        Where{.field = "points"},
+        std::to_string(m) + " points cannot determine a " +
+            (options.u_poles > 0 ? std::to_string(options.u_poles) + " × " + std::to_string(options.v_poles)
+                                 : std::to_string(p + 1) + " × " + std::to_string(p + 1) + " (smallest)") +
+            " control net (" + std::to_string(min_unknowns) + " unknowns per coordinate)",
+        "give at least " + std::to_string(min_unknowns) + " points or fewer poles");
+  }
+  FL_RETURN_IF_ERROR(CheckFiniteAndDistinct(points).WithContext("scattered fit"));
+  if (base != nullptr && !base->valid()) {
+    return Status::BadInput(Where{.field = "base"}, "the base surface is empty", "pass nullptr to use the PCA plane");
+  }
+
+  // Principal components (on centred coordinates, so the offset of the part does not cost digits).
+  Vector3d mean = Vector3d::Zero();
+  for (const Vector3d& q : points) mean += q;
+  mean /= m;
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (const Vector3d& q : points) cov += (q - mean) * (q - mean).transpose();
+  cov /= m;
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+  const Vector3d variances = eig.eigenvalues().reverse();  // descending
+  Eigen::Matrix3d axes;
+  axes << eig.eigenvectors().col(2), eig.eigenvectors().col(1), eig.eigenvectors().col(0);
+  // Coincident: all points within ~1 nm of each other (relative to their distance from the origin,
+  // which bounds the rounding of the coordinates).
+  if (!(std::sqrt(variances(0)) > 1e-9 * (1 + mean.norm()))) {
+    return Status::BadInput(
+        Where{.field = "points"},
+        "the points are coincident (spread " + Num(std::sqrt(variances(0))) + " mm): they do not span a surface",
+        "give points spread over an area");
+  }
+  if (!(variances(1) > 1e-12 * variances(0))) {
+    return Status::BadInput(Where{.field = "points"},
+                            "the points are collinear (principal variances " + Num(variances(0)) + ", " +
+                                Num(variances(1)) + " mm²): they do not span a surface",
+                            "give points spread over an area");
+  }
+
+  std::vector<Vector3d> centred(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) centred[i] = points[i] - mean;
+
+  // Initial parameters and the parameter box.
+  std::vector<double> u(points.size()), v(points.size());
+  ParamDomain box, data_box;
+  Frame frame;
+  nlohmann::json details = nlohmann::json::object();
+  if (base == nullptr) {
+    frame = PcaFrame(points, mean, axes);
+    double u0 = std::numeric_limits<double>::infinity(), u1 = -u0, v0 = u0, v1 = -u0;
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      u[i] = centred[i].dot(frame.u_axis);
+      v[i] = centred[i].dot(frame.v_axis);
+      u0 = std::min(u0, u[i]);
+      u1 = std::max(u1, u[i]);
+      v0 = std::min(v0, v[i]);
+      v1 = std::max(v1, v[i]);
+    }
+    data_box = ParamDomain{u0, u1, v0, v1};
+    details["parameterisation"] = "pca-plane";
+    details["frame"] = {{"origin_mm", JsonVector(frame.origin)},
+                        {"u_axis", JsonVector(frame.u_axis)},
+                        {"v_axis", JsonVector(frame.v_axis)},
+                        {"normal", JsonVector(frame.normal)}};
+  } else {
+    // Foot points on base, each Newton search started from the nearest node of a 65 × 65 sample.
+    box = base->domain();
+    data_box = box;
+    constexpr int kSamples = 65;
+    pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
+    std::vector<std::pair<double, double>> node_uv;
+    for (int j = 0; j < kSamples; ++j) {
+      for (int i = 0; i < kSamples; ++i) {
+        const double su = box.u_min + box.u_span() * i / (kSamples - 1);
+        const double sv = box.v_min + box.v_span() * j / (kSamples - 1);
+        const Vector3d q = base->Point(su, sv) - mean;
+        cloud->push_back(
+            pcl::PointXYZ(static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z())));
+        node_uv.emplace_back(su, sv);
+      }
+    }
+    pcl::KdTreeFLANN<pcl::PointXYZ> tree;
+    tree.setInputCloud(cloud);
+    std::vector<int> nearest(1);
+    std::vector<float> d2(1);
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      const pcl::PointXYZ query(static_cast<float>(centred[i].x()), static_cast<float>(centred[i].y()),
+                                static_cast<float>(centred[i].z()));
+      tree.nearestKSearch(query, 1, nearest, d2);
+      const auto [su, sv] = node_uv[static_cast<std::size_t>(nearest[0])];
+      const Result<FootPoint> foot = ProjectFrom(*base, points[i], su, sv);
+      u[i] = foot.ok() ? foot->u : su;
+      v[i] = foot.ok() ? foot->v : sv;
+    }
+    details["parameterisation"] = "base-surface";
+  }
+  // Control net. Automatic: about m / kScatteredPointsPerPole poles over the data, in the ratio of
+  // the data box's sides, plus the margin span's pole at each end (PCA case).
+  const bool margin = base == nullptr;
+  int nu = options.u_poles, nv = options.v_poles;
+  if (nu == 0) {
+    const double target = std::max(1.0, static_cast<double>(m) / kScatteredPointsPerPole);
+    const double aspect = data_box.u_span() / data_box.v_span();
+    const int extra = margin ? 2 : 0;
+    nu = std::clamp(static_cast<int>(std::lround(std::sqrt(target * aspect))), p + 1, kScatteredMaxAutoPoles);
+    nv = std::clamp(static_cast<int>(std::lround(target / nu)), p + 1, kScatteredMaxAutoPoles);
+    nu += extra;
+    nv += extra;
+  }
+  // Margin (PCA case): at least kMarginSpacings point spacings, the distance by which the points
+  // typically miss the boundary of the sampled surface at a corner.
+  const double min_margin = kMarginSpacings * std::sqrt(data_box.u_span() * data_box.v_span() / m);
+  FL_ASSIGN_OR_RETURN(KnotVector ku, DataKnots(p, nu, data_box.u_min, data_box.u_max, margin, min_margin));
+  FL_ASSIGN_OR_RETURN(KnotVector kv, DataKnots(p, nv, data_box.v_min, data_box.v_max, margin, min_margin));
+  if (margin) box = ParamDomain{ku.lo(), ku.hi(), kv.lo(), kv.hi()};
+  details["domain"] = {box.u_min, box.u_max, box.v_min, box.v_max};
+  details["data_box"] = {data_box.u_min, data_box.u_max, data_box.v_min, data_box.v_max};
+
+  // Fit, then refine where the residual exceeds the tolerance.
+  double previous_log_lambda = std::numeric_limits<double>::quiet_NaN();
+  std::vector<double> inserted_u, inserted_v;
+  std::vector<std::string> notes;
+  int refinements = 0;
+  nlohmann::json rounds_per_fit = nlohmann::json::array();
+  FL_ASSIGN_OR_RETURN(CorrectedFit fit,
+                      FitWithCorrection(points, centred, mean, ku, kv, data_box, u, v, options, &previous_log_lambda));
+  rounds_per_fit.push_back(fit.rounds);
+  auto max_distance = [](const CorrectedFit& f) {
+    return *std::max_element(f.distance_mm.begin(), f.distance_mm.end());
+  };
+  while (options.adaptive && max_distance(fit) > options.tolerance_mm) {
+    if (refinements == options.max_refinements) {
+      notes.push_back("adaptive refinement stopped after " + std::to_string(refinements) +
+                      " refinements (max_refinements) with a max orthogonal residual of " + Num(max_distance(fit)) +
+                      " mm > tolerance_mm = " + Num(options.tolerance_mm) + " mm");
+      break;
+    }
+    // Midpoints of the spans that hold an out-of-tolerance point.
+    std::vector<char> mark_u(static_cast<std::size_t>(ku.n_poles()), 0),
+        mark_v(static_cast<std::size_t>(kv.n_poles()), 0);
+    for (int i = 0; i < m; ++i) {
+      const std::size_t si = static_cast<std::size_t>(i);
+      if (fit.distance_mm[si] <= options.tolerance_mm) continue;
+      // A foot point in the margin marks the data span next to it (margin spans are not refined).
+      const double cu = std::clamp(fit.u[si], data_box.u_min, std::nextafter(data_box.u_max, data_box.u_min));
+      const double cv = std::clamp(fit.v[si], data_box.v_min, std::nextafter(data_box.v_max, data_box.v_min));
+      mark_u[static_cast<std::size_t>(ku.FindSpan(cu))] = 1;
+      mark_v[static_cast<std::size_t>(kv.FindSpan(cv))] = 1;
+    }
+    // Interior spans are halved. An end span of the data keeps its role (see DataKnots): it is split
+    // so that it stays kEndSpanWidth times as wide as the new span next to it.
+    auto midpoints = [](const KnotVector& k, const std::vector<char>& mark, double a, double b) {
+      std::vector<double> mids;
+      const double end_share = kEndSpanWidth / (kEndSpanWidth + 1);
+      for (std::size_t s = 0; s < mark.size(); ++s) {
+        if (!mark[s]) continue;
+        const double t0 = k.knots()[s], t1 = k.knots()[s + 1];
+        const bool first = t0 <= a, last = t1 >= b;
+        if (first && !last) {
+          mids.push_back(t0 + end_share * (t1 - t0));
+        } else if (last && !first) {
+          mids.push_back(t1 - end_share * (t1 - t0));
+        } else {
+          mids.push_back(0.5 * (t0 + t1));
+        }
+      }
+      return mids;
+    };
+    const std::vector<double> add_u = midpoints(ku, mark_u, data_box.u_min, data_box.u_max);
+    const std::vector<double> add_v = midpoints(kv, mark_v, data_box.v_min, data_box.v_max);
+    const long next_unknowns =
+        static_cast<long>(ku.n_poles() + add_u.size()) * static_cast<long>(kv.n_poles() + add_v.size());
+    if (next_unknowns > m || ku.n_poles() + static_cast<int>(add_u.size()) > kMaxPoles ||
+        kv.n_poles() + static_cast<int>(add_v.size()) > kMaxPoles) {
+      notes.push_back("adaptive refinement stopped after " + std::to_string(refinements) +
+                      " refinements: the next net (" + std::to_string(ku.n_poles() + add_u.size()) + " × " +
+                      std::to_string(kv.n_poles() + add_v.size()) + " poles) would have more unknowns than the " +
+                      std::to_string(m) + " points can determine; max orthogonal residual " + Num(max_distance(fit)) +
+                      " mm > tolerance_mm = " + Num(options.tolerance_mm) + " mm");
+      break;
+    }
+    FL_ASSIGN_OR_RETURN(ku, ku.Inserted(add_u));
+    FL_ASSIGN_OR_RETURN(kv, kv.Inserted(add_v));
+    inserted_u.insert(inserted_u.end(), add_u.begin(), add_u.end());
+    inserted_v.insert(inserted_v.end(), add_v.begin(), add_v.end());
+    ++refinements;
+    FL_ASSIGN_OR_RETURN(CorrectedFit refined, FitWithCorrection(points, centred, mean, ku, kv, data_box, fit.u, fit.v,
+                                                                options, &previous_log_lambda));
+    rounds_per_fit.push_back(refined.rounds);
+    fit = std::move(refined);
+  }
+
+  // Coverage: where Q is extrapolated rather than fitted.
+  const double spacing = std::sqrt(data_box.u_span() * data_box.v_span() / m);
+  const Gap gap = LargestGap(fit.u, fit.v, data_box, spacing);
+
+  // Report.
+  FitReport local;
+  local.method = options.adaptive ? "scattered-thin-plate-adaptive" : "scattered-thin-plate";
+  local.n_points = m;
+  local.residual =
+      "orthogonal: distance from each input point to its foot point on Q (parameter-corrected least squares)";
+  local.rms_mm = fit.rms_mm;
+  std::size_t worst = 0;
+  for (std::size_t i = 1; i < fit.distance_mm.size(); ++i) {
+    if (fit.distance_mm[i] > fit.distance_mm[worst]) worst = i;
+  }
+  local.max_mm = fit.distance_mm[worst];
+  local.max_at = points[worst];
+  const char* smoothing_name = options.smoothing == ScatteredFitOptions::Smoothing::kGcv         ? "gcv"
+                               : options.smoothing == ScatteredFitOptions::Smoothing::kTolerance ? "tolerance"
+                                                                                                 : "fixed";
+  details["degree"] = p;
+  details["u_poles"] = ku.n_poles();
+  details["v_poles"] = kv.n_poles();
+  details["u_knots"] = DistinctKnotsJson(ku);
+  details["v_knots"] = DistinctKnotsJson(kv);
+  details["smoothing"] = smoothing_name;
+  details["lambda"] = fit.trial.lambda;
+  details["lambda_scale"] = fit.lambda_scale;
+  details["gcv_score_mm2"] = fit.trial.gcv;
+  details["effective_dof"] = fit.trial.trace;
+  details["parametric_rms_mm"] = std::sqrt(fit.trial.rss / m);
+  details["correction_iterations"] = fit.rounds;
+  details["correction_iterations_per_fit"] = rounds_per_fit;
+  details["rms_history_mm"] = fit.rms_history;
+  details["refinements"] = refinements;
+  details["knots_inserted_u"] = inserted_u;
+  details["knots_inserted_v"] = inserted_v;
+  details["boundary_feet"] = fit.boundary_feet;
+  details["point_spacing_mm"] = spacing;
+  details["largest_gap_mm"] = gap.radius_mm;
+  details["largest_gap_at_uv"] = {gap.u, gap.v};
+  details["failed_projections"] = fit.failed_projections;
+  local.details = std::move(details);
+  local.notes = std::move(notes);
+  for (const std::string& note : fit.notes) local.notes.push_back(note);
+  if (fit.failed_projections > 0) {
+    local.notes.push_back(std::to_string(fit.failed_projections) +
+                          " points could not be projected onto Q; their residual is the parametric distance");
+  }
+  if (fit.boundary_feet > 0) {
+    local.notes.push_back(std::to_string(fit.boundary_feet) +
+                          " points have their foot point on the edge of Q (they lie beyond it); their residual is the "
+                          "distance to the edge");
+  }
+  if (gap.radius_mm > kGapSpacings * spacing) {
+    local.notes.push_back("the points leave a gap of radius " + Num(gap.radius_mm, 3) + " mm (" +
+                          Num(gap.radius_mm / spacing, 2) + " point spacings) around (u, v) = (" + Num(gap.u) + ", " +
+                          Num(gap.v) + ") mm, point " + PointText(fit.surface.Point(gap.u, gap.v)) +
+                          ": Q is extrapolated there and the residuals do not measure its error");
+  }
+  if (!options.adaptive && local.max_mm > options.tolerance_mm) {
+    local.notes.push_back("max orthogonal residual " + Num(local.max_mm) + " mm exceeds tolerance_mm = " +
+                          Num(options.tolerance_mm) + " mm (set adaptive to insert knots where it does)");
+  }
+  if (report != nullptr) *report = std::move(local);
+  return std::move(fit.surface);
+}
+
+}  // namespace formloop::recon

@@ -1,0 +1,65 @@
+#include "reconstruction/point_checks.h"
+
+#include <algorithm>
+#include <cmath>
+#include <locale>
+#include <numeric>
+#include <sstream>
+
+namespace formloop::recon {
+
+std::string NumberText(double value, int precision) {
+  std::ostringstream out;
+  out.imbue(std::locale::classic());
+  out.precision(precision);
+  out << value;
+  return out.str();
+}
+
+std::string PointText(const Eigen::Vector3d& p) {
+  return "(" + NumberText(p.x(), 10) + ", " + NumberText(p.y(), 10) + ", " + NumberText(p.z(), 10) + ") mm";
+}
+
+Status CheckFiniteAndDistinct(const std::vector<Eigen::Vector3d>& points) {
+  constexpr const char* kAxis[3] = {"x", "y", "z"};
+  const std::size_t n = points.size();
+  for (std::size_t k = 0; k < n; ++k) {
+    for (int axis = 0; axis < 3; ++axis) {
+      if (!std::isfinite(points[k](axis))) {
+        return Status::BadInput(Where{.field = "points[" + std::to_string(k) + "]." + kAxis[axis]},
+                                "point " + std::to_string(k) + " has " + kAxis[axis] + " = " +
+                                    NumberText(points[k](axis)) + ": the point is not finite",
+                                "remove or re-measure that point");
+      }
+    }
+  }
+  std::vector<std::size_t> order(n);
+  std::iota(order.begin(), order.end(), std::size_t{0});
+  std::sort(order.begin(), order.end(), [&](std::size_t i, std::size_t j) {
+    const Eigen::Vector3d &p = points[i], &q = points[j];
+    if (p.x() != q.x()) return p.x() < q.x();
+    if (p.y() != q.y()) return p.y() < q.y();
+    if (p.z() != q.z()) return p.z() < q.z();
+    return i < j;
+  });
+  std::size_t first_i = 0, first_j = 0, repeats = 0;
+  for (std::size_t k = 1; k < n; ++k) {
+    if (points[order[k]] != points[order[k - 1]]) continue;
+    const std::size_t i = std::min(order[k], order[k - 1]), j = std::max(order[k], order[k - 1]);
+    if (repeats == 0 || i < first_i || (i == first_i && j < first_j)) {
+      first_i = i;
+      first_j = j;
+    }
+    ++repeats;
+  }
+  if (repeats > 0) {
+    return Status::BadInput(Where{.field = "points"},
+                            "points " + std::to_string(first_i) + " and " + std::to_string(first_j) +
+                                " are identical " + PointText(points[first_i]) + " (" + std::to_string(repeats) +
+                                " repeated point(s) in all)",
+                            "remove repeated measurements (e.g. overlapping scan passes) or average them into one");
+  }
+  return Status::Ok();
+}
+
+}  // namespace formloop::recon

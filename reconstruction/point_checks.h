@@ -1,0 +1,26 @@
+#pragma once
+// Checks and message text shared by the fits and projections of reconstruction/: every fit refuses
+// non-finite and repeated points with the index named, and every message prints numbers and points
+// the same way, whatever the global locale.
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/status.h"
+
+namespace formloop::recon {
+
+// Locale-free "%.{precision}g".
+std::string NumberText(double value, int precision = 6);
+// "(x, y, z) mm" with 10 significant digits.
+std::string PointText(const Eigen::Vector3d& p);
+
+// BadInput naming the first non-finite coordinate (field "points[i].x") or the first pair of exactly
+// repeated points (both indices, the point, and how many repeats there are in all). A repeated point
+// counts twice in a least-squares fit and is usually a logging error, so the fits refuse it.
+// O(n log n): a lexicographic sort of the indices.
+Status CheckFiniteAndDistinct(const std::vector<Eigen::Vector3d>& points);
+
+}  // namespace formloop::recon
