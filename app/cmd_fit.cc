@@ -157,7 +157,7 @@ void AddFitCommand(CLI::App& root, CommandAction* action) {
   project->add_option("--points", project_args->points, "points (.csv .ply .xyz .pcd)")->required();
   project->add_option("--out", project_args->out,
                       "deviations (.csv .ply .xyz .pcd): the points with the normals of Q and the columns "
-                      "deviation_mm, u, v, foot_x, foot_y, foot_z, on_boundary")
+                      "deviation_mm, foot_u, foot_v (parameters of the foot point), foot_x, foot_y, foot_z, on_boundary")
       ->required();
   project->callback([action, project_args, project_face] {
     *action = [project_args, project_face] {

@@ -353,6 +353,13 @@ Result<ProjectOutcome> ProjectPoints(const ProjectRequest& request) {
   FL_ASSIGN_OR_RETURN(const recon::CadFace face, recon::ReadCadFace(request.surface, request.face));
   FL_ASSIGN_OR_RETURN(PointSet set, ReadPoints(request.points));
   if (set.empty()) return Status::BadInput(Where{.file = request.points}, "the file holds no points");
+  for (const char* name : {"deviation_mm", "foot_u", "foot_v", "foot_x", "foot_y", "foot_z", "on_boundary"}) {
+    if (set.FindScalar(name) != nullptr) {
+      return Status::BadInput(Where{.file = request.points, .field = name},
+                              "the input already has a column '" + std::string(name) + "'",
+                              "rename or drop that column: the output adds it");
+    }
+  }
   FL_ASSIGN_OR_RETURN(const recon::FootPointProjector projector, recon::FootPointProjector::Build(face.surface));
   auto feet = projector.ProjectAll(set.points);
   if (!feet.ok()) return feet.status().WithContext("projecting '" + request.points + "'");
@@ -375,16 +382,9 @@ Result<ProjectOutcome> ProjectPoints(const ProjectRequest& request) {
     max_abs = std::max(max_abs, std::abs(f.deviation_mm));
     boundary_count += f.on_boundary ? 1 : 0;
   }
-  for (const char* name : {"deviation_mm", "u", "v", "foot_x", "foot_y", "foot_z", "on_boundary"}) {
-    if (set.FindScalar(name) != nullptr) {
-      return Status::BadInput(Where{.file = request.points, .field = name},
-                              "the input already has a column '" + std::string(name) + "'",
-                              "rename or drop that column: the output adds it");
-    }
-  }
   set.SetScalar("deviation_mm", std::move(deviation));
-  set.SetScalar("u", std::move(u));
-  set.SetScalar("v", std::move(v));
+  set.SetScalar("foot_u", std::move(u));
+  set.SetScalar("foot_v", std::move(v));
   set.SetScalar("foot_x", std::move(fx));
   set.SetScalar("foot_y", std::move(fy));
   set.SetScalar("foot_z", std::move(fz));

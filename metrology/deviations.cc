@@ -35,18 +35,26 @@ Result<std::vector<Deviation>> ComputeDeviations(const recon::BSplineSurface& su
 
 PointSet DeviationsToPoints(const std::vector<Deviation>& deviations) {
   PointSet points;
-  std::vector<double> u, v, dev_um;
+  std::vector<double> u, v, fx, fy, fz, dev_um, boundary;
   for (const Deviation& d : deviations) {
     points.points.push_back(d.contact);
     points.normals.push_back(d.normal);
     points.ids.push_back(d.id);
     u.push_back(d.u);
     v.push_back(d.v);
+    fx.push_back(d.foot.x());
+    fy.push_back(d.foot.y());
+    fz.push_back(d.foot.z());
     dev_um.push_back(d.deviation_mm * 1e3);
+    boundary.push_back(d.on_boundary ? 1 : 0);
   }
   points.SetScalar("u", std::move(u));
   points.SetScalar("v", std::move(v));
+  points.SetScalar("foot_x", std::move(fx));
+  points.SetScalar("foot_y", std::move(fy));
+  points.SetScalar("foot_z", std::move(fz));
   points.SetScalar("deviation_um", std::move(dev_um));
+  points.SetScalar("on_boundary", std::move(boundary));
   return points;
 }
 

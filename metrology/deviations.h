@@ -28,7 +28,8 @@ struct Deviation {
 Result<std::vector<Deviation>> ComputeDeviations(const recon::BSplineSurface& surface, const ProbingPlan& plan,
                                                  const ProbeLog& log, const ProbeModel& probe);
 
-// As a point set: contact points, normals, ids, scalars u, v, deviation_um.
+// As a point set: contact points, normals (of Q at the foot points), ids, scalars u, v, foot_x, foot_y,
+// foot_z, deviation_um, on_boundary (1/0): the deviation vector, not only its length.
 PointSet DeviationsToPoints(const std::vector<Deviation>& deviations);
 
 }  // namespace formloop::metrology

@@ -279,6 +279,10 @@ Status CheckPoint(const Vector3d& p) {
   return Status::Ok();
 }
 
+// Tangential offset (mm) of p from the normal line at an edge foot point above which the edge, not
+// orthogonality, fixed the foot (1 nm: far below any metrology meaning, far above rounding).
+constexpr double kEdgeTangentialTolMm = 1e-6;
+
 Result<FootPoint> MakeFoot(const ParamDomain& dom, const Vector3d& p, const NewtonResult& r) {
   FootPoint foot;
   foot.u = r.x(0);
@@ -287,8 +291,16 @@ Result<FootPoint> MakeFoot(const ParamDomain& dom, const Vector3d& p, const Newt
   foot.normal = NormalFromDerivatives(r.d);
   foot.deviation_mm = (p - foot.foot).dot(foot.normal);
   foot.distance_mm = (p - foot.foot).norm();
-  foot.on_boundary = foot.u - dom.u_min <= kBoundaryTol || dom.u_max - foot.u <= kBoundaryTol ||
-                     foot.v - dom.v_min <= kBoundaryTol || dom.v_max - foot.v <= kBoundaryTol;
+  // Flagged only when the edge holds the foot point back: p - q keeps a tangential component across
+  // that edge. A point exactly over the edge (a grid sample on it, say) is an ordinary normal foot.
+  const Vector3d r_vec = p - foot.foot;
+  const auto held = [&](const Vector3d& tangent) {
+    const double speed = tangent.norm();
+    return speed > 0 && std::abs(r_vec.dot(tangent)) / speed > kEdgeTangentialTolMm;
+  };
+  const bool at_u_edge = foot.u - dom.u_min <= kBoundaryTol || dom.u_max - foot.u <= kBoundaryTol;
+  const bool at_v_edge = foot.v - dom.v_min <= kBoundaryTol || dom.v_max - foot.v <= kBoundaryTol;
+  foot.on_boundary = (at_u_edge && held(r.d.su)) || (at_v_edge && held(r.d.sv));
   if (!foot.foot.allFinite() || !foot.normal.allFinite()) {
     return Status::Internal("projection of " + PointText(p) + ": the surface gave a non-finite point or normal");
   }

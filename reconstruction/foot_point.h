@@ -55,7 +55,9 @@ struct FootPoint {
   // |p - q|; equals |deviation_mm| to rounding unless the foot point is clamped to an edge, where p - q
   // also has a tangential part.
   double distance_mm = 0;
-  bool on_boundary = false;  // the foot point lies on the edge of the parameter domain (clamped)
+  // The edge of the parameter domain holds the foot point back: p lies beyond Q, so deviation_mm is
+  // not a normal distance. Points exactly over an edge (orthogonal there) are not flagged.
+  bool on_boundary = false;
 };
 
 struct ProjectorOptions {

@@ -130,7 +130,7 @@ TEST_F(FitTest, ScatteredPointsFitThenProjectGivesTheOffsets) {
   const auto back = ReadPoints(dir_ / "dev.csv");
   ASSERT_TRUE(back.ok());
   EXPECT_EQ(back->size(), 500u);
-  for (const char* column : {"deviation_mm", "u", "v", "foot_x", "foot_y", "foot_z", "on_boundary"}) {
+  for (const char* column : {"deviation_mm", "foot_u", "foot_v", "foot_x", "foot_y", "foot_z", "on_boundary"}) {
     EXPECT_NE(back->FindScalar(column), nullptr) << column;
   }
   EXPECT_TRUE(back->has_normals());
@@ -286,6 +286,18 @@ TEST_F(FitTest, BinaryFitAndProject) {
   EXPECT_EQ((*summary)["n_points"], 100);
   EXPECT_NEAR((*summary)["rms_deviation_mm"].get<double>(), 0.05, 1e-3);
   EXPECT_TRUE(fs::exists(dir_ / "dev.ply"));
+  // The samples of `surfaces sample` carry u, v columns of their own; the output keeps them.
+  ASSERT_EQ(RunBinary("surfaces sample egg_box --nu 20 --nv 20 --out " + (dir_ / "s.csv").string(), &out, &err, dir_),
+            0);
+  ASSERT_EQ(RunBinary("project --surface " + q + " --points " + (dir_ / "s.csv").string() + " --out " +
+                          (dir_ / "s_dev.csv").string(),
+                      &out, &err, dir_),
+            0)
+      << err;
+  const auto sampled = ReadPoints(dir_ / "s_dev.csv");
+  ASSERT_TRUE(sampled.ok());
+  EXPECT_NE(sampled->FindScalar("u"), nullptr);
+  EXPECT_NE(sampled->FindScalar("foot_u"), nullptr);
 
   const fs::path box = dir_ / "box.step";
   WriteBox(box);
