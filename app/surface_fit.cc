@@ -6,8 +6,6 @@
 #include <memory>
 #include <system_error>
 
-#include <Eigen/Eigenvalues>
-
 #include "core/atomic_file.h"
 #include "core/log.h"
 #include "core/point_io.h"
@@ -60,29 +58,6 @@ Status CheckOutputs(const FitRequest& request) {
   if (!request.out_report.empty() && fs::path(request.out_report).extension() != ".json") {
     return Status::BadInput(Where{.file = request.out_report, .field = "--report"}, "the report is JSON",
                             "name it *.json");
-  }
-  return Status::Ok();
-}
-
-// Rejects point sets whose points span less than a plane: the second principal extent must be at
-// least 1e-6 of the first (collinear or coincident points determine no surface).
-Status CheckSpansAPlane(const std::vector<Eigen::Vector3d>& points, const std::string& source) {
-  if (points.size() < 3) {
-    return Status::BadInput(Where{.file = source}, "need at least 3 points to define a surface, got " +
-                                                       std::to_string(points.size()));
-  }
-  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  for (const auto& p : points) mean += p;
-  mean /= static_cast<double>(points.size());
-  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-  for (const auto& p : points) cov += (p - mean) * (p - mean).transpose();
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
-  const Eigen::Vector3d ev = eig.eigenvalues().cwiseMax(0);  // ascending
-  if (!(ev(2) > 0) || std::sqrt(ev(1) / ev(2)) < 1e-6) {
-    return Status::BadInput(Where{.file = source},
-                            ev(2) > 0 ? "the points are collinear: they determine no surface"
-                                      : "all points coincide: they determine no surface",
-                            "check the file: it must sample a surface, not a line");
   }
   return Status::Ok();
 }
@@ -193,7 +168,6 @@ Result<FitOutcome> FitPoints(const FitRequest& request, FitMethod method, const 
   recon::BSplineSurface q;
   nlohmann::json extra;
   if (method == FitMethod::kGrid) {
-    FL_RETURN_IF_ERROR(CheckSpansAPlane(points, request.input));
     recon::GridSamples samples;
     if (truth != nullptr) {
       const int nu = request.grid_nu > 0 ? request.grid_nu : 50, nv = request.grid_nv > 0 ? request.grid_nv : 50;

@@ -12,7 +12,15 @@
 // Counters: fit residual RMS in µm (orthogonal distance of the fitted points to Q, for both; OCCT's
 // own parametric figure as parametric_rms_um), error against the true surface at 10,000 random
 // points (distance to the foot point on Q), poles.
-// A table with all rows is printed at the end.
+// A table with all rows is printed at the end, with the RMS of the noise drawn for each data set.
+//
+// Measured (Release, 2 cores): OCCT 4.0 s, 1.094 µm orthogonal RMS; ours 0.67 s, 1.153 µm (1.231 µm
+// with the margin layout before it depended on coverage); GCV's λ (3e-6) adds no bias: λ = 1e-9
+// gives the same figures to 1e-3 µm. The rest of the gap is the parameterisation, not the solver:
+// franke's PCA plane is tilted ~10° from its xy domain, so the knot lines are not the grid's and
+// the parameter box is ~2 % wider than the data's footprint; with the plane forced to xy
+// (experiment) ours gave 1.121 µm, and 1.107 µm without the 2-spacing rim (DataKnots) as well,
+// but the rim keeps the true boundary inside Q (truth max 6.6 µm with it, 15.5 µm without).
 //
 // Run: formloop_bench_scattered_fit [--benchmark_repetitions=N]
 
@@ -39,17 +47,24 @@ const AnalyticSurface& Surface() {
   return *surface;
 }
 
+// RMS of the noise actually drawn for each data set (µm): the floor of its residual RMS.
+double grid_noise_rms_um = 0, scatter_noise_rms_um = 0;
+
 const GridSamples& NoisyGrid() {
   static const GridSamples grid = [] {
     GridSamples g = SampleGrid(Surface(), kGridSide, kGridSide);
     Rng rng(7);
+    double sum2 = 0;
     for (int j = 0; j < kGridSide; ++j) {
       for (int i = 0; i < kGridSide; ++i) {
         const double u = g.domain.u_min + g.domain.u_span() * i / (kGridSide - 1);
         const double v = g.domain.v_min + g.domain.v_span() * j / (kGridSide - 1);
-        g.points[static_cast<std::size_t>(j * kGridSide + i)] += rng.Normal(0, kNoiseMm) * Surface().Normal(u, v);
+        const double e = rng.Normal(0, kNoiseMm);
+        sum2 += e * e;
+        g.points[static_cast<std::size_t>(j * kGridSide + i)] += e * Surface().Normal(u, v);
       }
     }
+    grid_noise_rms_um = std::sqrt(sum2 / (kGridSide * kGridSide)) * 1e3;
     return g;
   }();
   return grid;
@@ -61,10 +76,14 @@ const std::vector<Eigen::Vector3d>& NoisyScatter() {
     Rng rng(11);
     std::vector<Eigen::Vector3d> p;
     p.reserve(kScatteredPoints);
+    double sum2 = 0;
     for (int i = 0; i < kScatteredPoints; ++i) {
       const double u = rng.Uniform(dom.u_min, dom.u_max), v = rng.Uniform(dom.v_min, dom.v_max);
-      p.push_back(Surface().Point(u, v) + rng.Normal(0, kNoiseMm) * Surface().Normal(u, v));
+      const double e = rng.Normal(0, kNoiseMm);
+      sum2 += e * e;
+      p.push_back(Surface().Point(u, v) + e * Surface().Normal(u, v));
     }
+    scatter_noise_rms_um = std::sqrt(sum2 / kScatteredPoints) * 1e3;
     return p;
   }();
   return points;
@@ -231,6 +250,7 @@ void PrintTable() {
     std::printf("%-56s %8.2f %5d x %-5d %13.3f %15.3f %15.3f\n", row->name.c_str(), row->seconds, row->u_poles,
                 row->v_poles, row->rms_um, row->check_rms_um, row->check_max_um);
   }
+  std::printf("noise drawn: grid %.4f um rms, scatter %.4f um rms\n", grid_noise_rms_um, scatter_noise_rms_um);
   for (const Row* row : {&ours_row, &ours_fixed_row}) {
     if (!row->done) continue;
     std::printf("%-56s edge spans: %s (largest initial gap %.3f spans), lambda %.2e\n", row->name.c_str(),

@@ -14,6 +14,7 @@
 #include <Eigen/Dense>
 
 #include "core/random.h"
+#include "reconstruction/point_checks.h"
 
 namespace formloop::recon {
 namespace {
@@ -212,6 +213,7 @@ Result<BSplineSurface> FitGrid(const GridSamples& samples, const GridFitOptions&
       return Status::BadInput("grid fit: sample " + std::to_string(k) + " is not finite");
     }
   }
+  FL_RETURN_IF_ERROR(CheckSpansASurface(samples.points).WithContext("grid fit"));
 
   TColgp_Array2OfPnt grid(1, samples.nu, 1, samples.nv);
   for (int j = 0; j < samples.nv; ++j) {

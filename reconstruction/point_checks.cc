@@ -6,6 +6,8 @@
 #include <numeric>
 #include <sstream>
 
+#include <Eigen/Eigenvalues>
+
 namespace formloop::recon {
 
 std::string NumberText(double value, int precision) {
@@ -58,6 +60,31 @@ Status CheckFiniteAndDistinct(const std::vector<Eigen::Vector3d>& points) {
                                 " are identical " + PointText(points[first_i]) + " (" + std::to_string(repeats) +
                                 " repeated point(s) in all)",
                             "remove repeated measurements (e.g. overlapping scan passes) or average them into one");
+  }
+  return Status::Ok();
+}
+
+Status CheckSpansASurface(const std::vector<Eigen::Vector3d>& points) {
+  if (points.size() < 3) {
+    return Status::BadInput(Where{.field = "points"},
+                            "need at least 3 points to define a surface, got " + std::to_string(points.size()));
+  }
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const auto& p : points) mean += p;
+  mean /= static_cast<double>(points.size());
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (const auto& p : points) cov += (p - mean) * (p - mean).transpose();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+  const Eigen::Vector3d extent = eig.eigenvalues().cwiseMax(0).cwiseSqrt();  // ascending
+  if (!(extent(2) > 0)) {
+    return Status::BadInput(Where{.field = "points"}, "all points coincide at " + PointText(mean),
+                            "the points must sample a surface");
+  }
+  if (extent(1) < 1e-6 * extent(2)) {
+    return Status::BadInput(Where{.field = "points"},
+                            "the points are collinear (principal extents " + NumberText(extent(2)) + " and " +
+                                NumberText(extent(1)) + " mm): they determine no surface",
+                            "the points must sample a surface, not a line");
   }
   return Status::Ok();
 }

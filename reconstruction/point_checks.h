@@ -23,4 +23,8 @@ std::string PointText(const Eigen::Vector3d& p);
 // O(n log n): a lexicographic sort of the indices.
 Status CheckFiniteAndDistinct(const std::vector<Eigen::Vector3d>& points);
 
+// BadInput when the points span less than a plane: all coincident, or collinear (the second principal
+// extent below 1e-6 of the first). Such points determine no surface.
+Status CheckSpansASurface(const std::vector<Eigen::Vector3d>& points);
+
 }  // namespace formloop::recon
