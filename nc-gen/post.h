@@ -1,18 +1,30 @@
 #pragma once
-// Posts: the tool path as controller text, with a safety check against the machine's limits first
-// (spec/nc-gen.md §3). This first post is LinuxCNC (RS274NGC); Fanuc, Heidenhain and Sinumerik join
-// it as further posts over the same move list.
+// Posts: the canonical move list (nc-gen/moves.h) as controller text, with the safety check against the
+// machine's limits done once before any text exists (spec/nc-gen.md §3). Each controller dialect is a
+// small class in its own file, listed in one registry (post.cc; STYLE.md habit 9): adding a dialect is a
+// file, a registry line and a golden-file test (tests/nc-gen/dialects_test.cc).
 //
-// Safety: a program is never emitted when any programmed position, feed or spindle speed lies
-// outside MachineLimits; the Status names the first offending block and the limit.
+// Dialects today (the conventions each relies on are cited in its file):
+//   "linuxcnc"   RS274NGC for LinuxCNC (accepted by LinuxCNC's own rs274 interpreter, post_test.cc)
+//   "fanuc"      Fanuc 0i/30i ISO word-address programs
+//   "heidenhain" Heidenhain TNC conversational (Klartext) programs
+//   "sinumerik"  Siemens Sinumerik 840D ISO/G-code programs
+// Every dialect has a reader for formloop's own output (positions, rapid/feed, feed rate), so a program
+// can be checked by reading it back; anything else is refused with its line.
+//
+// Safety: a program is never emitted when any programmed position, feed or spindle speed lies outside
+// MachineLimits; the Status names the first offending move and the limit.
 
+#include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
 #include "core/status.h"
+#include "nc-gen/moves.h"
 #include "nc-gen/toolpath.h"
 
 namespace formloop::nc {
@@ -31,25 +43,56 @@ Status CheckTravel(const MachineLimits& limits, const Eigen::Vector3d& tip, cons
 
 struct PostOptions {
   std::string title;           // first comment line
-  int decimals = 4;            // 0.1 µm resolution in mm
-  bool block_numbers = false;  // N10, N20, ...
+  int decimals = 4;            // fixed decimals of coordinates, mm: 4 = 0.1 µm (Fanuc IS-B takes at most 3)
+  bool block_numbers = false;  // N10, N20, ... (Heidenhain numbers every line whatever this says)
+  long block_start = 10;
+  long block_increment = 10;
+  // Longest line the controller or its DNC link accepts; 0 = no limit. Comments are wrapped onto more
+  // comment lines; a block that cannot fit is refused, naming the line (no program is returned).
+  int max_line_length = 0;
+  int program_number = 1234;              // Fanuc O-number, 1..9999
+  std::string program_name = "FORMLOOP";  // Heidenhain BEGIN/END PGM name (letters, digits, _)
   MachineLimits limits;
+  Status Validate() const;
 };
 
 // A programmed move read back from a program: enough to rebuild the cutter locations.
 struct ProgramMove {
   bool rapid = false;
-  Eigen::Vector3d tip = Eigen::Vector3d::Zero();  // end point, mm
+  Eigen::Vector3d tip = Eigen::Vector3d::Zero();  // end point, mm (NaN for an axis not programmed yet)
   long line = 0;                                  // 1-based line in the program text
-  double feed_mm_per_min = 0;
+  double feed_mm_per_min = 0;                     // modal feed in effect (also reported on rapids)
   std::string comment;                            // a comment on the same line, if any
 };
+
+// One controller dialect: spells a checked move list and reads its own spelling back.
+class PostDialect {
+ public:
+  virtual ~PostDialect() = default;
+  virtual std::string_view Name() const = 0;
+  virtual std::string_view FileExtension() const = 0;  // ".ngc", ".nc", ".h", ".mpf"
+  // The list has passed CheckMoveList and the options Validate when this is called.
+  virtual Result<std::string> Format(const MoveList& list, const PostOptions& options) const = 0;
+  virtual Result<std::vector<ProgramMove>> Read(const std::string& text, const std::string& source) const = 0;
+};
+
+// The registry: every dialect by name, in a fixed order.
+std::vector<std::string> PostNames();
+// nullptr when there is no such dialect.
+const PostDialect* FindPost(std::string_view name);
+
+// Checks the options and the move list (CheckMoveList) and then formats it in `dialect`.
+Result<std::string> Post(const MoveList& list, std::string_view dialect, const PostOptions& options);
+// Reads formloop's own output in `dialect` back; `source` names the text in messages.
+Result<std::vector<ProgramMove>> ReadProgram(const std::string& text, std::string_view dialect,
+                                             const std::string& source);
 
 // Text safe inside an RS274NGC comment: LinuxCNC rejects nested parentheses ("Nested comment
 // found"), so ( ) become [ ] and control characters become spaces.
 std::string CommentText(const std::string& text);
 
-// RS274NGC text for LinuxCNC. The i-th feed move after the "(cut)" marker is the i-th CL point.
+// RS274NGC text for LinuxCNC: BuildMoveList + Post(..., "linuxcnc", ...). The i-th feed move after the
+// "(cut)" marker is the i-th CL point.
 Result<std::string> PostLinuxCnc(const Toolpath& path, const PostOptions& options);
 
 // Reads formloop's own LinuxCNC output back (G0/G1 with X Y Z F, comments, N numbers, G21/G90 only).

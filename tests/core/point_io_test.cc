@@ -23,6 +23,7 @@
 
 #include "core/atomic_file.h"
 #include "core/random.h"
+#include "tests/support/locale.h"
 
 namespace formloop {
 namespace {
@@ -140,24 +141,8 @@ class XyzTest : public PointIoTestBase {};
 class PlyTest : public PointIoTestBase {};
 class PcdTest : public PointIoTestBase {};
 
-// Sets the global C++ (and, for named locales, C) locale for one scope.
-class GlobalLocale {
- public:
-  explicit GlobalLocale(const std::locale& locale) : previous_(std::locale::global(locale)) {}
-  ~GlobalLocale() { std::locale::global(previous_); }
-  GlobalLocale(const GlobalLocale&) = delete;
-  GlobalLocale& operator=(const GlobalLocale&) = delete;
-
- private:
-  std::locale previous_;
-};
-
-// German-style numbers without needing an installed locale: "1.234,5".
-struct CommaNumpunct : std::numpunct<char> {
-  char do_decimal_point() const override { return ','; }
-  char do_thousands_sep() const override { return '.'; }
-  std::string do_grouping() const override { return "\3"; }
-};
+using formloop::testing::CommaNumpunct;
+using formloop::testing::GlobalLocale;
 
 // Big-endian bytes for hand-made PLY files.
 template <typename T>

@@ -1,0 +1,75 @@
+#pragma once
+// The canonical, machine-independent move list (spec/nc-gen.md §3; STYLE.md habit 8): the tool path
+// becomes one list of moves with their provenance, the machine's limits are checked once on that list,
+// and every controller dialect is a post over it (nc-gen/post.h). No post decides a position, a feed or
+// an order of moves; a post only spells them.
+//
+// Conventions the list fixes for every post: millimetres, absolute coordinates, XY plane, no cutter
+// radius compensation (the programmed point is the ball tip, toolpath.h), feed in mm/min.
+
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/status.h"
+#include "nc-gen/toolpath.h"
+
+namespace formloop::nc {
+
+struct MachineLimits;
+
+enum class MoveType {
+  kComment,  // a comment line: block provenance ("pass 3") for people and for log mapping
+  kRapid,    // positioning at the controller's rapid rate (G0, FMAX)
+  kFeed,     // linear move at feed_mm_per_min (G1, L ... F)
+  kSetFeed,  // sets the modal feed to feed_mm_per_min without motion ("F1500" on its own block)
+};
+
+// Which axis words a motion block programs. The other axes keep their modal value; the first retract
+// programs Z alone because the start position in X and Y is unknown (and Z-first is the safe order).
+enum AxisMask : unsigned { kAxisX = 1u, kAxisY = 2u, kAxisZ = 4u, kAxisXY = 3u, kAxisXYZ = 7u };
+
+struct Move {
+  MoveType type = MoveType::kFeed;
+  // Tip position after the move, mm, part frame. Axes not known yet (before the first move that
+  // programs them) are NaN; only the axes in `axes` are written.
+  Eigen::Vector3d tip = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
+  unsigned axes = kAxisXYZ;
+  double feed_mm_per_min = 0;  // kFeed: the feed of this move; kSetFeed: the new modal feed; else 0
+  std::string text;            // kComment only
+  // Provenance.
+  int pass = -1;       // pass index from 0; -1 outside the passes (start, end)
+  long cl_index = -1;  // index into Toolpath::points for a move to a CL point; -1 otherwise
+  std::string source;  // what made the move: "cut", "plunge", "retract to safe Z", ...
+  // "move 7 (pass 0, CL point 3, plunge)": how refusals and round-trip failures name a block.
+  std::string Describe(std::size_t index) const;
+};
+
+// Header facts every post states in its own dialect (units mm, absolute and XY plane are fixed above).
+struct MoveListHeader {
+  int tool_number = 1;
+  double tool_radius_mm = 0;
+  double spindle_rpm = 0;  // clockwise (M3)
+  bool coolant = false;    // flood coolant (M8) on for the whole program; the planner leaves it off
+  int passes = 0;
+};
+
+struct MoveList {
+  MoveListHeader header;
+  std::vector<Move> moves;
+  double safe_z_mm = 0;
+};
+
+// The one function that turns a tool path into moves. Per pass: retract to safe Z (not before the
+// first), comment "pass k", rapid in XY above the first point, plunge feed to it, set the cutting
+// feed, cut through the pass; then a final retract. The i-th kFeed move is CL point i.
+Result<MoveList> BuildMoveList(const Toolpath& path);
+
+// The safety check (ARCHITECTURE.md "Safety"), done once on the list before any post writes text:
+// limits valid; spindle > 0 and ≤ the maximum; every feed > 0 and ≤ the maximum; every programmed axis
+// inside the travel. StatusCode::kSafetyLimit names the move (Move::Describe) and the limit.
+Status CheckMoveList(const MoveList& list, const MachineLimits& limits);
+
+}  // namespace formloop::nc

@@ -1,0 +1,329 @@
+#include "nc-gen/post.h"
+
+#include <cctype>
+#include <cmath>
+#include <utility>
+
+#include "core/point_io.h"
+#include "nc-gen/post_text.h"
+
+namespace formloop::nc {
+
+Status MachineLimits::Validate() const {
+  for (int a = 0; a < 3; ++a) {
+    if (!(travel_min_mm[a] < travel_max_mm[a])) {
+      return Status::BadInput(Where{.field = "machine.travel"}, "travel_min must be below travel_max on every axis");
+    }
+  }
+  if (!(max_feed_mm_per_min > 0)) return Status::BadInput(Where{.field = "machine.max_feed_mm_per_min"}, "must be > 0");
+  if (!(max_spindle_rpm > 0)) return Status::BadInput(Where{.field = "machine.max_spindle_rpm"}, "must be > 0");
+  return Status::Ok();
+}
+
+nlohmann::json MachineLimits::ToJson() const {
+  return {{"travel_min_mm", {travel_min_mm.x(), travel_min_mm.y(), travel_min_mm.z()}},
+          {"travel_max_mm", {travel_max_mm.x(), travel_max_mm.y(), travel_max_mm.z()}},
+          {"max_feed_mm_per_min", max_feed_mm_per_min},
+          {"max_spindle_rpm", max_spindle_rpm}};
+}
+
+Status CheckTravel(const MachineLimits& limits, const Eigen::Vector3d& tip, const std::string& what) {
+  static const char* kAxis[] = {"X", "Y", "Z"};
+  for (int a = 0; a < 3; ++a) {
+    if (tip[a] < limits.travel_min_mm[a] || tip[a] > limits.travel_max_mm[a]) {
+      return Status::SafetyLimit(what + ": " + kAxis[a] + " " + FormatFixed(tip[a], 4) + " mm is outside the travel " +
+                                 FormatFixed(limits.travel_min_mm[a], 3) + " .. " +
+                                 FormatFixed(limits.travel_max_mm[a], 3) +
+                                 " mm; no program was written. Fix: move the work offset or check the part and "
+                                 "machine limits");
+    }
+  }
+  return Status::Ok();
+}
+
+Status PostOptions::Validate() const {
+  // Beyond 6 decimals (1 nm) no controller resolves; 0 decimals would make Fanuc read X10 as 10 µm.
+  if (decimals < 1 || decimals > 6) return Status::BadInput(Where{.field = "post.decimals"}, "must be 1..6");
+  if (block_start < 0 || block_increment < 1) {
+    return Status::BadInput(Where{.field = "post.block_start"}, "block numbers need start >= 0 and increment >= 1");
+  }
+  if (max_line_length != 0 && max_line_length < 16) {
+    return Status::BadInput(Where{.field = "post.max_line_length"}, "must be 0 (no limit) or at least 16");
+  }
+  if (program_number < 1 || program_number > 9999) {
+    return Status::BadInput(Where{.field = "post.program_number"}, "must be 1..9999 (Fanuc O-number)");
+  }
+  if (program_name.empty()) return Status::BadInput(Where{.field = "post.program_name"}, "must not be empty");
+  for (char c : program_name) {
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_') {
+      return Status::BadInput(Where{.field = "post.program_name"},
+                              "'" + program_name + "' has a character other than letters, digits and '_'",
+                              "Heidenhain program names are file names");
+    }
+  }
+  return limits.Validate();
+}
+
+namespace {
+
+const std::vector<std::unique_ptr<PostDialect>>& Registry() {
+  // The registry: one line per dialect. Order is the order PostNames reports.
+  static const auto* registry = [] {
+    auto* r = new std::vector<std::unique_ptr<PostDialect>>;
+    r->push_back(internal::MakeLinuxCncPost());
+    r->push_back(internal::MakeFanucPost());
+    r->push_back(internal::MakeHeidenhainPost());
+    r->push_back(internal::MakeSinumerikPost());
+    return r;
+  }();
+  return *registry;
+}
+
+Status UnknownDialect(std::string_view name) {
+  std::string known;
+  for (const auto& n : PostNames()) known += (known.empty() ? "" : ", ") + n;
+  return Status::BadInput(Where{.field = "post.dialect"}, "unknown post dialect '" + std::string(name) + "'",
+                          "use one of " + known);
+}
+
+}  // namespace
+
+std::vector<std::string> PostNames() {
+  std::vector<std::string> names;
+  for (const auto& d : Registry()) names.emplace_back(d->Name());
+  return names;
+}
+
+const PostDialect* FindPost(std::string_view name) {
+  for (const auto& d : Registry()) {
+    if (d->Name() == name) return d.get();
+  }
+  return nullptr;
+}
+
+Result<std::string> Post(const MoveList& list, std::string_view dialect, const PostOptions& options) {
+  const PostDialect* post = FindPost(dialect);
+  if (post == nullptr) return UnknownDialect(dialect);
+  FL_RETURN_IF_ERROR(options.Validate());
+  // Safety first, once for every dialect: nothing is formatted unless every position and rate is within limits.
+  FL_RETURN_IF_ERROR(CheckMoveList(list, options.limits));
+  return post->Format(list, options);
+}
+
+Result<std::vector<ProgramMove>> ReadProgram(const std::string& text, std::string_view dialect,
+                                             const std::string& source) {
+  const PostDialect* post = FindPost(dialect);
+  if (post == nullptr) return UnknownDialect(dialect);
+  return post->Read(text, source);
+}
+
+Result<std::string> PostLinuxCnc(const Toolpath& path, const PostOptions& options) {
+  FL_ASSIGN_OR_RETURN(MoveList list, BuildMoveList(path));
+  return Post(list, "linuxcnc", options);
+}
+
+Result<std::vector<ProgramMove>> ReadLinuxCncMoves(const std::string& text, const std::string& source) {
+  return ReadProgram(text, "linuxcnc", source);
+}
+
+namespace internal {
+
+ProgramText::ProgramText(const PostOptions& options, Numbering numbering, std::string comment_open,
+                         std::string comment_close)
+    : options_(options),
+      numbering_(numbering),
+      comment_open_(std::move(comment_open)),
+      comment_close_(std::move(comment_close)),
+      next_number_(numbering == Numbering::kAllLines ? 0 : options.block_start) {}
+
+std::string ProgramText::NumberPrefix(bool numbered) {
+  if (numbering_ == Numbering::kAllLines) return std::to_string(next_number_++) + " ";
+  if (!numbered || !options_.block_numbers) return "";
+  const long n = next_number_;
+  next_number_ += options_.block_increment;
+  return "N" + std::to_string(n) + " ";
+}
+
+void ProgramText::Emit(const std::string& text, bool numbered) {
+  const std::string line = NumberPrefix(numbered) + text;
+  ++lines_;
+  const std::size_t limit = static_cast<std::size_t>(options_.max_line_length);
+  if (limit > 0 && line.size() > limit && error_.ok()) {
+    error_ =
+        Status::BadInput(Where{.line = lines_, .field = "post.max_line_length"},
+                         "program line '" + line + "' is " + std::to_string(line.size()) +
+                             " characters, over the limit of " + std::to_string(limit) + "; no program was written",
+                         "raise max_line_length or use fewer decimals or no block numbers");
+  }
+  out_ += line;
+  out_ += '\n';
+}
+
+void ProgramText::Raw(const std::string& text) { Emit(text, false); }
+void ProgramText::Block(const std::string& text) { Emit(text, true); }
+
+void ProgramText::Comment(const std::string& text) {
+  const bool numbered = numbering_ == Numbering::kAllLines;
+  const std::size_t limit = static_cast<std::size_t>(options_.max_line_length);
+  // Room for the text on one line: the limit less the delimiters and the widest number the line can get.
+  const std::size_t number_width =
+      numbered ? std::to_string(next_number_ + 1000).size() + 1 : 0;  // generous: numbers grow while wrapping
+  const std::size_t frame = comment_open_.size() + comment_close_.size() + number_width;
+  if (limit == 0 || text.size() + frame <= limit || limit <= frame + 8) {
+    Emit(comment_open_ + text + comment_close_, numbered);
+    return;
+  }
+  const std::size_t room = limit - frame;
+  std::string rest = text;
+  while (!rest.empty()) {
+    std::size_t cut = rest.size();
+    if (cut > room) {
+      cut = rest.rfind(' ', room);
+      if (cut == std::string::npos || cut == 0) cut = room;  // one long word: split it
+    }
+    Emit(comment_open_ + rest.substr(0, cut) + comment_close_, numbered);
+    rest = rest.substr(cut);
+    while (!rest.empty() && rest.front() == ' ') rest.erase(rest.begin());
+  }
+}
+
+std::string ProgramText::Num(double value) const { return FormatFixed(value, options_.decimals); }
+
+Result<std::string> ProgramText::Finish() const {
+  if (!error_.ok()) return error_;
+  return out_;
+}
+
+void WriteWordAddressBody(const MoveList& list, const std::string& rapid, const std::string& feed,
+                          std::string (*comment)(const std::string&), ProgramText* w) {
+  double modal_feed = -1;
+  for (const Move& m : list.moves) {
+    switch (m.type) {
+      case MoveType::kComment:
+        w->Comment(comment(m.text));
+        break;
+      case MoveType::kRapid:
+        w->Block(rapid + " " + AxisWords(*w, m));
+        break;
+      case MoveType::kSetFeed:
+        modal_feed = m.feed_mm_per_min;
+        w->Block("F" + FormatFixed(m.feed_mm_per_min, 0));
+        break;
+      case MoveType::kFeed: {
+        std::string block = feed + " " + AxisWords(*w, m);
+        if (m.feed_mm_per_min != modal_feed) {
+          modal_feed = m.feed_mm_per_min;
+          block += " F" + FormatFixed(m.feed_mm_per_min, 0);
+        }
+        w->Block(block);
+        break;
+      }
+    }
+  }
+}
+
+std::string AxisWords(const ProgramText& w, const Move& move, const std::string& separator) {
+  static const char kAxis[] = {'X', 'Y', 'Z'};
+  std::string out;
+  for (int a = 0; a < 3; ++a) {
+    if ((move.axes & (1u << a)) == 0) continue;
+    if (!out.empty()) out += ' ';
+    out += kAxis[a] + separator + w.Num(move.tip[a]);
+  }
+  return out;
+}
+
+Result<std::vector<ProgramMove>> ReadWordAddress(const std::string& text, const std::string& source,
+                                                 const WordDialect& dialect) {
+  const std::string fix = "only formloop's own " + dialect.name + " output can be read back";
+  std::vector<ProgramMove> moves;
+  std::size_t start = 0;
+  long line_no = 0;
+  Eigen::Vector3d position = Eigen::Vector3d::Constant(std::nan(""));
+  double feed = 0;
+  int motion = -1;  // 0 rapid, 1 feed
+  while (start < text.size()) {
+    std::size_t end = text.find('\n', start);
+    if (end == std::string::npos) end = text.size();
+    const std::string raw = text.substr(start, end - start);
+    start = end + 1;
+    ++line_no;
+    const Where where{.file = source, .line = line_no};
+    std::string comment;
+    std::string code;
+    int depth = 0;
+    for (char c : raw) {
+      if (dialect.paren_comments && c == '(') {
+        ++depth;
+        continue;
+      }
+      if (dialect.paren_comments && c == ')') {
+        --depth;
+        continue;
+      }
+      if (depth > 0) {
+        comment += c;
+      } else if (c == ';') {
+        break;
+      } else if (!std::isspace(static_cast<unsigned char>(c))) {
+        code += static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+      }
+    }
+    if (code.empty() || code == "%") continue;
+    bool has_xyz = false;
+    std::size_t i = 0;
+    while (i < code.size()) {
+      const char letter = code[i++];
+      std::size_t j = i;
+      while (j < code.size() && (std::isdigit(static_cast<unsigned char>(code[j])) || code[j] == '.' ||
+                                 code[j] == '-' || code[j] == '+')) {
+        ++j;
+      }
+      double value = 0;
+      if (!std::isalpha(static_cast<unsigned char>(letter)) || !ParseDouble(code.substr(i, j - i), &value)) {
+        return Status::BadInput(where, "cannot read word '" + code.substr(i - 1, j - i + 1) + "'", fix);
+      }
+      i = j;
+      switch (letter) {
+        case 'G':
+          if (value == 20 || value == 70 || value == 91) {
+            return Status::BadInput(where, "G" + FormatFixed(value, 0) + " (inch or incremental) is not supported",
+                                    "program in millimetres and absolute coordinates");
+          }
+          if (dialect.g_codes.count(value) == 0) {
+            return Status::BadInput(where, "unsupported G-code G" + FormatExact(value), fix);
+          }
+          if (value == 0 || value == 1) motion = static_cast<int>(value);
+          break;
+        case 'X':
+          position.x() = value;
+          has_xyz = true;
+          break;
+        case 'Y':
+          position.y() = value;
+          has_xyz = true;
+          break;
+        case 'Z':
+          position.z() = value;
+          has_xyz = true;
+          break;
+        case 'F':
+          feed = value;
+          break;
+        default:
+          if (dialect.other_letters.find(letter) == std::string::npos) {
+            return Status::BadInput(where, std::string("unsupported word '") + letter + "'", fix);
+          }
+      }
+    }
+    if (has_xyz) {
+      if (motion < 0) return Status::BadInput(where, "coordinates before any G0/G1", fix);
+      moves.push_back(
+          {.rapid = motion == 0, .tip = position, .line = line_no, .feed_mm_per_min = feed, .comment = comment});
+    }
+  }
+  return moves;
+}
+
+}  // namespace internal
+}  // namespace formloop::nc

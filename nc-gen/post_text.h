@@ -1,0 +1,71 @@
+#pragma once
+// Shared pieces of the posts (internal to nc-gen): a line writer that numbers blocks, wraps comments and
+// enforces the line-length limit, and a reader for the ISO word-address dialects (LinuxCNC, Fanuc,
+// Sinumerik), which differ only in comment syntax and in the words they allow.
+
+#include <memory>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "core/status.h"
+#include "nc-gen/post.h"
+
+namespace formloop::nc::internal {
+
+enum class Numbering {
+  kBlocks,    // "N<n> " on blocks when PostOptions::block_numbers (ISO dialects); comments never numbered
+  kAllLines,  // "<n> " on every line from 0 in steps of 1 (Heidenhain: numbers are part of the syntax)
+};
+
+class ProgramText {
+ public:
+  // A comment line is comment_open + text + comment_close.
+  ProgramText(const PostOptions& options, Numbering numbering, std::string comment_open, std::string comment_close);
+  void Raw(const std::string& text);      // never numbered in kBlocks ('%', "O1234", ...)
+  void Block(const std::string& text);    // an NC block
+  void Comment(const std::string& text);  // sanitised text; wrapped at spaces to fit the line length
+  // The coordinate value with PostOptions::decimals; never "-0.000".
+  std::string Num(double value) const;
+  // The program, or the first line-length refusal.
+  Result<std::string> Finish() const;
+
+ private:
+  std::string NumberPrefix(bool numbered);
+  void Emit(const std::string& line, bool numbered);
+  const PostOptions& options_;
+  Numbering numbering_;
+  std::string comment_open_, comment_close_;
+  std::string out_;
+  long next_number_ = 0;
+  long lines_ = 0;
+  Status error_ = Status::Ok();
+};
+
+// Axis words of a motion block: "X1.000 Y2.000" for the axes in `axes`.
+std::string AxisWords(const ProgramText& w, const Move& move, const std::string& separator = "");
+
+// The body of a word-address program (LinuxCNC, Fanuc, Sinumerik): comment lines through `comment`
+// (the dialect's sanitiser), rapids as `rapid` + axis words, feed moves as `feed` + axis words with F
+// written only when it changes (modal), feed-only blocks as "F..".
+void WriteWordAddressBody(const MoveList& list, const std::string& rapid, const std::string& feed,
+                          std::string (*comment)(const std::string&), ProgramText* w);
+
+// The word-address reader's view of a dialect.
+struct WordDialect {
+  std::string name;            // "LinuxCNC", used in messages
+  bool paren_comments = true;  // ( ... ) comments; ';' starts a comment to the end of the line always
+  std::set<double> g_codes;    // G-codes formloop writes (others are refused)
+  std::string other_letters;   // letters accepted and ignored (N M S T P O D ...)
+};
+
+Result<std::vector<ProgramMove>> ReadWordAddress(const std::string& text, const std::string& source,
+                                                 const WordDialect& dialect);
+
+// Registry entries (one per dialect file).
+std::unique_ptr<PostDialect> MakeLinuxCncPost();
+std::unique_ptr<PostDialect> MakeFanucPost();
+std::unique_ptr<PostDialect> MakeHeidenhainPost();
+std::unique_ptr<PostDialect> MakeSinumerikPost();
+
+}  // namespace formloop::nc::internal
