@@ -1,10 +1,26 @@
 #pragma once
-// Probing programs from a probing plan (spec/nc-gen.md §5). This first post is LinuxCNC: for each
-// point a rapid to a clearance point along the normal, a G38.2 probing move along −n that ends a
-// search distance beyond the surface, a retract; results are logged between (PROBEOPEN ...) and
-// (PROBECLOSE). The programmed point is the stylus-ball centre.
+// Probing programs from a probing plan (spec/nc-gen.md §5), in the four post dialects. Every dialect has
+// the same structure: per point a rapid at safe Z over a clearance point that lies clearance_mm above the
+// surface along +n, down to it, a probing move along −n that ends search_mm beyond the nominal surface, a
+// retract along +n and up to safe Z, and the point id in a comment ("point <id>"), so logs map back to the
+// plan. The programmed point is the stylus-ball centre (nominal contact point + R·n). Before any text is
+// written, the probe feed and every position (above, clearance, search end) of every point are checked
+// against MachineLimits; a refusal names the probe point id and no program is returned.
+//
+//   "linuxcnc"   G38.2 probing, results logged between (PROBEOPEN file) and (PROBECLOSE)
+//                (PostLinuxCncProbing; unchanged).
+//   "fanuc"      G31 skip function; after each probe the skip position #5061..#5063 (workpiece frame) is
+//                copied into common variables #[base+3k], #[base+3k+1], #[base+3k+2] for the k-th point
+//                (k from 0 in plan order). The range must lie in #100..#199 or #500..#999.
+//   "heidenhain" TNC 640 cycle 444 (PROBING IN 3-D) with the nominal surface point and its normal; the
+//                cycle itself approaches along the normal (see probe_program.cc for the Q parameters and
+//                what is uncertain about them).
+//   "sinumerik"  840D sl MEAS=1 G1 (measuring with deletion of distance to go); the measured position
+//                $AA_MW[X/Y/Z] (workpiece frame) is copied into R[base+3k] .. R[base+3k+2].
 
 #include <string>
+#include <string_view>
+#include <vector>
 
 #include "core/status.h"
 #include "metrology/probe.h"
@@ -18,11 +34,23 @@ struct ProbeProgramOptions {
   double search_mm = 2.0;             // probe this far beyond the nominal surface
   double probe_feed_mm_per_min = 200;
   double safe_z_mm = 50;              // rapids between points
-  std::string results_file = "probe_results.txt";
+  std::string results_file = "probe_results.txt";  // LinuxCNC (PROBEOPEN)
+  int fanuc_result_base = 500;   // Fanuc: first macro variable of the result range (#500)
+  int sinumerik_r_base = 10;     // Sinumerik: first R parameter of the result range (R10)
+  // Sinumerik: the last R parameter the control has (MD28050 MM_NUM_R_PARAM − 1; 99 by default).
+  int sinumerik_r_last = 99;
   PostOptions post;
   Status Validate() const;
 };
 
+// The dialects PostProbing knows, in registry order: linuxcnc, fanuc, heidenhain, sinumerik.
+std::vector<std::string> ProbingDialectNames();
+
+// The probing program for `plan` in `dialect` (a name of PostNames()); unknown dialects are refused.
+Result<std::string> PostProbing(const metrology::ProbingPlan& plan, std::string_view dialect,
+                                const ProbeProgramOptions& options);
+
+// = PostProbing(plan, "linuxcnc", options).
 Result<std::string> PostLinuxCncProbing(const metrology::ProbingPlan& plan, const ProbeProgramOptions& options);
 
 }  // namespace formloop::nc
