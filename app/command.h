@@ -23,5 +23,7 @@ void AddSurfacesCommand(CLI::App& root, CommandAction* action);
 void AddKbCommand(CLI::App& root, CommandAction* action);
 // `fit` and `project` (app/cmd_fit.cc).
 void AddFitCommand(CLI::App& root, CommandAction* action);
+// `nc path` and `nc probe` (app/cmd_nc.cc).
+void AddNcCommand(CLI::App& root, CommandAction* action);
 
 }  // namespace formloop::app

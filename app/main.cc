@@ -29,6 +29,7 @@ int main(int argc, char** argv) {
   app::AddRegressCommand(app, &action);
   app::AddSurfacesCommand(app, &action);
   app::AddFitCommand(app, &action);
+  app::AddNcCommand(app, &action);
   app::AddKbCommand(app, &action);
 
   try {
