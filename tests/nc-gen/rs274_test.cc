@@ -1,0 +1,370 @@
+// Acceptance by LinuxCNC's own interpreter (issue: "LinuxCNC programs are accepted by LinuxCNC's own
+// interpreter"): a cutting program (PlanRaster on a B-spline fit of franke, BuildMoveList, Post "linuxcnc")
+// and a probing program (PostProbing "linuxcnc") are run through `rs274 -g` (Debian linuxcnc-uspace, the
+// standalone interpreter with its built-in default tool table; the programs use no tool length offset, so
+// the canonical positions are the programmed tip / ball-centre positions in the part frame, mm). Its
+// canonical commands are parsed and compared, move by move, with formloop's moves:
+//   rapid ↔ STRAIGHT_TRAVERSE, feed ↔ STRAIGHT_FEED, probe ↔ STRAIGHT_PROBE, same count and order;
+//   every axis known to formloop within half a unit of the last printed decimal of both outputs
+//   (0.5·10^-4 for formloop's 4 decimals + 0.5·10^-d for rs274's d decimals);
+//   the modal feed (last SET_FEED_RATE) at every feed and probe move equal to formloop's feed;
+//   the length units millimetres throughout.
+// Skipped, with the message, only where rs274 is not installed.
+
+#include <algorithm>
+#include <array>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <gtest/gtest-spi.h>
+#include <gtest/gtest.h>
+
+#include "metrology/probe.h"
+#include "nc-gen/moves.h"
+#include "nc-gen/post.h"
+#include "nc-gen/probe_program.h"
+#include "nc-gen/toolpath.h"
+#include "reconstruction/analytic_surface.h"
+#include "reconstruction/bspline_surface.h"
+
+namespace formloop::nc {
+namespace {
+
+using Eigen::Vector3d;
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr int kPostDecimals = 4;  // PostOptions::decimals, set explicitly below
+
+bool Rs274Installed() { return std::system("command -v rs274 >/dev/null 2>&1") == 0; }
+
+// Runs `rs274 -g program canon` and returns the canonical commands; *exit_code and *console receive the
+// exit status and what rs274 printed.
+std::string RunRs274(const std::filesystem::path& program, int* exit_code, std::string* console) {
+  const std::filesystem::path canon = program.string() + ".canon";
+  const std::string command = "rs274 -g " + program.string() + " " + canon.string() + " </dev/null 2>&1";
+  FILE* pipe = ::popen(command.c_str(), "r");
+  std::array<char, 4096> buffer{};
+  std::size_t n;
+  console->clear();
+  while (pipe != nullptr && (n = std::fread(buffer.data(), 1, buffer.size(), pipe)) > 0) console->append(buffer.data(), n);
+  const int status = pipe != nullptr ? ::pclose(pipe) : -1;
+  *exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  std::ifstream in(canon);
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::filesystem::remove(canon);
+  return text;
+}
+
+enum class Kind { kTraverse, kFeed, kProbe };
+
+const char* KindName(Kind k) {
+  switch (k) {
+    case Kind::kTraverse:
+      return "STRAIGHT_TRAVERSE";
+    case Kind::kFeed:
+      return "STRAIGHT_FEED";
+    case Kind::kProbe:
+      return "STRAIGHT_PROBE";
+  }
+  return "?";
+}
+
+// One motion of rs274's canonical output.
+struct CanonMove {
+  Kind kind = Kind::kTraverse;
+  Vector3d p = Vector3d::Zero();
+  int decimals = 0;  // printed decimals of the positions
+  double feed = 0;   // modal SET_FEED_RATE when the move was issued
+  long line = 0;     // line of the canon output
+};
+
+struct Canon {
+  std::vector<CanonMove> moves;
+  int mm_units = 0, inch_units = 0, other_units = 0;  // USE_LENGTH_UNITS(...) lines
+  int unparsed_motion = 0;                            // motion lines this parser could not read
+};
+
+int DecimalsOf(const std::string& number) {
+  const auto dot = number.find('.');
+  if (dot == std::string::npos) return 0;
+  int d = 0;
+  for (std::size_t i = dot + 1; i < number.size() && std::isdigit(static_cast<unsigned char>(number[i])); ++i) ++d;
+  return d;
+}
+
+// Lines look like "   17 N..... STRAIGHT_TRAVERSE(1.2346, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)".
+Canon ParseCanon(const std::string& text) {
+  Canon out;
+  std::istringstream in(text);
+  std::string line;
+  long number = 0;
+  double feed = 0;
+  while (std::getline(in, line)) {
+    ++number;
+    const auto open = line.find('(');
+    const auto close = line.rfind(')');
+    if (open == std::string::npos || close == std::string::npos || close < open) continue;
+    const auto name_start = line.find_last_of(' ', open);
+    const std::string name = line.substr(name_start == std::string::npos ? 0 : name_start + 1,
+                                         open - (name_start == std::string::npos ? 0 : name_start + 1));
+    std::vector<std::string> args;
+    {
+      std::string arg;
+      std::istringstream a(line.substr(open + 1, close - open - 1));
+      while (std::getline(a, arg, ',')) {
+        arg.erase(0, arg.find_first_not_of(' '));
+        args.push_back(arg);
+      }
+    }
+    if (name == "USE_LENGTH_UNITS") {
+      if (!args.empty() && args[0] == "CANON_UNITS_MM") {
+        ++out.mm_units;
+      } else if (!args.empty() && args[0] == "CANON_UNITS_INCHES") {
+        ++out.inch_units;
+      } else {
+        ++out.other_units;
+      }
+    } else if (name == "SET_FEED_RATE" && !args.empty()) {
+      feed = std::strtod(args[0].c_str(), nullptr);
+    } else if (name == "STRAIGHT_TRAVERSE" || name == "STRAIGHT_FEED" || name == "STRAIGHT_PROBE") {
+      if (args.size() < 3) {
+        ++out.unparsed_motion;
+        continue;
+      }
+      CanonMove m;
+      m.kind = name == "STRAIGHT_TRAVERSE" ? Kind::kTraverse : name == "STRAIGHT_FEED" ? Kind::kFeed : Kind::kProbe;
+      for (int a = 0; a < 3; ++a) m.p[a] = std::strtod(args[a].c_str(), nullptr);
+      m.decimals = std::min({DecimalsOf(args[0]), DecimalsOf(args[1]), DecimalsOf(args[2])});
+      m.feed = feed;
+      m.line = number;
+      out.moves.push_back(m);
+    }
+  }
+  return out;
+}
+
+// A move formloop programmed; NaN for an axis whose value formloop does not know (before it is first
+// programmed, rs274 reports its own start position there).
+struct ExpectedMove {
+  Kind kind = Kind::kTraverse;
+  Vector3d p = Vector3d::Constant(kNaN);
+  double feed = 0;  // feed and probe moves
+  std::string what;
+};
+
+std::vector<ExpectedMove> FromMoveList(const MoveList& list) {
+  std::vector<ExpectedMove> out;
+  Vector3d modal = Vector3d::Constant(kNaN);
+  for (std::size_t i = 0; i < list.moves.size(); ++i) {
+    const Move& m = list.moves[i];
+    if (m.type != MoveType::kRapid && m.type != MoveType::kFeed) continue;
+    for (int a = 0; a < 3; ++a) {
+      if ((m.axes & (1u << a)) != 0) modal[a] = m.tip[a];
+    }
+    ExpectedMove e;
+    e.kind = m.type == MoveType::kRapid ? Kind::kTraverse : Kind::kFeed;
+    e.p = modal;
+    e.feed = m.feed_mm_per_min;
+    e.what = m.Describe(i);
+    out.push_back(e);
+  }
+  return out;
+}
+
+// The probing program's moves as probe_program.h describes them: safe Z first, then per point a rapid at
+// safe Z over the clearance point (surface point + (R + clearance)·n), down to it, a probing move to
+// surface point + (R − search)·n, back to the clearance point and up to safe Z.
+std::vector<ExpectedMove> FromProbingPlan(const metrology::ProbingPlan& plan, const ProbeProgramOptions& o) {
+  std::vector<ExpectedMove> out;
+  auto add = [&out](Kind kind, const Vector3d& p, double feed, const std::string& what) {
+    out.push_back({kind, p, feed, what});
+  };
+  add(Kind::kTraverse, Vector3d(kNaN, kNaN, o.safe_z_mm), 0, "initial safe Z");
+  for (const metrology::ProbePoint& p : plan.points) {
+    const std::string id = "point " + std::to_string(p.id);
+    const Vector3d start = p.point + (o.ball_radius_mm + o.clearance_mm) * p.normal;
+    const Vector3d target = p.point + (o.ball_radius_mm - o.search_mm) * p.normal;
+    add(Kind::kTraverse, Vector3d(start.x(), start.y(), o.safe_z_mm), 0, id + " above");
+    add(Kind::kTraverse, start, 0, id + " clearance");
+    add(Kind::kProbe, target, o.probe_feed_mm_per_min, id + " probe");
+    add(Kind::kTraverse, start, 0, id + " back to clearance");
+    add(Kind::kTraverse, Vector3d(start.x(), start.y(), o.safe_z_mm), 0, id + " safe Z");
+  }
+  return out;
+}
+
+struct Comparison {
+  std::size_t compared = 0, traverses = 0, feeds = 0, probes = 0;
+  double max_difference_mm = 0;
+  double max_allowed_mm = 0;
+};
+
+Comparison Compare(const std::vector<ExpectedMove>& expected, const Canon& canon, const std::string& name) {
+  Comparison c;
+  EXPECT_EQ(canon.unparsed_motion, 0) << name;
+  EXPECT_EQ(canon.moves.size(), expected.size()) << name << ": rs274 motions vs formloop moves";
+  int failures = 0;
+  const std::size_t n = std::min(canon.moves.size(), expected.size());
+  for (std::size_t k = 0; k < n && failures < 10; ++k) {
+    const ExpectedMove& e = expected[k];
+    const CanonMove& m = canon.moves[k];
+    const std::string where = name + " motion " + std::to_string(k) + " (" + e.what + "; canon line " +
+                              std::to_string(m.line) + ")";
+    if (m.kind != e.kind) {
+      ADD_FAILURE() << where << ": rs274 says " << KindName(m.kind) << ", formloop " << KindName(e.kind);
+      ++failures;
+      continue;
+    }
+    ++c.compared;
+    (e.kind == Kind::kTraverse ? c.traverses : e.kind == Kind::kFeed ? c.feeds : c.probes)++;
+    const double tolerance = 0.5 * std::pow(10.0, -kPostDecimals) + 0.5 * std::pow(10.0, -m.decimals) + 1e-9;
+    c.max_allowed_mm = std::max(c.max_allowed_mm, tolerance);
+    for (int a = 0; a < 3; ++a) {
+      if (std::isnan(e.p[a])) continue;
+      const double d = std::abs(m.p[a] - e.p[a]);
+      c.max_difference_mm = std::max(c.max_difference_mm, d);
+      if (d > tolerance) {
+        ADD_FAILURE() << where << " axis " << "XYZ"[a] << ": rs274 " << m.p[a] << ", formloop " << e.p[a]
+                      << " (difference " << d << " mm > " << tolerance << ")";
+        ++failures;
+      }
+    }
+    if (e.kind != Kind::kTraverse && m.feed != e.feed) {
+      ADD_FAILURE() << where << ": modal feed " << m.feed << " mm/min, formloop " << e.feed;
+      ++failures;
+    }
+  }
+  return c;
+}
+
+void Report(const std::string& name, const Comparison& c) {
+  std::printf("[rs274] %-8s %zu motions compared (%zu STRAIGHT_TRAVERSE, %zu STRAIGHT_FEED, %zu STRAIGHT_PROBE)"
+              "  max |difference| %.3g mm (allowed %.3g mm)\n",
+              name.c_str(), c.compared, c.traverses, c.feeds, c.probes, c.max_difference_mm, c.max_allowed_mm);
+  ::testing::Test::RecordProperty(name + "_compared", static_cast<int>(c.compared));
+}
+
+recon::BSplineSurface Franke() {
+  const auto s = recon::MakeReferenceSurface("franke");
+  EXPECT_TRUE(s.ok());
+  recon::FitReport report;
+  const auto q = recon::FitAnalytic(*s.value(), 21, 21, {}, 0, 1, &report);
+  EXPECT_TRUE(q.ok());
+  return q.value();
+}
+
+class Rs274Test : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!Rs274Installed()) {
+      GTEST_SKIP() << "rs274 not found: LinuxCNC's interpreter is not installed (Debian linuxcnc-uspace, "
+                      "scripts/setup.sh installs it); the LinuxCNC acceptance test is skipped";
+    }
+    dir_ = std::filesystem::temp_directory_path() / ("formloop-rs274-cmp-" + std::to_string(::getpid()));
+    std::filesystem::create_directories(dir_);
+  }
+  void TearDown() override {
+    if (!dir_.empty()) std::filesystem::remove_all(dir_);
+  }
+  Canon Run(const std::string& file, const std::string& program) {
+    std::ofstream(dir_ / file) << program;
+    int code = 0;
+    std::string console;
+    const std::string text = RunRs274(dir_ / file, &code, &console);
+    EXPECT_EQ(code, 0) << file << ": " << console.substr(console.size() > 2000 ? console.size() - 2000 : 0);
+    EXPECT_FALSE(text.empty()) << file << ": no canonical output; " << console;
+    return ParseCanon(text);
+  }
+  std::filesystem::path dir_;
+};
+
+TEST_F(Rs274Test, CuttingProgramCanonicalMovesMatchTheMoveList) {
+  ToolpathOptions options;
+  options.tool.radius_mm = 3.0;
+  options.scallop_um = 200.0;  // coarse: about 10,000 moves
+  options.chord_tolerance_um = 1000.0;
+  options.max_point_spacing_mm = 4.0;
+  const auto path = PlanRaster(Franke(), options);
+  ASSERT_TRUE(path.ok()) << path.status().message();
+  const auto list = BuildMoveList(*path);
+  ASSERT_TRUE(list.ok()) << list.status().message();
+  PostOptions post;
+  post.title = "formloop rs274 comparison (franke)";
+  post.decimals = kPostDecimals;
+  const auto text = Post(*list, "linuxcnc", post);
+  ASSERT_TRUE(text.ok()) << text.status().message();
+  const std::vector<ExpectedMove> expected = FromMoveList(*list);
+  ASSERT_GE(expected.size(), 1000u) << "a real tool path: thousands of moves";
+
+  const Canon canon = Run("cut.ngc", *text);
+  EXPECT_GE(canon.mm_units, 1);
+  EXPECT_EQ(canon.inch_units + canon.other_units, 0);
+  const Comparison c = Compare(expected, canon, "cutting");
+  Report("cutting", c);
+  EXPECT_EQ(c.compared, expected.size());
+  EXPECT_EQ(c.feeds, path->points.size()) << "every CL point is one STRAIGHT_FEED (plus the plunges)";
+  EXPECT_EQ(c.probes, 0u);
+}
+
+TEST_F(Rs274Test, ProbingProgramCanonicalMovesMatchThePlan) {
+  const auto plan = metrology::PlanProbingGrid(Franke(), 7, 6, 0.05);
+  ASSERT_TRUE(plan.ok()) << plan.status().message();
+  ProbeProgramOptions options;
+  options.ball_radius_mm = 1.0;
+  options.safe_z_mm = 40;
+  options.post.title = "formloop rs274 comparison (probing)";
+  options.post.decimals = kPostDecimals;
+  const auto text = PostProbing(*plan, "linuxcnc", options);
+  ASSERT_TRUE(text.ok()) << text.status().message();
+  const std::vector<ExpectedMove> expected = FromProbingPlan(*plan, options);
+
+  const Canon canon = Run("probe.ngc", *text);
+  EXPECT_GE(canon.mm_units, 1);
+  EXPECT_EQ(canon.inch_units + canon.other_units, 0);
+  const Comparison c = Compare(expected, canon, "probing");
+  Report("probing", c);
+  EXPECT_EQ(c.compared, expected.size());
+  EXPECT_EQ(c.probes, plan->points.size());
+}
+
+// The comparison itself catches a wrong move: a shifted, a missing and a mistyped motion all fail.
+TEST(Rs274CompareTest, ComparisonCatchesShiftedMissingAndMistypedMoves) {
+  const std::string canon_text =
+      "    1 N..... USE_LENGTH_UNITS(CANON_UNITS_MM)\n"
+      "    2 N..... STRAIGHT_TRAVERSE(0.0000, 0.0000, 10.0000, 0.0000, 0.0000, 0.0000)\n"
+      "    3 N..... SET_FEED_RATE(300.0000)\n"
+      "    4 N..... STRAIGHT_FEED(1.2346, 2.0000, -1.5000, 0.0000, 0.0000, 0.0000)\n";
+  const Canon canon = ParseCanon(canon_text);
+  ASSERT_EQ(canon.moves.size(), 2u);
+  EXPECT_EQ(canon.mm_units, 1);
+  EXPECT_EQ(canon.moves[1].decimals, 4);
+  EXPECT_EQ(canon.moves[1].feed, 300.0);
+  const std::vector<ExpectedMove> good = {{Kind::kTraverse, Vector3d(kNaN, kNaN, 10), 0, "a"},
+                                          {Kind::kFeed, Vector3d(1.23456, 2, -1.5), 300, "b"}};
+  EXPECT_NEAR(Compare(good, canon, "good").max_difference_mm, 0.00004, 1e-9);
+  auto shifted = good;
+  shifted[1].p.x() += 2e-4;
+  EXPECT_NONFATAL_FAILURE(Compare(shifted, canon, "shifted"), "axis X");
+  auto slow = good;
+  slow[1].feed = 1500;
+  EXPECT_NONFATAL_FAILURE(Compare(slow, canon, "slow"), "modal feed");
+  auto mistyped = good;
+  mistyped[1].kind = Kind::kTraverse;
+  EXPECT_NONFATAL_FAILURE(Compare(mistyped, canon, "mistyped"), "rs274 says STRAIGHT_FEED");
+  const std::vector<ExpectedMove> missing(good.begin(), good.begin() + 1);
+  EXPECT_NONFATAL_FAILURE(Compare(missing, canon, "missing"), "rs274 motions vs formloop moves");
+}
+
+}  // namespace
+}  // namespace formloop::nc
