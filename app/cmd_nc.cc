@@ -2,11 +2,14 @@
 //
 //   formloop nc path  --surface Q.step --out program.ngc [--dialect D] [--report toolpath.json] [tool/path options]
 //   formloop nc probe --surface Q.step --out probe.ngc   [--dialect D] [--grid NUxNV] [probe options]
+//   formloop nc check --nominal P0 --compensated P1 --side side.csv [--field ds.csv] [--dialect D]
 //
 // Every program passes the machine-limit check before any text exists; a refusal names the block
 // or probe point and nothing is written. Outputs are written through a temporary file and renamed.
 
+#include <iostream>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -15,6 +18,8 @@
 #include "core/atomic_file.h"
 #include "core/log.h"
 #include "metrology/probe.h"
+#include "nc-gen/compensation.h"
+#include "nc-gen/deviation_field.h"
 #include "nc-gen/moves.h"
 #include "nc-gen/post.h"
 #include "nc-gen/probe_program.h"
@@ -153,6 +158,41 @@ Status PlanAndPostProbing(const ProbeArgs& args) {
   return Status::Ok();
 }
 
+struct CheckArgs {
+  std::string nominal, compensated, side, field;
+  double lambda = 0;
+  std::string dialect = "linuxcnc";
+  int decimals = 4;
+};
+
+// Recomputes every compensated block from the two programs, the side file and (optionally) the
+// field; the report goes to stdout as JSON, disagreeing blocks also to the log; exit 1 when any.
+Status CheckPrograms(const CheckArgs& args) {
+  FL_ASSIGN_OR_RETURN(const std::string nominal_text, ReadFile(args.nominal));
+  FL_ASSIGN_OR_RETURN(const std::string compensated_text, ReadFile(args.compensated));
+  FL_ASSIGN_OR_RETURN(const auto nominal, nc::ReadProgram(nominal_text, args.dialect, args.nominal));
+  FL_ASSIGN_OR_RETURN(const auto compensated, nc::ReadProgram(compensated_text, args.dialect, args.compensated));
+  FL_ASSIGN_OR_RETURN(const nc::SideFile side, nc::ReadSideFile(args.side));
+  nc::SystematicField field;
+  std::optional<nc::DeviationField> fitted;
+  if (!args.field.empty()) {
+    FL_ASSIGN_OR_RETURN(nc::DeviationField f, nc::ReadDeviationField(args.field, {.smoothing = args.lambda}));
+    fitted = std::move(f);
+    field = fitted->AsSystematicField();
+  }
+  FL_ASSIGN_OR_RETURN(const nc::CheckReport report,
+                      nc::CheckCompensation(nominal, compensated, side, field, {.program_decimals = args.decimals}));
+  std::cout << report.ToJson().dump(2) << "\n";
+  std::cout.flush();
+  if (report.ok()) {
+    log::Info("nc check: all {} blocks agree within {:.3f} um", report.blocks, report.tolerance_um);
+    return Status::Ok();
+  }
+  for (const auto& block : report.disagreeing) log::Warn("nc check: {}", block.Describe());
+  return Status::Failed("nc check: " + std::to_string(report.disagreeing.size()) + " of " +
+                        std::to_string(report.blocks) + " blocks disagree (listed above and in the JSON report)");
+}
+
 }  // namespace
 
 void AddNcCommand(CLI::App& root, CommandAction* action) {
@@ -197,6 +237,20 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
   probe->add_option("--safe-z-mm", o.safe_z_mm, "rapid height between points, mm")->capture_default_str();
   probe->add_option("--out", probe_args->out, "the program")->required();
   probe->callback([action, probe_args] { *action = [probe_args] { return PlanAndPostProbing(*probe_args); }; });
+
+  auto check_args = std::make_shared<CheckArgs>();
+  CLI::App* check = nc->add_subcommand(
+      "check", "Recompute every compensated block from the nominal and compensated programs and compare it with the "
+               "side file and, given the field, with -d_s*n; JSON report on stdout, exit 1 if any block disagrees.");
+  check->add_option("--nominal", check_args->nominal, "the nominal program")->required();
+  check->add_option("--compensated", check_args->compensated, "the compensated program")->required();
+  check->add_option("--side", check_args->side, "the side file (CSV) written with the compensated program")
+      ->required();
+  check->add_option("--field", check_args->field, "the systematic field as CSV u,v,ds_um (thin-plate interpolated)");
+  check->add_option("--lambda", check_args->lambda, "smoothing of the field (0 = interpolate)")->capture_default_str();
+  check->add_option("--dialect", check_args->dialect, "dialect of both programs")->capture_default_str();
+  check->add_option("--decimals", check_args->decimals, "coordinate decimals of the programs")->capture_default_str();
+  check->callback([action, check_args] { *action = [check_args] { return CheckPrograms(*check_args); }; });
 }
 
 }  // namespace formloop::app

@@ -2,9 +2,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <sstream>
+#include <system_error>
 
 #include "core/atomic_file.h"
 #include "core/point_io.h"
+#include "nc-gen/csv_cells.h"
 
 namespace formloop::nc {
 namespace {
@@ -16,6 +20,19 @@ std::vector<const ProgramMove*> FeedMoves(const std::vector<ProgramMove>& moves)
   }
   return feeds;
 }
+
+using internal::SplitComma;
+std::string Trim(const std::string& s) { return internal::TrimCell(s); }
+
+std::string Vec(const Eigen::Vector3d& v_mm) {
+  return "(" + FormatFixed(1e3 * v_mm.x(), 3) + ", " + FormatFixed(1e3 * v_mm.y(), 3) + ", " +
+         FormatFixed(1e3 * v_mm.z(), 3) + ") um";
+}
+
+constexpr const char* kSideColumns[] = {"cl_index", "pass",     "nominal_line", "compensated_line",
+                                        "nominal_x", "nominal_y", "nominal_z",   "offset_x",
+                                        "offset_y",  "offset_z",  "ds_um"};
+constexpr const char* kFieldColumns[] = {"u", "v", "nx", "ny", "nz"};
 
 }  // namespace
 
@@ -45,6 +62,10 @@ Result<Compensation> CompensateToolpath(const Toolpath& nominal, const Systemati
     entry.cl_index = k;
     entry.nominal_tip = nominal.points[k].tip;
     entry.systematic_um = ds_mm * 1e3;
+    entry.pass = cl.pass;
+    entry.u = cl.u;
+    entry.v = cl.v;
+    entry.normal = cl.normal;
     result.entries.push_back(entry);
   }
   UpdateCutterLocations(&result.path);
@@ -74,14 +95,19 @@ Status AssignProgramLines(const std::vector<ProgramMove>& nominal, const std::ve
 Status WriteSideFile(const std::filesystem::path& path, const Compensation& compensation) {
   std::string text = "# formloop compensation side file: per CL point, the nominal tip, the applied offset, its source\n";
   text += "# source: " + compensation.source + "\n";
-  text += "cl_index,pass,nominal_line,compensated_line,nominal_x,nominal_y,nominal_z,offset_x,offset_y,offset_z,ds_um\n";
+  text +=
+      "cl_index,pass,nominal_line,compensated_line,nominal_x,nominal_y,nominal_z,offset_x,offset_y,offset_z,ds_um,"
+      "u,v,nx,ny,nz\n";
   for (const auto& e : compensation.entries) {
     const ClPoint& cl = compensation.path.points[e.cl_index];
     text += std::to_string(e.cl_index) + "," + std::to_string(cl.pass) + "," + std::to_string(e.nominal_line) + "," +
             std::to_string(e.compensated_line);
     for (int a = 0; a < 3; ++a) text += "," + FormatFixed(e.nominal_tip[a], 6);
     for (int a = 0; a < 3; ++a) text += "," + FormatFixed(e.offset_mm[a], 6);
-    text += "," + FormatFixed(e.systematic_um, 4) + "\n";
+    text += "," + FormatFixed(e.systematic_um, 4);
+    text += "," + FormatExact(e.u) + "," + FormatExact(e.v);
+    for (int a = 0; a < 3; ++a) text += "," + FormatFixed(e.normal[a], 9);
+    text += "\n";
   }
   return WriteFileAtomic(path, text);
 }
@@ -100,6 +126,238 @@ Result<double> VerifyCompensation(const std::vector<ProgramMove>& nominal, const
     worst = std::max(worst, 1e3 * (program_offset - compensation.entries[k].offset_mm).norm());
   }
   return worst;
+}
+
+Result<SideFile> ParseSideFile(const std::string& text, const std::string& source) {
+  SideFile side;
+  std::istringstream in(text);
+  std::string line;
+  long number = 0;
+  std::map<std::string, std::size_t> column;
+  std::size_t columns = 0;
+  while (std::getline(in, line)) {
+    ++number;
+    const std::string t = Trim(line);
+    if (t.empty()) continue;
+    if (t[0] == '#') {
+      if (t.rfind("# source:", 0) == 0) side.source = Trim(t.substr(9));
+      continue;
+    }
+    const auto cells = SplitComma(t);
+    if (columns == 0) {
+      for (std::size_t c = 0; c < cells.size(); ++c) column[cells[c]] = c;
+      for (const char* name : kSideColumns) {
+        if (!column.count(name)) {
+          return Status::BadInput(Where{.file = source, .line = number, .field = name},
+                                  "the header lacks this column", "use the side file formloop wrote");
+        }
+      }
+      int field_columns = 0;
+      for (const char* name : kFieldColumns) field_columns += column.count(name) ? 1 : 0;
+      if (field_columns != 0 && field_columns != 5) {
+        return Status::BadInput(Where{.file = source, .line = number},
+                                "the header has only some of the columns u, v, nx, ny, nz", "give all five or none");
+      }
+      side.has_field_points = field_columns == 5;
+      columns = cells.size();
+      continue;
+    }
+    if (cells.size() != columns) {
+      return Status::BadInput(Where{.file = source, .line = number},
+                              "has " + std::to_string(cells.size()) + " fields, the header " + std::to_string(columns));
+    }
+    auto number_of = [&](const char* name, double* value) -> Status {
+      const std::string& cell = cells[column[name]];
+      if (!ParseDouble(cell, value) || !std::isfinite(*value)) {
+        return Status::BadInput(Where{.file = source, .line = number, .field = name},
+                                "value '" + cell + "' is not a finite number");
+      }
+      return Status::Ok();
+    };
+    auto integer_of = [&](const char* name, long* value) -> Status {
+      double x = 0;
+      FL_RETURN_IF_ERROR(number_of(name, &x));
+      if (x != std::floor(x) || x < 0 || x > 1e15) {
+        return Status::BadInput(Where{.file = source, .line = number, .field = name},
+                                "value '" + cells[column[name]] + "' is not a non-negative integer");
+      }
+      *value = static_cast<long>(x);
+      return Status::Ok();
+    };
+    CompensationEntry e;
+    long index = 0, pass = 0;
+    FL_RETURN_IF_ERROR(integer_of("cl_index", &index));
+    FL_RETURN_IF_ERROR(integer_of("pass", &pass));
+    FL_RETURN_IF_ERROR(integer_of("nominal_line", &e.nominal_line));
+    FL_RETURN_IF_ERROR(integer_of("compensated_line", &e.compensated_line));
+    e.cl_index = static_cast<std::size_t>(index);
+    e.pass = static_cast<int>(pass);
+    FL_RETURN_IF_ERROR(number_of("nominal_x", &e.nominal_tip.x()));
+    FL_RETURN_IF_ERROR(number_of("nominal_y", &e.nominal_tip.y()));
+    FL_RETURN_IF_ERROR(number_of("nominal_z", &e.nominal_tip.z()));
+    FL_RETURN_IF_ERROR(number_of("offset_x", &e.offset_mm.x()));
+    FL_RETURN_IF_ERROR(number_of("offset_y", &e.offset_mm.y()));
+    FL_RETURN_IF_ERROR(number_of("offset_z", &e.offset_mm.z()));
+    FL_RETURN_IF_ERROR(number_of("ds_um", &e.systematic_um));
+    e.has_field_point = side.has_field_points;
+    if (side.has_field_points) {
+      FL_RETURN_IF_ERROR(number_of("u", &e.u));
+      FL_RETURN_IF_ERROR(number_of("v", &e.v));
+      FL_RETURN_IF_ERROR(number_of("nx", &e.normal.x()));
+      FL_RETURN_IF_ERROR(number_of("ny", &e.normal.y()));
+      FL_RETURN_IF_ERROR(number_of("nz", &e.normal.z()));
+      if (std::abs(e.normal.norm() - 1) > 1e-6) {
+        return Status::BadInput(Where{.file = source, .line = number, .field = "nx"},
+                                "the normal (nx, ny, nz) is not a unit vector");
+      }
+    }
+    if (e.cl_index != side.entries.size()) {
+      return Status::BadInput(Where{.file = source, .line = number, .field = "cl_index"},
+                              "expected CL point " + std::to_string(side.entries.size()) + ", found " +
+                                  std::to_string(e.cl_index),
+                              "rows must list every CL point in order from 0");
+    }
+    side.entries.push_back(e);
+  }
+  if (columns == 0) return Status::BadInput(Where{.file = source}, "no header row", "use the side file formloop wrote");
+  return side;
+}
+
+Result<SideFile> ReadSideFile(const std::filesystem::path& path) {
+  FL_ASSIGN_OR_RETURN(std::string text, ReadFile(path));
+  return ParseSideFile(text, path.string());
+}
+
+double ProgramOffsetToleranceUm(int decimals) {
+  return 1e3 * std::sqrt(3.0) * std::pow(10.0, -std::max(decimals, 0)) + 0.002;
+}
+
+std::string BlockCheck::Describe() const {
+  std::string text = "block " + std::to_string(cl_index) + " (pass " + std::to_string(pass) + ", nominal line " +
+                     std::to_string(nominal_line) + ", compensated line " + std::to_string(compensated_line) + "): ";
+  for (std::size_t k = 0; k < problems.size(); ++k) text += (k ? "; " : "") + problems[k];
+  return text;
+}
+
+nlohmann::json CheckReport::ToJson() const {
+  nlohmann::json blocks_json = nlohmann::json::array();
+  auto vec = [](const Eigen::Vector3d& v) { return nlohmann::json::array({1e3 * v.x(), 1e3 * v.y(), 1e3 * v.z()}); };
+  for (const auto& b : disagreeing) {
+    nlohmann::json j = {{"cl_index", b.cl_index},
+                        {"pass", b.pass},
+                        {"nominal_line", b.nominal_line},
+                        {"compensated_line", b.compensated_line},
+                        {"program_offset_um", vec(b.program_offset_mm)},
+                        {"side_offset_um", vec(b.side_offset_mm)},
+                        {"side_difference_um", b.side_difference_um},
+                        {"nominal_tip_difference_um", b.nominal_tip_difference_um},
+                        {"problems", b.problems}};
+    if (b.field_checked) {
+      j["field_offset_um"] = vec(b.field_offset_mm);
+      j["field_difference_um"] = b.field_difference_um;
+    }
+    blocks_json.push_back(j);
+  }
+  return {{"ok", ok()},
+          {"blocks", blocks},
+          {"field_checked", field_checked},
+          {"tolerance_um", tolerance_um},
+          {"max_side_difference_um", max_side_difference_um},
+          {"max_field_difference_um", max_field_difference_um},
+          {"disagreeing_blocks", blocks_json}};
+}
+
+Result<CheckReport> CheckCompensation(const std::vector<ProgramMove>& nominal,
+                                      const std::vector<ProgramMove>& compensated, const SideFile& side,
+                                      const SystematicField& field, const CheckOptions& options) {
+  if (options.program_decimals < 0 || options.program_decimals > 9) {
+    return Status::BadInput(Where{.field = "program_decimals"}, "must be 0..9");
+  }
+  if (!(options.tolerance_um >= 0)) return Status::BadInput(Where{.field = "tolerance_um"}, "must be >= 0");
+  const auto a = FeedMoves(nominal), b = FeedMoves(compensated);
+  if (a.size() != b.size() || a.size() != side.entries.size()) {
+    return Status::Failed("compensation check: the nominal program has " + std::to_string(a.size()) +
+                          " feed blocks, the compensated program " + std::to_string(b.size()) + ", the side file " +
+                          std::to_string(side.entries.size()) + " rows; they must be equal");
+  }
+  CheckReport report;
+  report.blocks = a.size();
+  report.field_checked = static_cast<bool>(field) && side.has_field_points;
+  report.tolerance_um =
+      options.tolerance_um > 0 ? options.tolerance_um : ProgramOffsetToleranceUm(options.program_decimals);
+  const double tol = report.tolerance_um;
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    const CompensationEntry& e = side.entries[k];
+    BlockCheck block;
+    block.cl_index = k;
+    block.pass = e.pass;
+    block.nominal_line = a[k]->line;
+    block.compensated_line = b[k]->line;
+    if (!a[k]->tip.allFinite() || !b[k]->tip.allFinite()) {
+      block.problems.push_back("a feed block does not program all three axes");
+      report.disagreeing.push_back(block);
+      continue;
+    }
+    block.program_offset_mm = b[k]->tip - a[k]->tip;
+    block.side_offset_mm = e.offset_mm;
+    block.side_difference_um = 1e3 * (block.program_offset_mm - e.offset_mm).norm();
+    report.max_side_difference_um = std::max(report.max_side_difference_um, block.side_difference_um);
+    if (block.side_difference_um > tol) {
+      block.problems.push_back("program offset " + Vec(block.program_offset_mm) + " vs side file " +
+                               Vec(e.offset_mm) + ": differ by " + FormatFixed(block.side_difference_um, 3) + " um");
+    }
+    block.nominal_tip_difference_um = 1e3 * (a[k]->tip - e.nominal_tip).norm();
+    if (block.nominal_tip_difference_um > tol) {
+      block.problems.push_back("nominal program tip differs from the side file's by " +
+                               FormatFixed(block.nominal_tip_difference_um, 3) + " um");
+    }
+    if ((e.nominal_line != 0 && e.nominal_line != a[k]->line) ||
+        (e.compensated_line != 0 && e.compensated_line != b[k]->line)) {
+      block.problems.push_back("side file names lines " + std::to_string(e.nominal_line) + "/" +
+                               std::to_string(e.compensated_line) + ", the programs " + std::to_string(a[k]->line) +
+                               "/" + std::to_string(b[k]->line));
+    }
+    if (report.field_checked) {
+      block.field_checked = true;
+      const double ds_mm = field(e.u, e.v);
+      block.field_offset_mm = -ds_mm * e.normal;
+      block.field_difference_um = 1e3 * (block.program_offset_mm - block.field_offset_mm).norm();
+      report.max_field_difference_um = std::max(report.max_field_difference_um, block.field_difference_um);
+      if (!(block.field_difference_um <= tol)) {
+        block.problems.push_back("program offset " + Vec(block.program_offset_mm) + " vs -d_s*n from the field " +
+                                 Vec(block.field_offset_mm) + " (d_s " + FormatFixed(1e3 * ds_mm, 3) +
+                                 " um): differ by " + FormatFixed(block.field_difference_um, 3) + " um");
+      }
+    }
+    if (!block.problems.empty()) report.disagreeing.push_back(block);
+  }
+  return report;
+}
+
+Result<Compensation> WriteCompensatedProgram(const Toolpath& nominal, const std::string& nominal_program,
+                                             const SystematicField& systematic, const std::string& source,
+                                             const CompensationOptions& options, const PostOptions& post,
+                                             const std::filesystem::path& program_path,
+                                             const std::filesystem::path& side_path) {
+  FL_ASSIGN_OR_RETURN(Compensation compensation, CompensateToolpath(nominal, systematic, source, options));
+  FL_ASSIGN_OR_RETURN(std::string program, PostLinuxCnc(compensation.path, post));
+  FL_ASSIGN_OR_RETURN(std::vector<ProgramMove> nominal_moves, ReadLinuxCncMoves(nominal_program, "nominal program"));
+  FL_ASSIGN_OR_RETURN(std::vector<ProgramMove> moves, ReadLinuxCncMoves(program, "compensated program"));
+  FL_RETURN_IF_ERROR(AssignProgramLines(nominal_moves, moves, &compensation));
+  SideFile side{.source = source, .entries = compensation.entries, .has_field_points = true};
+  FL_ASSIGN_OR_RETURN(CheckReport report,
+                      CheckCompensation(nominal_moves, moves, side, systematic, {.program_decimals = post.decimals}));
+  if (!report.ok()) {
+    return Status::Internal("compensated program fails its own check: " + report.disagreeing.front().Describe() +
+                            "; nothing was written");
+  }
+  FL_RETURN_IF_ERROR(WriteSideFile(side_path, compensation));
+  if (Status s = WriteFileAtomic(program_path, program); !s.ok()) {
+    std::error_code ec;
+    std::filesystem::remove(side_path, ec);
+    return s;
+  }
+  return compensation;
 }
 
 }  // namespace formloop::nc

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include <Eigen/Core>
+#include <nlohmann/json.hpp>
 
 #include "core/status.h"
 #include "nc-gen/post.h"
@@ -29,6 +30,12 @@ struct CompensationEntry {
   Eigen::Vector3d nominal_tip = Eigen::Vector3d::Zero();
   Eigen::Vector3d offset_mm = Eigen::Vector3d::Zero();  // compensated tip − nominal tip
   double systematic_um = 0;    // d_s at the CC point
+  // Where d_s was taken and along which normal (CompensateToolpath fills them), so a checker can
+  // recompute −d_s·n from the field alone.
+  int pass = 0;
+  double u = 0, v = 0;
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
+  bool has_field_point = true;  // false for an entry read from an old side file without u, v, nx..nz
 };
 
 struct Compensation {
@@ -48,8 +55,82 @@ Result<Compensation> CompensateToolpath(const Toolpath& nominal, const Systemati
 Status AssignProgramLines(const std::vector<ProgramMove>& nominal, const std::vector<ProgramMove>& compensated,
                           Compensation* compensation);
 
-// CSV side file: block,cl_index,pass,nominal_line,compensated_line,nominal_x..z,offset_x..z,ds_um,source.
+// CSV side file, one row per CL point (= feed block) in cutting order:
+//   # formloop compensation side file: ...
+//   # source: <Compensation::source>          (the offsets' source, for every row)
+//   cl_index,pass,nominal_line,compensated_line,nominal_x,nominal_y,nominal_z,offset_x,offset_y,offset_z,ds_um,u,v,nx,ny,nz
+// nominal_* = nominal tip (mm, 6 decimals); offset_* = compensated − nominal tip (mm, 6 decimals);
+// ds_um = d_s at the CC point (µm, 4 decimals); u, v = CC parameters (shortest exact text); nx..nz = unit
+// normal at the CC point (9 decimals). The applied offset is −ds·n.
 Status WriteSideFile(const std::filesystem::path& path, const Compensation& compensation);
+
+struct SideFile {
+  std::string source;                      // from the "# source:" line ("" when absent)
+  std::vector<CompensationEntry> entries;  // in file order
+  bool has_field_points = false;           // the u, v, nx, ny, nz columns are present
+};
+
+// Reads what WriteSideFile writes (the u, v, nx, ny, nz columns may be absent: older side files).
+// BadInput names file, line and field for a missing column, a wrong field count or a bad number.
+Result<SideFile> ReadSideFile(const std::filesystem::path& path);
+// The same from text; `source` names it in messages.
+Result<SideFile> ParseSideFile(const std::string& text, const std::string& source);
+
+struct CheckOptions {
+  int program_decimals = 4;  // coordinate decimals of the programs (PostOptions::decimals)
+  double tolerance_um = 0;   // 0: derived from program_decimals (ProgramOffsetToleranceUm)
+};
+
+// Largest honest disagreement of an offset recomputed from two programs printed with `decimals`
+// decimals: each axis of each tip is rounded by at most ½·10^−d mm, so the difference of two tips by
+// 10^−d per axis, √3·10^−d mm in norm; plus 0.002 µm for the side file's 6-decimal rounding.
+// decimals = 4 → 0.175 µm.
+double ProgramOffsetToleranceUm(int decimals);
+
+// One block (feed move = CL point) whose recomputed offset disagrees.
+struct BlockCheck {
+  std::size_t cl_index = 0;
+  int pass = 0;
+  long nominal_line = 0, compensated_line = 0;  // lines in the two programs (as read from them)
+  Eigen::Vector3d program_offset_mm = Eigen::Vector3d::Zero();  // compensated tip − nominal tip
+  Eigen::Vector3d side_offset_mm = Eigen::Vector3d::Zero();     // offset_x..z of the side file
+  Eigen::Vector3d field_offset_mm = Eigen::Vector3d::Zero();    // −d_s(u, v)·n from the field
+  bool field_checked = false;
+  double side_difference_um = 0, field_difference_um = 0, nominal_tip_difference_um = 0;
+  std::vector<std::string> problems;  // one sentence per failed comparison
+  std::string Describe() const;       // "block 17 (pass 2, nominal line 40, compensated line 40): ..."
+};
+
+struct CheckReport {
+  std::size_t blocks = 0;
+  bool field_checked = false;  // the field comparison ran (field given and side file has u, v, n)
+  double tolerance_um = 0;
+  double max_side_difference_um = 0, max_field_difference_um = 0;
+  std::vector<BlockCheck> disagreeing;  // every block with at least one failed comparison, in order
+  bool ok() const { return disagreeing.empty(); }
+  nlohmann::json ToJson() const;
+};
+
+// `formloop nc check`: for every feed block k (the k-th feed move of each program is side entry k),
+// recomputes the offset b_k − a_k from the two programs and compares it (a) with the side file's
+// offset, (b) with −d_s(u_k, v_k)·n_k from `field` (mm) when `field` is non-empty and the side file
+// has u, v, n, and checks (c) the side file's nominal tip against the nominal program and (d) its line
+// numbers (when non-zero) against the programs. Differences above the tolerance are reported per
+// block with both values. Failed when the programs and side file disagree in their number of blocks.
+Result<CheckReport> CheckCompensation(const std::vector<ProgramMove>& nominal,
+                                      const std::vector<ProgramMove>& compensated, const SideFile& side,
+                                      const SystematicField& field, const CheckOptions& options = {});
+
+// The whole mirror step with nothing written unless everything passed: CompensateToolpath (refuses
+// an offset above options.max_offset_um with SafetyLimit), PostLinuxCnc, read back both programs,
+// AssignProgramLines, CheckCompensation against the field; then the program and the side file are
+// written atomically (side file first; should the program then fail to write, the side file is
+// removed). On any refusal or failed check neither file is written.
+Result<Compensation> WriteCompensatedProgram(const Toolpath& nominal, const std::string& nominal_program,
+                                             const SystematicField& systematic, const std::string& source,
+                                             const CompensationOptions& options, const PostOptions& post,
+                                             const std::filesystem::path& program_path,
+                                             const std::filesystem::path& side_path);
 
 // Recomputes every offset from the two programs and compares with the side entries; returns the
 // largest disagreement in µm (the program resolution limits it to about 0.1 µm).

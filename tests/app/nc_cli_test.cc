@@ -2,6 +2,7 @@
 // with formloop's reader to as many feed moves as the report has CL points, probing programs name
 // every point, and limit violations are refused with nothing written.
 
+#include <algorithm>
 #include <array>
 #include <cstdio>
 #include <filesystem>
@@ -96,6 +97,34 @@ TEST_F(NcCliTest, LimitsAndBadOptionsAreRefusedWithNothingWritten) {
   EXPECT_EQ(Run("nc probe --surface " + Path("Q.step") + " --out " + out + " --grid 4by3"), 2);
   EXPECT_EQ(Run("nc path --surface " + Path("missing.step") + " --out " + out), 2);
   EXPECT_FALSE(fs::exists(out));
+}
+
+TEST_F(NcCliTest, CheckFindsACorruptedCompensatedBlock) {
+  // The demo run writes a nominal program, a compensated one and the side file.
+  const fs::path run = dir_ / "demo";
+  ASSERT_EQ(Run("run " + std::string(FORMLOOP_SOURCE_DIR) + "/data/parts/demo-saddle.json --out " + run.string()), 0)
+      << err_;
+  const std::string nominal = (run / "toolpath" / "program.ngc").string();
+  const std::string side = (run / "loop-0" / "compensation_side.csv").string();
+  std::string compensated = (run / "loop-0" / "program_compensated.ngc").string();
+  const std::string check = "nc check --nominal " + nominal + " --side " + side + " --compensated ";
+  ASSERT_EQ(Run(check + compensated), 0) << err_;
+
+  // Raise the Z word of one feed block deep in the program by 10 µm.
+  std::string text = ReadFile(compensated).value();
+  std::size_t at = text.find("G1 X", text.size() / 2);
+  ASSERT_NE(at, std::string::npos);
+  const std::size_t z = text.find(" Z", at) + 2, end = text.find_first_of(" \n", z);
+  const double value = std::stod(text.substr(z, end - z)) + 0.010;
+  char buffer[32];
+  std::snprintf(buffer, sizeof buffer, "%.4f", value);
+  text.replace(z, end - z, buffer);
+  const fs::path corrupted = dir_ / "corrupted.ngc";
+  ASSERT_TRUE(WriteFileAtomic(corrupted, text).ok());
+  EXPECT_EQ(Run(check + corrupted.string()), 1);
+  EXPECT_NE(err_.find("1 of "), std::string::npos) << err_;
+  const long line = static_cast<long>(std::count(text.begin(), text.begin() + static_cast<long>(at), '\n')) + 1;
+  EXPECT_NE(err_.find("compensated line " + std::to_string(line)), std::string::npos) << err_;
 }
 
 }  // namespace

@@ -1,0 +1,362 @@
+// Mirror compensation end to end (spec/nc-gen.md §4): a smooth deviation field from scattered values,
+// the compensated program, its side file and the independent check of both programs against the field.
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "core/atomic_file.h"
+#include "core/point_io.h"
+#include "nc-gen/compensation.h"
+#include "nc-gen/deviation_field.h"
+#include "nc-gen/post.h"
+#include "nc-gen/toolpath.h"
+#include "reconstruction/analytic_surface.h"
+#include "reconstruction/bspline_surface.h"
+
+namespace formloop::nc {
+namespace {
+
+namespace fs = std::filesystem;
+constexpr double kPi = 3.14159265358979323846;
+
+fs::path TempDir(const std::string& name) {
+  const fs::path dir = fs::temp_directory_path() / ("formloop_compensation_test_" + name);
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+void WriteText(const fs::path& path, const std::string& text) {
+  std::ofstream out(path);
+  out << text;
+}
+
+Toolpath SaddlePath() {
+  auto s = recon::MakeReferenceSurface("saddle");
+  recon::FitReport report;
+  auto q = recon::FitAnalytic(*s.value(), 30, 30, {}, 0, 1, &report);
+  EXPECT_TRUE(q.ok());
+  ToolpathOptions o;
+  o.tool.radius_mm = 3.0;
+  o.scallop_um = 5.0;
+  o.max_point_spacing_mm = 2.0;
+  auto path = PlanRaster(q.value(), o);
+  EXPECT_TRUE(path.ok());
+  return path.value();
+}
+
+// Scattered (pseudo-random, deterministic) points in [0, 10] x [0, 5].
+std::vector<DeviationSample> Scattered(int n, double (*f)(double, double)) {
+  std::vector<DeviationSample> samples;
+  for (int i = 0; i < n; ++i) {
+    const double u = 10.0 * std::fmod(0.6180339887 * (i + 1), 1.0);
+    const double v = 5.0 * std::fmod(0.7548776662 * (i + 1) + 0.5698402910 * (i % 7), 1.0);
+    samples.push_back({u, v, f(u, v), i + 2});
+  }
+  return samples;
+}
+
+double Wavy(double u, double v) { return 5.0 * std::sin(0.7 * u) * std::cos(0.9 * v) + 0.3 * u; }
+double Linear(double u, double v) { return 3.0 + 0.2 * u - 0.7 * v; }
+
+TEST(DeviationFieldTest, InterpolatesExactlyAtTheDataPointsWithoutSmoothing) {
+  const auto samples = Scattered(80, Wavy);
+  const auto field = DeviationField::Fit(samples, {});
+  ASSERT_TRUE(field.ok()) << field.status().message();
+  EXPECT_EQ(field->size(), 80u);
+  for (const auto& s : samples) EXPECT_NEAR(field->EvaluateUm(s.u, s.v), s.ds_um, 1e-8);
+  // Smooth between the points: close to the generating function in the interior (5 µm amplitude).
+  EXPECT_NEAR(field->EvaluateUm(5.0, 2.5), Wavy(5.0, 2.5), 0.3);
+  // Smoothing gives up exactness at the data points.
+  const auto smooth = DeviationField::Fit(samples, {.smoothing = 1.0});
+  ASSERT_TRUE(smooth.ok());
+  double worst = 0;
+  for (const auto& s : samples) worst = std::max(worst, std::abs(smooth->EvaluateUm(s.u, s.v) - s.ds_um));
+  EXPECT_GT(worst, 1e-4);
+}
+
+TEST(DeviationFieldTest, ReproducesLinearFieldsExactlyForAnySmoothing) {
+  const auto samples = Scattered(40, Linear);
+  for (double lambda : {0.0, 0.5, 100.0}) {
+    const auto field = DeviationField::Fit(samples, {.smoothing = lambda});
+    ASSERT_TRUE(field.ok()) << field.status().message();
+    for (double u : {-2.0, 0.3, 4.7, 12.0}) {
+      for (double v : {-1.0, 2.2, 6.0}) EXPECT_NEAR(field->EvaluateUm(u, v), Linear(u, v), 1e-8) << lambda;
+    }
+    EXPECT_NEAR(field->AsSystematicField()(4.7, 2.2), 1e-3 * Linear(4.7, 2.2), 1e-11);
+  }
+}
+
+TEST(DeviationFieldTest, RefusesDegenerateAndOversizedInput) {
+  std::vector<DeviationSample> line = {{0, 0, 1, 2}, {1, 1, 2, 3}, {2, 2, 3, 4}};
+  EXPECT_EQ(DeviationField::Fit(line, {}).status().code(), StatusCode::kBadInput);
+  auto dup = Scattered(10, Linear);
+  dup.push_back(dup[3]);
+  dup.back().line = 99;
+  const auto refused = DeviationField::Fit(dup, {}, "d.csv");
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("d.csv:99"), std::string::npos) << refused.status().message();
+  EXPECT_NE(refused.status().message().find("line 5"), std::string::npos) << refused.status().message();
+  EXPECT_TRUE(DeviationField::Fit(dup, {.smoothing = 0.1}).ok());
+  const auto big = Scattered(static_cast<int>(kMaxDeviationSamples) + 1, Linear);
+  const auto too_many = DeviationField::Fit(big, {});
+  ASSERT_FALSE(too_many.ok());
+  EXPECT_NE(too_many.status().message().find("3001 samples exceed"), std::string::npos);
+  EXPECT_FALSE(DeviationField::Fit(Scattered(5, Linear), {.smoothing = -1}).ok());
+}
+
+TEST(DeviationFieldTest, ReadsCsvAndNamesFileLineAndField) {
+  const fs::path dir = TempDir("csv");
+  WriteText(dir / "ok.csv", "# d_s from loop 0\nid,u,v,ds_um\n1,0,0,1\n\n2,1,0,2\n3,0,1,3.5\n4,1,1,4.5\n");
+  const auto samples = ReadDeviationSamples(dir / "ok.csv");
+  ASSERT_TRUE(samples.ok()) << samples.status().message();
+  ASSERT_EQ(samples->size(), 4u);
+  EXPECT_EQ((*samples)[1].line, 5);
+  EXPECT_DOUBLE_EQ((*samples)[2].ds_um, 3.5);
+  const auto field = ReadDeviationField(dir / "ok.csv");
+  ASSERT_TRUE(field.ok());
+  EXPECT_NEAR(field->EvaluateUm(0, 1), 3.5, 1e-9);
+
+  WriteText(dir / "bad.csv", "u,v,ds_um\n0,0,1\n1,0,x2\n");
+  const auto bad = ReadDeviationSamples(dir / "bad.csv");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().code(), StatusCode::kBadInput);
+  EXPECT_NE(bad.status().message().find("bad.csv:3: field 'ds_um'"), std::string::npos) << bad.status().message();
+  WriteText(dir / "nocol.csv", "u,w,ds_um\n0,0,1\n");
+  const auto nocol = ReadDeviationSamples(dir / "nocol.csv");
+  ASSERT_FALSE(nocol.ok());
+  EXPECT_NE(nocol.status().message().find("nocol.csv:1: field 'v'"), std::string::npos) << nocol.status().message();
+  WriteText(dir / "short.csv", "u,v,ds_um\n0,0\n");
+  const auto short_row = ReadDeviationSamples(dir / "short.csv");
+  ASSERT_FALSE(short_row.ok());
+  EXPECT_NE(short_row.status().message().find("short.csv:2"), std::string::npos);
+}
+
+// The known field: 5 µm · sin · cos over the path's parameter box, given at a 12 x 12 grid of points
+// and interpolated by the thin-plate spline.
+struct Fixture {
+  Toolpath path;
+  DeviationField field;
+  SystematicField ds;
+};
+
+Fixture MakeFixture() {
+  Fixture f;
+  f.path = SaddlePath();
+  double u0 = 1e300, u1 = -1e300, v0 = 1e300, v1 = -1e300;
+  for (const auto& p : f.path.points) {
+    u0 = std::min(u0, p.u), u1 = std::max(u1, p.u), v0 = std::min(v0, p.v), v1 = std::max(v1, p.v);
+  }
+  std::vector<DeviationSample> samples;
+  for (int i = 0; i < 12; ++i) {
+    for (int j = 0; j < 12; ++j) {
+      const double u = u0 + (u1 - u0) * i / 11.0, v = v0 + (v1 - v0) * j / 11.0;
+      samples.push_back({u, v, 5.0 * std::sin(2 * kPi * (u - u0) / (u1 - u0)) * std::cos(kPi * (v - v0) / (v1 - v0)),
+                         0});
+    }
+  }
+  auto field = DeviationField::Fit(samples, {});
+  EXPECT_TRUE(field.ok());
+  f.field = field.value();
+  f.ds = f.field.AsSystematicField();
+  return f;
+}
+
+std::string CorruptZ(const std::string& text, long line_number, double delta_mm) {
+  std::istringstream in(text);
+  std::string line, out;
+  long n = 0;
+  while (std::getline(in, line)) {
+    if (++n == line_number) {
+      const auto z = line.find(" Z");
+      const auto end = line.find(' ', z + 2);
+      const double value = std::stod(line.substr(z + 2, end - z - 2));
+      line = line.substr(0, z + 2) + FormatFixed(value + delta_mm, 4) + (end == std::string::npos ? "" : line.substr(end));
+    }
+    out += line + "\n";
+  }
+  return out;
+}
+
+TEST(CompensationCheckTest, EveryBlockMovesByMinusDsNToOutputPrecisionAndTheSideFileMatches) {
+  const Fixture f = MakeFixture();
+  const fs::path dir = TempDir("roundtrip");
+  PostOptions post;  // 4 decimals: 0.1 µm
+  const auto nominal_text = PostLinuxCnc(f.path, post);
+  ASSERT_TRUE(nominal_text.ok());
+  const auto comp = WriteCompensatedProgram(f.path, *nominal_text, f.ds, "TPS field, 144 samples", {}, post,
+                                            dir / "compensated.ngc", dir / "side.csv");
+  ASSERT_TRUE(comp.ok()) << comp.status().message();
+  EXPECT_GT(comp->max_offset_um, 4.0);
+  EXPECT_LE(comp->max_offset_um, 5.05);
+  const auto comp_text = ReadFile(dir / "compensated.ngc");
+  ASSERT_TRUE(comp_text.ok());
+  const auto a = ReadLinuxCncMoves(*nominal_text, "nominal");
+  const auto b = ReadLinuxCncMoves(*comp_text, "compensated");
+  ASSERT_TRUE(a.ok() && b.ok());
+  std::vector<const ProgramMove*> fa, fb;
+  for (const auto& m : *a) if (!m.rapid) fa.push_back(&m);
+  for (const auto& m : *b) if (!m.rapid) fb.push_back(&m);
+  ASSERT_EQ(fa.size(), f.path.points.size());
+  ASSERT_EQ(fb.size(), f.path.points.size());
+  // Each axis of each tip is rounded to 0.05 µm, so each axis of the offset is within 0.1 µm.
+  for (std::size_t k = 0; k < fa.size(); ++k) {
+    const ClPoint& cl = f.path.points[k];
+    const Eigen::Vector3d expected = -f.ds(cl.u, cl.v) * cl.normal;
+    const Eigen::Vector3d got = fb[k]->tip - fa[k]->tip;
+    for (int axis = 0; axis < 3; ++axis) ASSERT_LE(std::abs(got[axis] - expected[axis]), 1e-4 + 1e-9) << k;
+  }
+  // Side file round trip.
+  const auto side = ReadSideFile(dir / "side.csv");
+  ASSERT_TRUE(side.ok()) << side.status().message();
+  EXPECT_EQ(side->source, "TPS field, 144 samples");
+  EXPECT_TRUE(side->has_field_points);
+  ASSERT_EQ(side->entries.size(), comp->entries.size());
+  for (std::size_t k = 0; k < side->entries.size(); ++k) {
+    const auto& r = side->entries[k];
+    const auto& e = comp->entries[k];
+    EXPECT_EQ(r.cl_index, k);
+    EXPECT_EQ(r.pass, f.path.points[k].pass);
+    EXPECT_EQ(r.nominal_line, fa[k]->line);
+    EXPECT_EQ(r.compensated_line, fb[k]->line);
+    EXPECT_LE((r.nominal_tip - e.nominal_tip).cwiseAbs().maxCoeff(), 0.5e-6 + 1e-12);
+    EXPECT_LE((r.offset_mm - e.offset_mm).cwiseAbs().maxCoeff(), 0.5e-6 + 1e-12);
+    EXPECT_NEAR(r.systematic_um, e.systematic_um, 0.5e-4 + 1e-12);
+    EXPECT_EQ(r.u, e.u);
+    EXPECT_EQ(r.v, e.v);
+    EXPECT_LE((r.normal - e.normal).cwiseAbs().maxCoeff(), 0.5e-9 + 1e-15);
+  }
+  // The checker agrees with everything: side file and field within the 0.175 µm tolerance.
+  const auto report = CheckCompensation(*a, *b, *side, f.ds, {.program_decimals = 4});
+  ASSERT_TRUE(report.ok()) << report.status().message();
+  EXPECT_TRUE(report->ok()) << (report->ok() ? "" : report->disagreeing.front().Describe());
+  EXPECT_TRUE(report->field_checked);
+  EXPECT_EQ(report->blocks, fa.size());
+  EXPECT_NEAR(report->tolerance_um, 0.1752, 1e-3);
+  EXPECT_LE(report->max_side_difference_um, 0.1 * std::sqrt(3.0) + 0.001);
+  EXPECT_LE(report->max_field_difference_um, 0.1 * std::sqrt(3.0) + 0.001);
+}
+
+TEST(CompensationCheckTest, ReportsExactlyTheCorruptedBlockWithItsLinesAndBothValues) {
+  const Fixture f = MakeFixture();
+  const fs::path dir = TempDir("corrupt");
+  PostOptions post;
+  const auto nominal_text = PostLinuxCnc(f.path, post);
+  ASSERT_TRUE(nominal_text.ok());
+  const auto comp = WriteCompensatedProgram(f.path, *nominal_text, f.ds, "field", {}, post, dir / "c.ngc",
+                                            dir / "side.csv");
+  ASSERT_TRUE(comp.ok()) << comp.status().message();
+  const auto side = ReadSideFile(dir / "side.csv");
+  ASSERT_TRUE(side.ok());
+  const std::size_t victim = side->entries.size() / 2;
+  const long victim_line = side->entries[victim].compensated_line;
+  const std::string corrupted = CorruptZ(*ReadFile(dir / "c.ngc"), victim_line, 0.010);  // +10 µm in Z
+  const auto a = ReadLinuxCncMoves(*nominal_text, "nominal");
+  const auto b = ReadLinuxCncMoves(corrupted, "corrupted");
+  ASSERT_TRUE(a.ok() && b.ok()) << b.status().message();
+  const auto report = CheckCompensation(*a, *b, *side, f.ds, {.program_decimals = 4});
+  ASSERT_TRUE(report.ok());
+  ASSERT_EQ(report->disagreeing.size(), 1u);
+  const BlockCheck& block = report->disagreeing.front();
+  EXPECT_EQ(block.cl_index, victim);
+  EXPECT_EQ(block.compensated_line, victim_line);
+  EXPECT_EQ(block.nominal_line, side->entries[victim].nominal_line);
+  EXPECT_NEAR(block.side_difference_um, 10.0, 0.2);
+  EXPECT_NEAR(block.field_difference_um, 10.0, 0.2);
+  EXPECT_NEAR(1e3 * (block.program_offset_mm - block.side_offset_mm).z(), 10.0, 0.2);
+  EXPECT_EQ(block.problems.size(), 2u);  // side file and field
+  EXPECT_NE(block.Describe().find("compensated line " + std::to_string(victim_line)), std::string::npos);
+  EXPECT_FALSE(report->ToJson()["ok"].get<bool>());
+
+  // Without the field only the side-file comparison runs, and still finds the same block.
+  const auto side_only = CheckCompensation(*a, *b, *side, SystematicField{}, {.program_decimals = 4});
+  ASSERT_TRUE(side_only.ok());
+  EXPECT_FALSE(side_only->field_checked);
+  ASSERT_EQ(side_only->disagreeing.size(), 1u);
+  EXPECT_EQ(side_only->disagreeing.front().cl_index, victim);
+
+  // A side file whose offset was edited (but the programs are intact) is caught too, on that block only.
+  SideFile edited = *side;
+  edited.entries[3].offset_mm.x() += 0.001;
+  const auto intact = ReadLinuxCncMoves(*ReadFile(dir / "c.ngc"), "c");
+  const auto edited_report = CheckCompensation(*a, *intact, edited, f.ds, {.program_decimals = 4});
+  ASSERT_TRUE(edited_report.ok());
+  ASSERT_EQ(edited_report->disagreeing.size(), 1u);
+  EXPECT_EQ(edited_report->disagreeing.front().cl_index, 3u);
+  EXPECT_EQ(edited_report->disagreeing.front().problems.size(), 1u);  // the field still agrees
+
+  // A different field (d_s + 1 µm) disagrees on every block.
+  const SystematicField shifted = [&](double u, double v) { return f.ds(u, v) + 0.001; };
+  const auto shifted_report = CheckCompensation(*a, *intact, *side, shifted, {.program_decimals = 4});
+  ASSERT_TRUE(shifted_report.ok());
+  EXPECT_EQ(shifted_report->disagreeing.size(), side->entries.size());
+
+  // Missing blocks are a failure, not a report.
+  SideFile shorter = *side;
+  shorter.entries.pop_back();
+  EXPECT_EQ(CheckCompensation(*a, *intact, shorter, f.ds).status().code(), StatusCode::kFailed);
+}
+
+TEST(CompensationCheckTest, OffsetAboveTheMaximumIsRefusedWithTheReasonAndNothingIsWritten) {
+  const Toolpath path = SaddlePath();
+  const fs::path dir = TempDir("refuse");
+  PostOptions post;
+  const auto nominal_text = PostLinuxCnc(path, post);
+  ASSERT_TRUE(nominal_text.ok());
+  CompensationOptions options;
+  options.max_offset_um = 20;
+  // 5 µm everywhere except one CL point's neighbourhood where it reaches 25 µm.
+  const ClPoint hot = path.points[path.points.size() / 3];
+  const SystematicField field = [&](double u, double v) {
+    return 0.005 + 0.020 * std::exp(-((u - hot.u) * (u - hot.u) + (v - hot.v) * (v - hot.v)) / 1e-6);
+  };
+  const auto result = WriteCompensatedProgram(path, *nominal_text, field, "too big", options, post,
+                                              dir / "c.ngc", dir / "side.csv");
+  ASSERT_FALSE(result.ok());
+  EXPECT_EQ(result.status().code(), StatusCode::kSafetyLimit);
+  const std::string& message = result.status().message();
+  EXPECT_NE(message.find("compensation offset 25.0 um"), std::string::npos) << message;
+  EXPECT_NE(message.find("exceeds the limit 20.0 um"), std::string::npos) << message;
+  EXPECT_NE(message.find("no compensated program was written"), std::string::npos) << message;
+  EXPECT_FALSE(fs::exists(dir / "c.ngc"));
+  EXPECT_FALSE(fs::exists(dir / "side.csv"));
+  EXPECT_TRUE(fs::is_empty(dir));
+  // Just under the limit it goes through.
+  options.max_offset_um = 25.5;
+  EXPECT_TRUE(WriteCompensatedProgram(path, *nominal_text, field, "ok", options, post, dir / "c.ngc",
+                                      dir / "side.csv")
+                  .ok());
+  EXPECT_TRUE(fs::exists(dir / "c.ngc") && fs::exists(dir / "side.csv"));
+}
+
+TEST(CompensationCheckTest, SideFileReaderNamesLineAndFieldAndAcceptsTheOldColumns) {
+  const std::string header =
+      "# source: x\ncl_index,pass,nominal_line,compensated_line,nominal_x,nominal_y,nominal_z,offset_x,offset_y,"
+      "offset_z,ds_um";
+  const auto old = ParseSideFile(header + "\n0,0,12,12,1,2,3,0,0,-0.005,5\n", "old.csv");
+  ASSERT_TRUE(old.ok()) << old.status().message();
+  EXPECT_FALSE(old->has_field_points);
+  EXPECT_EQ(old->source, "x");
+  EXPECT_DOUBLE_EQ(old->entries[0].offset_mm.z(), -0.005);
+  const auto bad = ParseSideFile(header + ",u,v,nx,ny,nz\n0,0,12,12,1,2,3,0,0,-0.005,5,0.1,0.2,0,0,abc\n", "s.csv");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("s.csv:3: field 'nz'"), std::string::npos) << bad.status().message();
+  const auto partial = ParseSideFile(header + ",u,v\n", "p.csv");
+  ASSERT_FALSE(partial.ok());
+  const auto order = ParseSideFile(header + "\n1,0,12,12,1,2,3,0,0,-0.005,5\n", "o.csv");
+  ASSERT_FALSE(order.ok());
+  EXPECT_NE(order.status().message().find("o.csv:3: field 'cl_index'"), std::string::npos);
+  const auto missing = ParseSideFile("cl_index,pass\n", "m.csv");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.status().message().find("m.csv:1: field 'nominal_line'"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace formloop::nc
