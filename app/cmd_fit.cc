@@ -17,28 +17,6 @@
 namespace formloop::app {
 namespace {
 
-// "NUxNV" (or "NU,NV") into two positive integers.
-Status ParseLayout(const std::string& text, const std::string& option, int* nu, int* nv) {
-  if (text.empty()) return Status::Ok();
-  const std::size_t sep = text.find_first_of("x,X");
-  int a = 0, b = 0;
-  try {
-    std::size_t used_a = 0, used_b = 0;
-    if (sep == std::string::npos) throw std::invalid_argument(text);
-    a = std::stoi(text.substr(0, sep), &used_a);
-    b = std::stoi(text.substr(sep + 1), &used_b);
-    if (used_a != sep || used_b != text.size() - sep - 1) throw std::invalid_argument(text);
-  } catch (const std::exception&) {
-    return Status::BadInput(Where{.field = option}, "'" + text + "' is not a layout", "write it as NUxNV, e.g. 40x40");
-  }
-  if (a < 2 || b < 2) {
-    return Status::BadInput(Where{.field = option}, "'" + text + "' has a side below 2", "use at least 2x2");
-  }
-  *nu = a;
-  *nv = b;
-  return Status::Ok();
-}
-
 struct FitArgs {
   FitRequest request;
   std::string method;
@@ -94,6 +72,27 @@ Status Fit(FitArgs args) {
 }
 
 }  // namespace
+
+Status ParseLayout(const std::string& text, const std::string& option, int* nu, int* nv) {
+  if (text.empty()) return Status::Ok();
+  const std::size_t sep = text.find_first_of("x,X");
+  int a = 0, b = 0;
+  try {
+    std::size_t used_a = 0, used_b = 0;
+    if (sep == std::string::npos) throw std::invalid_argument(text);
+    a = std::stoi(text.substr(0, sep), &used_a);
+    b = std::stoi(text.substr(sep + 1), &used_b);
+    if (used_a != sep || used_b != text.size() - sep - 1) throw std::invalid_argument(text);
+  } catch (const std::exception&) {
+    return Status::BadInput(Where{.field = option}, "'" + text + "' is not a layout", "write it as NUxNV, e.g. 40x40");
+  }
+  if (a < 2 || b < 2) {
+    return Status::BadInput(Where{.field = option}, "'" + text + "' has a side below 2", "use at least 2x2");
+  }
+  *nu = a;
+  *nv = b;
+  return Status::Ok();
+}
 
 void AddFitCommand(CLI::App& root, CommandAction* action) {
   auto args = std::make_shared<FitArgs>();

@@ -135,18 +135,7 @@ struct ProbeArgs {
 
 Status PlanAndPostProbing(const ProbeArgs& args) {
   int nu = 0, nv = 0;
-  {
-    const std::size_t sep = args.grid.find_first_of("xX");
-    try {
-      if (sep == std::string::npos) throw std::invalid_argument(args.grid);
-      std::size_t used_u = 0, used_v = 0;
-      nu = std::stoi(args.grid.substr(0, sep), &used_u);
-      nv = std::stoi(args.grid.substr(sep + 1), &used_v);
-      if (used_u != sep || used_v != args.grid.size() - sep - 1) throw std::invalid_argument(args.grid);
-    } catch (const std::exception&) {
-      return Status::BadInput(Where{.field = "--grid"}, "'" + args.grid + "' is not a layout", "write NUxNV, e.g. 10x10");
-    }
-  }
+  FL_RETURN_IF_ERROR(ParseLayout(args.grid, "--grid", &nu, &nv));
   FL_ASSIGN_OR_RETURN(const recon::CadFace face, args.surface.Read());
   FL_ASSIGN_OR_RETURN(const metrology::ProbingPlan plan,
                       metrology::PlanProbingGrid(face.surface, nu, nv, args.inset_fraction));

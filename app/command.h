@@ -8,6 +8,7 @@
 // directly; the command is a thin layer over it.
 
 #include <functional>
+#include <string>
 
 #include <CLI/CLI.hpp>
 
@@ -21,6 +22,9 @@ void AddRunCommand(CLI::App& root, CommandAction* action);
 void AddRegressCommand(CLI::App& root, CommandAction* action);
 void AddSurfacesCommand(CLI::App& root, CommandAction* action);
 void AddKbCommand(CLI::App& root, CommandAction* action);
+// "NUxNV" (or "NU,NV") into two integers of at least 2; `option` names the option in the message.
+Status ParseLayout(const std::string& text, const std::string& option, int* nu, int* nv);
+
 // `fit` and `project` (app/cmd_fit.cc).
 void AddFitCommand(CLI::App& root, CommandAction* action);
 // `nc path` and `nc probe` (app/cmd_nc.cc).

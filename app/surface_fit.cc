@@ -20,6 +20,8 @@ namespace {
 namespace fs = std::filesystem;
 
 constexpr const char* kAnalyticPrefix = "analytic:";
+// Samples per side of an analytic surface for the grid method when --grid is not given.
+constexpr int kDefaultAnalyticGrid = 50;
 
 struct MethodName {
   FitMethod method;
@@ -170,8 +172,11 @@ Result<FitOutcome> FitPoints(const FitRequest& request, FitMethod method, const 
   if (method == FitMethod::kGrid) {
     recon::GridSamples samples;
     if (truth != nullptr) {
-      const int nu = request.grid_nu > 0 ? request.grid_nu : 50, nv = request.grid_nv > 0 ? request.grid_nv : 50;
-      samples = recon::SampleGrid(*truth, nu, nv);
+      // FitSurface sampled the truth on this grid already (row-major over its domain).
+      samples.nu = request.grid_nu > 0 ? request.grid_nu : kDefaultAnalyticGrid;
+      samples.nv = request.grid_nv > 0 ? request.grid_nv : kDefaultAnalyticGrid;
+      samples.domain = truth->domain();
+      samples.points = points;
     } else {
       std::vector<std::string> notes;
       FL_ASSIGN_OR_RETURN(const auto layout, GridLayout(request, points.size(), &notes));
@@ -254,7 +259,8 @@ Result<FitOutcome> FitSurface(const FitRequest& request) {
     std::vector<Eigen::Vector3d> points;
     const recon::ParamDomain dom = truth->domain();
     if (method == FitMethod::kGrid) {
-      const int nu = request.grid_nu > 0 ? request.grid_nu : 50, nv = request.grid_nv > 0 ? request.grid_nv : 50;
+      const int nu = request.grid_nu > 0 ? request.grid_nu : kDefaultAnalyticGrid;
+      const int nv = request.grid_nv > 0 ? request.grid_nv : kDefaultAnalyticGrid;
       points = recon::SampleGrid(*truth, nu, nv).points;
     } else {
       Rng rng(request.seed);

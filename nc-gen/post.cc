@@ -194,6 +194,14 @@ Result<std::string> ProgramText::Finish() const {
   return out_;
 }
 
+std::string PlainComment(const std::string& text) {
+  std::string out = text;
+  for (char& c : out) {
+    if (static_cast<unsigned char>(c) < 0x20) c = ' ';
+  }
+  return out;
+}
+
 void WriteWordAddressBody(const MoveList& list, const std::string& rapid, const std::string& feed,
                           std::string (*comment)(const std::string&), ProgramText* w) {
   double modal_feed = -1;

@@ -14,7 +14,6 @@
 #include "nc-gen/post_text.h"
 
 namespace formloop::nc::internal {
-namespace {
 
 // Upper case; anything outside letters, digits, space and . , - + / * = : becomes a space (parentheses
 // would end the comment early and '%' ends the program on tape-style transfers); runs of spaces collapse.
@@ -33,6 +32,8 @@ std::string FanucComment(const std::string& text) {
   while (!out.empty() && out.back() == ' ') out.pop_back();
   return out;
 }
+
+namespace {
 
 class FanucPost : public PostDialect {
  public:

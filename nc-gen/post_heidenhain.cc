@@ -23,14 +23,6 @@
 namespace formloop::nc::internal {
 namespace {
 
-std::string HeidenhainComment(const std::string& text) {
-  std::string out = text;
-  for (char& c : out) {
-    if (static_cast<unsigned char>(c) < 0x20) c = ' ';
-  }
-  return out;
-}
-
 std::string Signed(const ProgramText& w, double value) {
   const std::string s = w.Num(value);
   return s.front() == '-' ? s : "+" + s;
@@ -53,7 +45,7 @@ class HeidenhainPost : public PostDialect {
     }
     if (first_motion == list.moves.size()) return Status::BadInput("the move list has no motion; nothing to post");
     w.Block("BEGIN PGM " + options.program_name + " MM");
-    w.Comment(HeidenhainComment(options.title));
+    w.Comment(PlainComment(options.title));
     w.Comment("ball-end tool T" + std::to_string(h.tool_number) + " radius " + w.Num(h.tool_radius_mm) +
               " mm; programmed point = ball tip; " + std::to_string(h.passes) + " passes");
     w.Block("TOOL CALL " + std::to_string(h.tool_number) + " Z S" + FormatFixed(h.spindle_rpm, 0));
@@ -61,7 +53,7 @@ class HeidenhainPost : public PostDialect {
     for (std::size_t i = 0; i < list.moves.size(); ++i) {
       const Move& m = list.moves[i];
       if (m.type == MoveType::kComment) {
-        w.Comment(HeidenhainComment(m.text));
+        w.Comment(PlainComment(m.text));
         continue;
       }
       if (m.type == MoveType::kSetFeed) continue;  // no block of its own: the next L carries the new F

@@ -13,14 +13,6 @@
 namespace formloop::nc::internal {
 namespace {
 
-std::string SinumerikComment(const std::string& text) {
-  std::string out = text;
-  for (char& c : out) {
-    if (static_cast<unsigned char>(c) < 0x20) c = ' ';
-  }
-  return out;
-}
-
 class SinumerikPost : public PostDialect {
  public:
   std::string_view Name() const override { return "sinumerik"; }
@@ -29,7 +21,7 @@ class SinumerikPost : public PostDialect {
   Result<std::string> Format(const MoveList& list, const PostOptions& options) const override {
     ProgramText w(options, Numbering::kBlocks, "; ", "");
     const MoveListHeader& h = list.header;
-    w.Comment(SinumerikComment(options.title));
+    w.Comment(PlainComment(options.title));
     w.Comment("ball-end tool T" + std::to_string(h.tool_number) + " radius " + w.Num(h.tool_radius_mm) +
               " mm; programmed point = ball tip; " + std::to_string(h.passes) + " passes");
     w.Block("G71 G90 G17 G40 G94");
@@ -37,7 +29,7 @@ class SinumerikPost : public PostDialect {
     w.Block("M6");
     w.Block("S" + FormatFixed(h.spindle_rpm, 0) + " M3");
     if (h.coolant) w.Block("M8");
-    WriteWordAddressBody(list, "G0", "G1", SinumerikComment, &w);
+    WriteWordAddressBody(list, "G0", "G1", PlainComment, &w);
     if (h.coolant) w.Block("M9");
     w.Block("M5");
     w.Block("M30");

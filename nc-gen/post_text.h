@@ -45,6 +45,11 @@ class ProgramText {
 // Axis words of a motion block: "X1.000 Y2.000" for the axes in `axes`.
 std::string AxisWords(const ProgramText& w, const Move& move, const std::string& separator = "");
 
+// Comment text for ';'-comment dialects (Heidenhain, Sinumerik): control characters become spaces.
+std::string PlainComment(const std::string& text);
+// Comment text for Fanuc: upper case, only characters safe inside ( ), one space per run (post_fanuc.cc).
+std::string FanucComment(const std::string& text);
+
 // The body of a word-address program (LinuxCNC, Fanuc, Sinumerik): comment lines through `comment`
 // (the dialect's sanitiser), rapids as `rapid` + axis words, feed moves as `feed` + axis words with F
 // written only when it changes (modal), feed-only blocks as "F..".

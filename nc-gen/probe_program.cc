@@ -47,7 +47,9 @@
 namespace formloop::nc {
 namespace {
 
+using internal::FanucComment;
 using internal::Numbering;
+using internal::PlainComment;
 using internal::ProgramText;
 
 // One probe point's positions (ball centre), all checked against the limits before any text.
@@ -89,31 +91,6 @@ std::string Xyz(const ProgramText& w, const Eigen::Vector3d& p) {
 std::string Header(const ProbeProgramOptions& options, std::size_t points) {
   return "stylus ball radius " + FormatFixed(options.ball_radius_mm, 4) +
          " mm; programmed point = ball centre; " + std::to_string(points) + " points";
-}
-
-// As the Fanuc cutting post: upper case, only characters safe inside a Fanuc comment, one space per run.
-std::string FanucComment(const std::string& text) {
-  static const std::string kSafe = " .,-+/*=:";
-  std::string out;
-  for (char c : text) {
-    const unsigned char u = static_cast<unsigned char>(c);
-    if (std::isalnum(u)) {
-      out += static_cast<char>(std::toupper(u));
-    } else {
-      out += kSafe.find(c) != std::string::npos ? c : ' ';
-    }
-    if (out.size() >= 2 && out.back() == ' ' && out[out.size() - 2] == ' ') out.pop_back();
-  }
-  while (!out.empty() && out.back() == ' ') out.pop_back();
-  return out;
-}
-
-std::string PlainComment(const std::string& text) {
-  std::string out = text;
-  for (char& c : out) {
-    if (static_cast<unsigned char>(c) < 0x20) c = ' ';
-  }
-  return out;
 }
 
 std::string Signed(const std::string& s) { return s.front() == '-' ? s : "+" + s; }

@@ -1,7 +1,6 @@
 // `formloop fit` and `formloop project` (app/surface_fit.h): every input kind and method end to end,
 // the bad-input cases of issue 3 (clear error, no output file), and the binary's stdout/exit codes.
 
-#include <array>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -16,7 +15,6 @@
 #include <TCollection_HAsciiString.hxx>
 #include <gp_Pnt.hxx>
 #include <unistd.h>
-#include <sys/wait.h>
 
 #include <gtest/gtest.h>
 
@@ -27,6 +25,7 @@
 #include "core/random.h"
 #include "reconstruction/analytic_surface.h"
 #include "reconstruction/occt_support.h"
+#include "tests/support/run_binary.h"
 
 namespace formloop::app {
 namespace {
@@ -250,21 +249,8 @@ TEST_F(FitTest, BadInputIsRefusedWithAClearErrorAndNoOutput) {
   }
 }
 
-// Runs the binary; returns the exit code, stdout and stderr.
-int RunBinary(const std::string& args, std::string* out, std::string* err, const fs::path& dir) {
-  const fs::path err_file = dir / "stderr.txt";
-  const std::string command = std::string(FORMLOOP_BINARY) + " " + args + " 2>" + err_file.string();
-  FILE* pipe = ::popen(command.c_str(), "r");
-  if (pipe == nullptr) return -1;
-  std::array<char, 4096> buffer{};
-  out->clear();
-  std::size_t n;
-  while ((n = std::fread(buffer.data(), 1, buffer.size(), pipe)) > 0) out->append(buffer.data(), n);
-  const int status = ::pclose(pipe);
-  std::ifstream in(err_file);
-  err->assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-  fs::remove(err_file);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+int RunBinary(const std::string& args, std::string* out, std::string* err, const fs::path&) {
+  return testing::RunFormloop(args, out, err);
 }
 
 TEST_F(FitTest, BinaryFitAndProject) {

@@ -3,20 +3,19 @@
 // every point, and limit violations are refused with nothing written.
 
 #include <algorithm>
-#include <array>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <string>
 
 #include <unistd.h>
-#include <sys/wait.h>
 
 #include <gtest/gtest.h>
 
 #include "core/atomic_file.h"
 #include "core/json_io.h"
 #include "nc-gen/post.h"
+#include "tests/support/run_binary.h"
 
 namespace formloop::app {
 namespace {
@@ -36,16 +35,8 @@ class NcCliTest : public ::testing::Test {
   std::string Path(const std::string& name) const { return (dir_ / name).string(); }
   // Runs the binary; keeps stderr in err_.
   int Run(const std::string& args) {
-    const std::string command = std::string(FORMLOOP_BINARY) + " " + args + " 2>" + Path("stderr.txt");
-    FILE* pipe = ::popen(command.c_str(), "r");
-    if (pipe == nullptr) return -1;
-    std::array<char, 4096> buffer{};
-    while (std::fread(buffer.data(), 1, buffer.size(), pipe) > 0) {
-    }
-    const int status = ::pclose(pipe);
-    const auto err = ReadFile(Path("stderr.txt"));
-    err_ = err.ok() ? *err : "";
-    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    std::string out;
+    return testing::RunFormloop(args, &out, &err_);
   }
   fs::path dir_;
   std::string err_;

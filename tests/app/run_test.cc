@@ -1,14 +1,12 @@
 // The end-to-end run: every stage writes its report, the loop reaches tolerance, runs repeat
 // byte for byte, bad parts are refused before anything is written, and the binary behaves.
 
-#include <array>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 
 #include <unistd.h>
-#include <sys/wait.h>
 
 #include <gtest/gtest.h>
 
@@ -17,6 +15,7 @@
 #include "core/atomic_file.h"
 #include "core/json_io.h"
 #include "core/log.h"
+#include "tests/support/run_binary.h"
 
 namespace formloop::app {
 namespace {
@@ -151,18 +150,7 @@ TEST_F(RunTest, ExistingRunFolderNeedsForce) {
   EXPECT_NE(r.status().message().find("--force"), std::string::npos);
 }
 
-// Runs the formloop binary; returns the exit code and stdout.
-int RunBinary(const std::string& args, std::string* out) {
-  const std::string command = std::string(FORMLOOP_BINARY) + " " + args + " 2>/dev/null";
-  FILE* pipe = ::popen(command.c_str(), "r");
-  if (pipe == nullptr) return -1;
-  std::array<char, 4096> buffer{};
-  out->clear();
-  std::size_t n;
-  while ((n = std::fread(buffer.data(), 1, buffer.size(), pipe)) > 0) out->append(buffer.data(), n);
-  const int status = ::pclose(pipe);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
+int RunBinary(const std::string& args, std::string* out) { return testing::RunFormloop(args, out); }
 
 TEST_F(RunTest, BinaryHelpExitCodesAndCleanStdout) {
   std::string out;

@@ -13,6 +13,7 @@
 
 #include <gtest/gtest.h>
 
+#include "core/atomic_file.h"
 #include "nc-gen/moves.h"
 #include "nc-gen/post.h"
 #include "nc-gen/toolpath.h"
@@ -58,11 +59,10 @@ std::filesystem::path GoldenPath(const std::string& dialect) {
          ("small_" + dialect + std::string(FindPost(dialect)->FileExtension()));
 }
 
+// The golden file's text, or "" when it is missing (the comparison then fails and says so).
 std::string ReadText(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
+  auto text = ReadFile(path);
+  return text.ok() ? *text : std::string();
 }
 
 using formloop::testing::CommaNumpunct;
