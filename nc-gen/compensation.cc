@@ -34,6 +34,18 @@ constexpr const char* kSideColumns[] = {"cl_index", "pass",     "nominal_line", 
                                         "offset_y",  "offset_z",  "ds_um"};
 constexpr const char* kFieldColumns[] = {"u", "v", "nx", "ny", "nz"};
 
+const char* KindName(ClKind kind) {
+  switch (kind) {
+    case ClKind::kLeadIn:
+      return "lead-in";
+    case ClKind::kLeadOut:
+      return "lead-out";
+    case ClKind::kCut:
+      break;
+  }
+  return "cut";
+}
+
 }  // namespace
 
 Status CompensationOptions::Validate() const {
@@ -49,7 +61,9 @@ Result<Compensation> CompensateToolpath(const Toolpath& nominal, const Systemati
   result.source = source;
   for (std::size_t k = 0; k < nominal.points.size(); ++k) {
     ClPoint& cl = result.path.points[k];
-    const double ds_mm = systematic(cl.u, cl.v);
+    // Leads are off Q: nothing to compensate; they keep their nominal place (offset 0, no field point).
+    const bool on_q = cl.kind == ClKind::kCut;
+    const double ds_mm = on_q ? systematic(cl.u, cl.v) : 0.0;
     if (std::abs(ds_mm) * 1e3 > options.max_offset_um) {
       return Status::SafetyLimit("compensation offset " + FormatFixed(ds_mm * 1e3, 1) + " um at CL point " +
                                  std::to_string(k) + " (pass " + std::to_string(cl.pass) + ") exceeds the limit " +
@@ -66,6 +80,8 @@ Result<Compensation> CompensateToolpath(const Toolpath& nominal, const Systemati
     entry.u = cl.u;
     entry.v = cl.v;
     entry.normal = cl.normal;
+    entry.has_field_point = on_q;
+    entry.kind = cl.kind;
     result.entries.push_back(entry);
   }
   UpdateCutterLocations(&result.path);
@@ -97,7 +113,7 @@ Status WriteSideFile(const std::filesystem::path& path, const Compensation& comp
   text += "# source: " + compensation.source + "\n";
   text +=
       "cl_index,pass,nominal_line,compensated_line,nominal_x,nominal_y,nominal_z,offset_x,offset_y,offset_z,ds_um,"
-      "u,v,nx,ny,nz\n";
+      "u,v,nx,ny,nz,kind\n";
   for (const auto& e : compensation.entries) {
     const ClPoint& cl = compensation.path.points[e.cl_index];
     text += std::to_string(e.cl_index) + "," + std::to_string(cl.pass) + "," + std::to_string(e.nominal_line) + "," +
@@ -107,7 +123,7 @@ Status WriteSideFile(const std::filesystem::path& path, const Compensation& comp
     text += "," + FormatFixed(e.systematic_um, 4);
     text += "," + FormatExact(e.u) + "," + FormatExact(e.v);
     for (int a = 0; a < 3; ++a) text += "," + FormatFixed(e.normal[a], 9);
-    text += "\n";
+    text += std::string(",") + KindName(e.kind) + "\n";
   }
   return WriteFileAtomic(path, text);
 }
@@ -199,7 +215,18 @@ Result<SideFile> ParseSideFile(const std::string& text, const std::string& sourc
     FL_RETURN_IF_ERROR(number_of("offset_y", &e.offset_mm.y()));
     FL_RETURN_IF_ERROR(number_of("offset_z", &e.offset_mm.z()));
     FL_RETURN_IF_ERROR(number_of("ds_um", &e.systematic_um));
-    e.has_field_point = side.has_field_points;
+    if (column.count("kind")) {
+      const std::string& kind = cells[column["kind"]];
+      if (kind == "lead-in") {
+        e.kind = ClKind::kLeadIn;
+      } else if (kind == "lead-out") {
+        e.kind = ClKind::kLeadOut;
+      } else if (kind != "cut") {
+        return Status::BadInput(Where{.file = source, .line = number, .field = "kind"},
+                                "value '" + kind + "' is not cut, lead-in or lead-out");
+      }
+    }
+    e.has_field_point = side.has_field_points && e.kind == ClKind::kCut;
     if (side.has_field_points) {
       FL_RETURN_IF_ERROR(number_of("u", &e.u));
       FL_RETURN_IF_ERROR(number_of("v", &e.v));
@@ -317,7 +344,7 @@ Result<CheckReport> CheckCompensation(const std::vector<ProgramMove>& nominal,
                                std::to_string(e.compensated_line) + ", the programs " + std::to_string(a[k]->line) +
                                "/" + std::to_string(b[k]->line));
     }
-    if (report.field_checked) {
+    if (report.field_checked && e.has_field_point) {
       block.field_checked = true;
       const double ds_mm = field(e.u, e.v);
       block.field_offset_mm = -ds_mm * e.normal;

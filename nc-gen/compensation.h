@@ -35,7 +35,8 @@ struct CompensationEntry {
   int pass = 0;
   double u = 0, v = 0;
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
-  bool has_field_point = true;  // false for an entry read from an old side file without u, v, nx..nz
+  bool has_field_point = true;  // false for a lead (off Q) and for an old side file without u, v, nx..nz
+  ClKind kind = ClKind::kCut;   // leads are never compensated (offset 0)
 };
 
 struct Compensation {
@@ -58,10 +59,11 @@ Status AssignProgramLines(const std::vector<ProgramMove>& nominal, const std::ve
 // CSV side file, one row per CL point (= feed block) in cutting order:
 //   # formloop compensation side file: ...
 //   # source: <Compensation::source>          (the offsets' source, for every row)
-//   cl_index,pass,nominal_line,compensated_line,nominal_x,nominal_y,nominal_z,offset_x,offset_y,offset_z,ds_um,u,v,nx,ny,nz
+//   cl_index,pass,nominal_line,compensated_line,nominal_x,nominal_y,nominal_z,offset_x,offset_y,offset_z,ds_um,u,v,nx,ny,nz,kind
 // nominal_* = nominal tip (mm, 6 decimals); offset_* = compensated − nominal tip (mm, 6 decimals);
 // ds_um = d_s at the CC point (µm, 4 decimals); u, v = CC parameters (shortest exact text); nx..nz = unit
-// normal at the CC point (9 decimals). The applied offset is −ds·n.
+// normal at the CC point (9 decimals); kind = cut | lead-in | lead-out (leads are off Q and keep their
+// nominal place: offset 0, not checked against the field). The applied offset is −ds·n.
 Status WriteSideFile(const std::filesystem::path& path, const Compensation& compensation);
 
 struct SideFile {
@@ -70,7 +72,7 @@ struct SideFile {
   bool has_field_points = false;           // the u, v, nx, ny, nz columns are present
 };
 
-// Reads what WriteSideFile writes (the u, v, nx, ny, nz columns may be absent: older side files).
+// Reads what WriteSideFile writes (the u, v, nx, ny, nz and kind columns may be absent: older side files).
 // BadInput names file, line and field for a missing column, a wrong field count or a bad number.
 Result<SideFile> ReadSideFile(const std::filesystem::path& path);
 // The same from text; `source` names it in messages.

@@ -55,7 +55,7 @@ Result<MoveList> BuildMoveList(const Toolpath& path) {
                             .feed_mm_per_min = tp.plunge_feed_mm_per_min,
                             .pass = cl.pass,
                             .cl_index = index,
-                            .source = "plunge"});
+                            .source = cl.kind == ClKind::kLeadIn ? "plunge to the lead-in" : "plunge"});
       list.moves.push_back({.type = MoveType::kSetFeed,
                             .feed_mm_per_min = tp.feed_mm_per_min,
                             .pass = cl.pass,
@@ -68,7 +68,9 @@ Result<MoveList> BuildMoveList(const Toolpath& path) {
                           .feed_mm_per_min = tp.feed_mm_per_min,
                           .pass = cl.pass,
                           .cl_index = index,
-                          .source = "cut"});
+                          .source = cl.kind == ClKind::kLeadOut                               ? "lead-out"
+                                    : k > 0 && path.points[k - 1].kind == ClKind::kLeadIn ? "lead-in"
+                                                                                          : "cut"});
   }
   retract(-1, "end: retract to safe Z");
   return list;

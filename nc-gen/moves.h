@@ -63,8 +63,9 @@ struct MoveList {
 };
 
 // The one function that turns a tool path into moves. Per pass: retract to safe Z (not before the
-// first), comment "pass k", rapid in XY above the first point, plunge feed to it, set the cutting
-// feed, cut through the pass; then a final retract. The i-th kFeed move is CL point i.
+// first), comment "pass k", rapid in XY above the first point (the lead-in start when the path has
+// leads), plunge feed to it, set the cutting feed, feed through the pass (lead-in, cut, lead-out); then
+// a final retract. The i-th kFeed move is CL point i.
 Result<MoveList> BuildMoveList(const Toolpath& path);
 
 // The safety check (ARCHITECTURE.md "Safety"), done once on the list before any post writes text:

@@ -1,11 +1,17 @@
 #include "nc-gen/toolpath.h"
 
 #include <algorithm>
+#include <array>
+#include <optional>
 #include <cmath>
 #include <unordered_map>
 #include <vector>
 
 #include <Eigen/Geometry>
+#include <Eigen/LU>
+#include <Eigen/Cholesky>
+
+#include "core/point_io.h"
 
 namespace formloop::nc {
 
@@ -23,6 +29,8 @@ Status ToolpathOptions::Validate() const {
   if (!(plunge_feed_mm_per_min > 0)) return bad("toolpath.plunge_feed_mm_per_min", "must be > 0");
   if (!(spindle_rpm > 0)) return bad("toolpath.spindle_rpm", "must be > 0");
   if (!(clearance_mm > 0)) return bad("toolpath.clearance_mm", "must be > 0");
+  if (!std::isfinite(raster_angle_deg)) return bad("toolpath.raster_angle_deg", "must be a finite angle in degrees");
+  if (!(lead_mm >= 0) || lead_mm > 100) return bad("toolpath.lead_mm", "must be between 0 (no leads) and 100 mm");
   return Status::Ok();
 }
 
@@ -35,31 +43,6 @@ double NormalCurvature(const recon::SurfaceDerivatives& d, double du, double dv)
   const Eigen::Vector3d t = d.su * du + d.sv * dv;
   const double second = (d.suu * du * du + 2 * d.suv * du * dv + d.svv * dv * dv).dot(n);
   return -second / t.squaredNorm();
-}
-
-// What one pass (iso-v curve) needs: the largest convex normal curvature across it, the largest
-// curvature of the ball-centre path along it, and the largest parametric speeds.
-struct PassProbe {
-  double kappa_across = -1e300;
-  double kappa_centre = 0;  // centre path: curve curvature κ_c plus r κ_n² where convex (κ_n > 0)
-  double speed_u = 0, speed_v = 0;
-};
-
-PassProbe ProbePass(const recon::BSplineSurface& surface, const recon::ParamDomain& dom, double v, double r) {
-  constexpr int kProbe = 81;  // samples along a pass used to size the step-over and point spacing
-  PassProbe p;
-  for (int i = 0; i < kProbe; ++i) {
-    const double u = dom.u_min + dom.u_span() * i / (kProbe - 1);
-    const recon::SurfaceDerivatives d = surface.Derivatives(u, v);
-    p.kappa_across = std::max(p.kappa_across, NormalCurvature(d, 0, 1));
-    const double kn = NormalCurvature(d, 1, 0);
-    const double su = d.su.norm();
-    const double kc = su > 0 ? d.su.cross(d.suu).norm() / (su * su * su) : 0;
-    p.kappa_centre = std::max(p.kappa_centre, std::max(kc, std::abs(kn)) + r * std::max(kn, 0.0) * kn);
-    p.speed_u = std::max(p.speed_u, su);
-    p.speed_v = std::max(p.speed_v, d.sv.norm());
-  }
-  return p;
 }
 
 // Step-over that keeps h = s²/8 · (1/r + κ) at the target for the convex curvature κ across the passes.
@@ -112,11 +95,14 @@ class ConcaveRegions {
 
 // Drop-cutter test against a dense local sample of Q: how far the ball centred at b must rise along ẑ
 // so that no point of Q within horizontal distance r lies inside the ball (0 if none does).
+// The window is centred on (u, v) and covers horizontal distance `reach` (1.5 r by default: the ball
+// centre is above the CC point (u, v) within r).
 double DropLift(const recon::BSplineSurface& surface, const recon::ParamDomain& dom, double u, double v,
-                const recon::SurfaceDerivatives& d, const Eigen::Vector3d& b, double r) {
+                const recon::SurfaceDerivatives& d, const Eigen::Vector3d& b, double r, double reach = 0) {
   // Parameter half-widths that cover horizontal distance r (with a margin for varying speed).
-  const double wu = 1.5 * r / std::max(d.su.head<2>().norm(), 1e-3);
-  const double wv = 1.5 * r / std::max(d.sv.head<2>().norm(), 1e-3);
+  if (reach <= 0) reach = 1.5 * r;
+  const double wu = reach / std::max(d.su.head<2>().norm(), 1e-3);
+  const double wv = reach / std::max(d.sv.head<2>().norm(), 1e-3);
   const auto need_at = [&](double uu, double vv) {
     const Eigen::Vector3d s = surface.Point(uu, vv);
     const double dh2 = (s - b).head<2>().squaredNorm();
@@ -153,6 +139,273 @@ double DropLift(const recon::BSplineSurface& surface, const recon::ParamDomain& 
 
 }  // namespace
 
+namespace {
+
+// The raster's frame: cutting direction d and section-plane normal m, both horizontal.
+struct RasterFrame {
+  Eigen::Vector3d d, m;
+  explicit RasterFrame(double angle_deg) {
+    const double a = angle_deg * M_PI / 180.0;
+    d = Eigen::Vector3d(std::cos(a), std::sin(a), 0);
+    m = Eigen::Vector3d(-std::sin(a), std::cos(a), 0);
+  }
+};
+
+// Solves S(u, v)·m = c, S(u, v)·d = s by Newton from (*u, *v), clamped to the domain. False when it
+// does not converge to 1e-9 mm inside the domain (the point (c, s) is not over Q).
+bool SolveOnPlane(const recon::BSplineSurface& q, const recon::ParamDomain& dom, const RasterFrame& f, double c,
+                  double s, double* u, double* v) {
+  for (int it = 0; it < 40; ++it) {
+    const recon::SurfaceDerivatives d = q.Derivatives(*u, *v);
+    const Eigen::Vector2d residual(d.p.dot(f.m) - c, d.p.dot(f.d) - s);
+    Eigen::Matrix2d jacobian;
+    jacobian << d.su.dot(f.m), d.sv.dot(f.m), d.su.dot(f.d), d.sv.dot(f.d);
+    if (residual.lpNorm<Eigen::Infinity>() < 1e-12) return true;
+    if (!(std::abs(jacobian.determinant()) > 1e-14)) return false;
+    const Eigen::Vector2d step = jacobian.partialPivLu().solve(residual);
+    // Damped where the full step would leave the domain: the largest fraction that stays inside.
+    double alpha = 1.0;
+    const auto limit = [&alpha](double x, double dx, double lo, double hi) {
+      if (x - dx < lo && dx > 0) alpha = std::min(alpha, (x - lo) / dx);
+      if (x - dx > hi && dx < 0) alpha = std::min(alpha, (x - hi) / dx);
+    };
+    limit(*u, step[0], dom.u_min, dom.u_max);
+    limit(*v, step[1], dom.v_min, dom.v_max);
+    // At the boundary and pushing out: a projected step (the solution may lie on the boundary itself;
+    // if it lies outside, the iterate stalls and the residual check below refuses it).
+    if (alpha < 1e-12) alpha = 1.0;
+    const double nu = std::clamp(*u - alpha * step[0], dom.u_min, dom.u_max);
+    const double nv = std::clamp(*v - alpha * step[1], dom.v_min, dom.v_max);
+    if (nu == *u && nv == *v) break;
+    *u = nu;
+    *v = nv;
+  }
+  const Eigen::Vector3d p = q.Point(*u, *v);
+  return std::abs(p.dot(f.m) - c) < 1e-9 && std::abs(p.dot(f.d) - s) < 1e-9;
+}
+
+// A point where the plane meets the domain boundary.
+struct EdgeCrossing {
+  double u = 0, v = 0, s = 0;
+};
+
+// The domain's four edges as (u, v) segments.
+std::array<std::array<Eigen::Vector2d, 2>, 4> DomainEdges(const recon::ParamDomain& dom) {
+  const Eigen::Vector2d a(dom.u_min, dom.v_min), b(dom.u_max, dom.v_min), c(dom.u_max, dom.v_max),
+      e(dom.u_min, dom.v_max);
+  return {{{a, b}, {b, c}, {c, e}, {e, a}}};
+}
+
+constexpr int kEdgeSamples = 128;  // samples per domain edge to find where a plane crosses it
+
+// Where plane S·m = c crosses the domain boundary, by sign changes on sampled edges refined by regula
+// falsi (Illinois); exact zeros at samples count too (a plane through a corner or along an edge).
+std::vector<EdgeCrossing> PlaneCrossings(const recon::BSplineSurface& q, const recon::ParamDomain& dom,
+                                         const RasterFrame& f, double c) {
+  std::vector<EdgeCrossing> out;
+  const auto add = [&](const Eigen::Vector2d& uv) {
+    const Eigen::Vector3d p = q.Point(uv.x(), uv.y());
+    for (const auto& e : out) {
+      if (std::abs(e.u - uv.x()) + std::abs(e.v - uv.y()) < 1e-12) return;
+    }
+    out.push_back({uv.x(), uv.y(), p.dot(f.d)});
+  };
+  for (const auto& edge : DomainEdges(dom)) {
+    const auto at = [&](double t) { return Eigen::Vector2d(edge[0] + t * (edge[1] - edge[0])); };
+    const auto g = [&](double t) {
+      const Eigen::Vector2d uv = at(t);
+      return q.Point(uv.x(), uv.y()).dot(f.m) - c;
+    };
+    double t0 = 0, g0 = g(0);
+    for (int i = 1; i <= kEdgeSamples; ++i) {
+      const double t1 = static_cast<double>(i) / kEdgeSamples, g1 = g(t1);
+      if (g0 == 0) add(at(t0));
+      if (g1 == 0) add(at(t1));
+      if ((g0 < 0 && g1 > 0) || (g0 > 0 && g1 < 0)) {
+        double a = t0, b = t1, ga = g0, gb = g1;
+        int side = 0;
+        for (int it = 0; it < 100 && b - a > 1e-15; ++it) {
+          const double t = (a * gb - b * ga) / (gb - ga);
+          const double gt = g(t);
+          if (std::abs(gt) < 1e-13) {
+            a = b = t;
+            break;
+          }
+          if ((gt < 0) == (ga < 0)) {
+            a = t;
+            ga = gt;
+            if (side == -1) gb *= 0.5;
+            side = -1;
+          } else {
+            b = t;
+            gb = gt;
+            if (side == 1) ga *= 0.5;
+            side = 1;
+          }
+        }
+        add(at(0.5 * (a + b)));
+      }
+      t0 = t1;
+      g0 = g1;
+    }
+  }
+  return out;
+}
+
+// One pass: the section of Q by plane c, densely sampled along +d between its two boundary ends.
+struct Section {
+  double c = 0;
+  std::vector<Eigen::Vector2d> uv;  // dense samples (u, v) in order of increasing s
+  std::vector<double> s;            // abscissa along d
+  std::vector<double> arc;          // cumulative length of the ball-centre path, mm
+  double kappa_centre = 0;          // largest curvature of the ball-centre path
+  double min_plane_step = 1e300;    // largest plane spacing that keeps the scallop target across this pass
+  bool empty() const { return uv.empty(); }
+};
+
+// Curvatures, step-over and centre-path length over the samples of one piece.
+Section PieceGeometry(const recon::BSplineSurface& q, const RasterFrame& f, double c,
+                      std::vector<Eigen::Vector2d> uv, std::vector<double> abscissa, double r, double h) {
+  Section sec;
+  sec.c = c;
+  sec.uv = std::move(uv);
+  sec.s = std::move(abscissa);
+  Eigen::Vector3d previous_centre = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector2d& p : sec.uv) {
+    const recon::SurfaceDerivatives d = q.Derivatives(p.x(), p.y());
+    const Eigen::Vector3d normal = recon::NormalFromDerivatives(d);
+    // Tangent-plane directions as (du, dv): solve [Su Sv] (a, b) = t through the first fundamental form.
+    Eigen::Matrix2d first;
+    first << d.su.dot(d.su), d.su.dot(d.sv), d.su.dot(d.sv), d.sv.dot(d.sv);
+    const auto param = [&](const Eigen::Vector3d& t) {
+      return Eigen::Vector2d(first.ldlt().solve(Eigen::Vector2d(t.dot(d.su), t.dot(d.sv))));
+    };
+    Eigen::Vector3d tangent = normal.cross(f.m).normalized();  // along the section, in the plane
+    if (tangent.dot(f.d) < 0) tangent = -tangent;
+    const Eigen::Vector2d ab = param(tangent);
+    const double kn = NormalCurvature(d, ab.x(), ab.y());
+    // Meusnier: the section curve's curvature is |κ_n| / |N·n| with N its principal normal (in the plane, ⊥ t).
+    const double cos_normal = std::abs(f.m.cross(tangent).dot(normal));
+    const double kc = std::abs(kn) / std::max(cos_normal, 0.2);
+    sec.kappa_centre = std::max(sec.kappa_centre, std::max(kc, std::abs(kn)) + r * std::max(kn, 0.0) * kn);
+    // Across the pass: the unit tangent along m's projection on the tangent plane.
+    const Eigen::Vector3d m_t = f.m - f.m.dot(normal) * normal;
+    const double m_t_norm = m_t.norm();
+    if (m_t_norm > 1e-9) {
+      const Eigen::Vector2d ae = param(m_t / m_t_norm);
+      const double kappa_across = NormalCurvature(d, ae.x(), ae.y());
+      sec.min_plane_step = std::min(sec.min_plane_step, m_t_norm * StepOver(h, r, kappa_across));
+    }
+    const Eigen::Vector3d centre = d.p + r * normal;
+    sec.arc.push_back(sec.arc.empty() ? 0.0 : sec.arc.back() + (centre - previous_centre).norm());
+    previous_centre = centre;
+  }
+  return sec;
+}
+
+// Every piece of the section of Q by plane c, in order along d. From the lowest boundary crossing the
+// plane is followed (Newton continuation in small steps) as far as it stays over Q; the piece ends at
+// the last crossing reached, and the next piece starts at the next crossing (the part between is
+// outside a non-convex outline). A plane running along a domain edge is one piece; a crossing where
+// the plane only touches the outline (a corner at the first or last plane) is a one-point piece.
+Result<std::vector<Section>> TraceSection(const recon::BSplineSurface& q, const recon::ParamDomain& dom,
+                                          const RasterFrame& f, double c, double r, double h) {
+  std::vector<EdgeCrossing> ends = PlaneCrossings(q, dom, f, c);
+  std::sort(ends.begin(), ends.end(), [](const EdgeCrossing& a, const EdgeCrossing& b) { return a.s < b.s; });
+  std::vector<Section> pieces;
+  std::size_t i = 0;
+  while (i < ends.size()) {
+    const EdgeCrossing& lo = ends[i];
+    const double far = ends.back().s;
+    const double length = far - lo.s;
+    std::vector<Eigen::Vector2d> uv{Eigen::Vector2d(lo.u, lo.v)};
+    std::vector<double> abscissa{lo.s};
+    std::size_t last = i;  // the last crossing reached
+    if (length > 1e-9) {
+      double reached = far;  // the plane is over Q up to here (the first failed abscissa, else the end)
+      const int n = std::clamp(static_cast<int>(std::ceil(length / 0.25)) + 1, 33, 801);
+      double u = lo.u, v = lo.v;
+      for (int k = 1; k < n; ++k) {
+        const double s = lo.s + length * k / (n - 1);
+        if (uv.size() >= 2) {  // start Newton from the straight continuation of the last two samples
+          const Eigen::Vector2d guess = 2 * uv[uv.size() - 1] - uv[uv.size() - 2];
+          u = std::clamp(guess.x(), dom.u_min, dom.u_max);
+          v = std::clamp(guess.y(), dom.v_min, dom.v_max);
+        }
+        if (k == n - 1) {  // the last crossing: known exactly
+          uv.emplace_back(ends.back().u, ends.back().v);
+          abscissa.push_back(s);
+          break;
+        }
+        if (!SolveOnPlane(q, dom, f, c, s, &u, &v)) {
+          reached = s;  // it left Q between the last sample and s: at a crossing in that interval
+          break;
+        }
+        uv.emplace_back(u, v);
+        abscissa.push_back(s);
+      }
+      while (last + 1 < ends.size() && ends[last + 1].s <= reached + 1e-9) ++last;
+    }
+    // Keep the samples up to the last crossing reached and end exactly on it.
+    const EdgeCrossing& hi = ends[last];
+    while (abscissa.size() > 1 && abscissa.back() >= hi.s - 1e-9) {
+      abscissa.pop_back();
+      uv.pop_back();
+    }
+    if (last != i) {
+      uv.emplace_back(hi.u, hi.v);
+      abscissa.push_back(hi.s);
+    }
+    pieces.push_back(PieceGeometry(q, f, c, std::move(uv), std::move(abscissa), r, h));
+    i = last + 1;
+  }
+  return pieces;
+}
+
+double MinPlaneStep(const std::vector<Section>& pieces) {
+  double step = 1e300;
+  for (const Section& p : pieces) step = std::min(step, p.min_plane_step);
+  return step;
+}
+
+// A lead at a pass end: a quarter circle in the plane of the path direction t (away from the pass) and
+// the normal n of Q there, tangent to the path at the end, curving away from Q: offsets of the tip
+// ρ·(sin φ·t + (1 − cos φ)·n), φ = 15°, 30°, ..., 90°, in that order. Moving along the arc the ball
+// gains clearance as ρφ²/2 and loses at most (ρφ)²/(2ρ_c) to a concave centre path of radius ρ_c in
+// that direction (ρ_c = concave radius of Q − r), so ρ is cut to ρ_c/2 where that is smaller; where Q's
+// concave radius is at most r (a lifted region) the lead leaves along n alone. Chords of the arc lie
+// on its inner side, away from Q.
+std::vector<Eigen::Vector3d> LeadArc(const recon::BSplineSurface& q, const ClPoint& end, const Eigen::Vector3d& t,
+                                     double lead_mm, double r) {
+  constexpr int kSegments = 6;
+  const recon::SurfaceDerivatives d = q.Derivatives(end.u, end.v);
+  const Eigen::Vector3d& n = end.normal;
+  const Eigen::Vector3d tangent = (t - t.dot(n) * n).normalized();
+  Eigen::Matrix2d first;
+  first << d.su.dot(d.su), d.su.dot(d.sv), d.su.dot(d.sv), d.sv.dot(d.sv);
+  const Eigen::Vector2d ab = first.ldlt().solve(Eigen::Vector2d(tangent.dot(d.su), tangent.dot(d.sv)));
+  const double kappa = NormalCurvature(d, ab.x(), ab.y());
+  double radius = lead_mm;
+  bool normal_only = false;
+  if (kappa < 0) {
+    const double centre_radius = -1.0 / kappa - r;
+    if (centre_radius <= 0) {
+      normal_only = true;
+    } else {
+      radius = std::min(radius, 0.5 * centre_radius);
+    }
+  }
+  std::vector<Eigen::Vector3d> out;
+  for (int k = 1; k <= kSegments; ++k) {
+    const double phi = 0.5 * M_PI * k / kSegments;
+    out.push_back(normal_only ? Eigen::Vector3d(lead_mm * k / kSegments * n)
+                              : Eigen::Vector3d(radius * (std::sin(phi) * tangent + (1 - std::cos(phi)) * n)));
+  }
+  return out;
+}
+
+}  // namespace
+
 Result<Toolpath> PlanRaster(const recon::BSplineSurface& surface, const ToolpathOptions& options) {
   FL_RETURN_IF_ERROR(options.Validate());
   if (!surface.valid()) return Status::Internal("PlanRaster: no surface");
@@ -160,82 +413,173 @@ Result<Toolpath> PlanRaster(const recon::BSplineSurface& surface, const Toolpath
   const double r = options.tool.radius_mm;
   const double h = options.scallop_um * 1e-3;
   const double chord = options.chord_tolerance_um * 1e-3;
+  const RasterFrame frame(options.raster_angle_deg);
   const ConcaveRegions concave(surface, dom, r);
   // Where the ball is lifted it rests on Q at up to two points and its centre follows arcs of radius up
   // to r: spacing for the chord tolerance on such an arc, with a margin.
   const double lifted_spacing = 0.6 * std::sqrt(8.0 * chord * r);
+
+  // The planes cover the range of S·m over the domain boundary (for a graph over XY, S·m has no
+  // interior extremum); the extremes are taken at the same samples PlaneCrossings uses, so the first and
+  // last planes meet the boundary exactly.
+  double c_min = 1e300, c_max = -1e300;
+  for (const auto& edge : DomainEdges(dom)) {
+    for (int i = 0; i <= kEdgeSamples; ++i) {
+      const Eigen::Vector2d uv = edge[0] + (static_cast<double>(i) / kEdgeSamples) * (edge[1] - edge[0]);
+      const double c = surface.Point(uv.x(), uv.y()).dot(frame.m);
+      c_min = std::min(c_min, c);
+      c_max = std::max(c_max, c);
+    }
+  }
 
   Toolpath path;
   path.options = options;
   path.min_step_over_mm = 1e300;
   path.max_step_over_mm = 0;
 
-  double v = dom.v_min;
-  int pass = 0;
-  PassProbe probe = ProbePass(surface, dom, v, r);
+  const auto tip_of = [r](const ClPoint& cl) {
+    return Eigen::Vector3d(cl.cc + r * cl.normal + (cl.lift_mm - r) * Eigen::Vector3d::UnitZ());
+  };
+  const auto lead_point = [](ClKind kind, const ClPoint& end, const Eigen::Vector3d& tip) {
+    ClPoint lead;
+    lead.kind = kind;
+    lead.pass = end.pass;
+    lead.u = end.u;
+    lead.v = end.v;
+    lead.cc = tip;  // off Q: cc = tip and normal = ẑ make the centre tip + r ẑ
+    lead.normal = Eigen::Vector3d::UnitZ();
+    return lead;
+  };
+
+  double c = c_min;
+  int pass = 0;   // one pass per piece of a section
+  int plane = 0;  // sections with at least one piece
+  FL_ASSIGN_OR_RETURN(std::vector<Section> sections, TraceSection(surface, dom, frame, c, r, h));
   while (true) {
-    // Along the pass: the sag of a chord of length L on a path of curvature κ is L²κ/8.
-    double spacing = options.max_point_spacing_mm;
-    if (probe.kappa_centre > 1e-12) spacing = std::min(spacing, std::sqrt(8.0 * chord / probe.kappa_centre));
-    const auto n_for = [&](double sp) {
-      return std::max(2, static_cast<int>(std::ceil(dom.u_span() * probe.speed_u / sp)) + 1);
-    };
-    int n_points = n_for(spacing);
-    // Passes that reach a concave region below the ball radius get the lifted-path spacing.
-    bool at_risk = false;
-    if (!concave.empty()) {
-      for (int i = 0; i < n_points && !at_risk; ++i) {
-        at_risk = concave.Near(surface.Point(dom.u_min + dom.u_span() * i / (n_points - 1), v));
+    // Pieces of one plane are cut in the pass direction: along d, or against it on reversed passes.
+    const bool reversed = options.zigzag && plane % 2 == 1;
+    if (reversed) std::reverse(sections.begin(), sections.end());
+    if (!sections.empty()) ++plane;
+    for (const Section& section : sections) {
+      // Along the pass: the sag of a chord of length L on a path of curvature κ is L²κ/8 (3 % margin for
+      // the interpolated arc length).
+      double spacing = options.max_point_spacing_mm;
+      if (section.kappa_centre > 1e-12) spacing = std::min(spacing, std::sqrt(8.0 * chord / section.kappa_centre));
+      spacing *= 0.97;
+      const double length = section.arc.back();
+      const auto n_for = [&](double sp) { return std::max(2, static_cast<int>(std::ceil(length / sp)) + 1); };
+      int n_points = section.uv.size() == 1 ? 1 : n_for(spacing);
+      bool at_risk = false;
+      if (!concave.empty()) {
+        for (const auto& uv : section.uv) {
+          if (concave.Near(surface.Point(uv.x(), uv.y()))) {
+            at_risk = true;
+            break;
+          }
+        }
+        if (at_risk && n_points > 1 && spacing > lifted_spacing) n_points = n_for(lifted_spacing);
       }
-      if (at_risk && spacing > lifted_spacing) n_points = n_for(lifted_spacing);
-    }
-    const bool reverse = options.zigzag && (pass % 2 == 1);
-    for (int i = 0; i < n_points; ++i) {
-      const int k = reverse ? n_points - 1 - i : i;
-      const double u = dom.u_min + dom.u_span() * k / (n_points - 1);
-      const recon::SurfaceDerivatives d = surface.Derivatives(u, v);
-      ClPoint cl;
-      cl.pass = pass;
-      cl.index_in_pass = i;
-      cl.u = u;
-      cl.v = v;
-      cl.cc = d.p;
-      cl.normal = recon::NormalFromDerivatives(d);
-      const recon::PrincipalCurvatures curvatures = recon::CurvaturesFromDerivatives(d);
-      if (curvatures.k2 < -1.0 / r) ++path.gouge_risk_points;
-      if (at_risk && concave.Near(cl.cc)) {
-        const double lift = DropLift(surface, dom, u, v, d, cl.cc + r * cl.normal, r);
-        if (lift > 1e-6) {
-          cl.lift_mm = lift;
-          const Eigen::Vector3d& p = cl.cc;
-          if (path.lifted_points == 0) path.lifted_box_min = path.lifted_box_max = p;
-          path.lifted_box_min = path.lifted_box_min.cwiseMin(p);
-          path.lifted_box_max = path.lifted_box_max.cwiseMax(p);
-          path.max_lift_mm = std::max(path.max_lift_mm, lift);
+      std::vector<ClPoint> cut;
+      cut.reserve(n_points);
+      std::size_t j = 0;  // dense sample at or before the target arc length
+      for (int i = 0; i < n_points; ++i) {
+        double u = section.uv.back().x(), v = section.uv.back().y();
+        if (i == 0) {
+          u = section.uv.front().x();
+          v = section.uv.front().y();
+        } else if (i < n_points - 1) {
+          const double target = length * i / (n_points - 1);
+          while (j + 2 < section.arc.size() && section.arc[j + 1] < target) ++j;
+          const double span = section.arc[j + 1] - section.arc[j];
+          const double t = span > 0 ? std::clamp((target - section.arc[j]) / span, 0.0, 1.0) : 0.0;
+          const double s = section.s[j] + t * (section.s[j + 1] - section.s[j]);
+          u = section.uv[j].x() + t * (section.uv[j + 1].x() - section.uv[j].x());
+          v = section.uv[j].y() + t * (section.uv[j + 1].y() - section.uv[j].y());
+          if (!SolveOnPlane(surface, dom, frame, section.c, s, &u, &v)) {
+            return Status::Internal("PlanRaster: a point between two solved samples of a section did not converge");
+          }
+        }
+        const recon::SurfaceDerivatives d = surface.Derivatives(u, v);
+        ClPoint cl;
+        cl.pass = pass;
+        cl.u = u;
+        cl.v = v;
+        cl.cc = d.p;
+        cl.normal = recon::NormalFromDerivatives(d);
+        if (recon::CurvaturesFromDerivatives(d).k2 < -1.0 / r) ++path.gouge_risk_points;
+        if (at_risk && concave.Near(cl.cc)) {
+          const double lift = DropLift(surface, dom, u, v, d, cl.cc + r * cl.normal, r);
+          if (lift > 1e-6) cl.lift_mm = lift;
+        }
+        cut.push_back(cl);
+      }
+      if (reversed) std::reverse(cut.begin(), cut.end());
+      // Tangential leads: along the tip path's direction at each end (±d for a one-point pass).
+      const Eigen::Vector3d along = reversed ? -frame.d : frame.d;
+      const auto direction = [&](const Eigen::Vector3d& from, const Eigen::Vector3d& to) {
+        const Eigen::Vector3d t = to - from;
+        return t.norm() > 1e-9 ? Eigen::Vector3d(t.normalized()) : along;
+      };
+      std::vector<ClPoint> points;
+      if (options.lead_mm > 0) {
+        const Eigen::Vector3d t0 = cut.size() > 1 ? direction(tip_of(cut[0]), tip_of(cut[1])) : along;
+        const std::vector<Eigen::Vector3d> arc = LeadArc(surface, cut.front(), -t0, options.lead_mm, r);
+        for (auto it = arc.rbegin(); it != arc.rend(); ++it) {
+          points.push_back(lead_point(ClKind::kLeadIn, cut.front(), tip_of(cut.front()) + *it));
+        }
+      }
+      points.insert(points.end(), cut.begin(), cut.end());
+      if (options.lead_mm > 0) {
+        const std::size_t k = cut.size() - 1;
+        const Eigen::Vector3d t1 = cut.size() > 1 ? direction(tip_of(cut[k - 1]), tip_of(cut[k])) : along;
+        for (const Eigen::Vector3d& offset : LeadArc(surface, cut.back(), t1, options.lead_mm, r)) {
+          points.push_back(lead_point(ClKind::kLeadOut, cut.back(), tip_of(cut.back()) + offset));
+        }
+      }
+      // On a pass near a concave region below the ball radius the lead arcs are checked like CL points
+      // (the local argument of LeadArc does not hold there) and lifted clear of Q.
+      if (at_risk) {
+        for (ClPoint& cl : points) {
+          if (cl.kind == ClKind::kCut) continue;
+          const Eigen::Vector3d centre = cl.cc + r * Eigen::Vector3d::UnitZ();
+          const recon::SurfaceDerivatives d = surface.Derivatives(cl.u, cl.v);
+          const double reach = 1.5 * r + (centre - d.p).head<2>().norm();
+          const double lift = DropLift(surface, dom, cl.u, cl.v, d, centre, r, reach);
+          if (lift > 1e-6) cl.cc.z() += lift;
+        }
+      }
+      for (std::size_t i = 0; i < points.size(); ++i) {
+        ClPoint& cl = points[i];
+        cl.index_in_pass = static_cast<int>(i);
+        if (cl.lift_mm > 0) {
+          if (path.lifted_points == 0) path.lifted_box_min = path.lifted_box_max = cl.cc;
+          path.lifted_box_min = path.lifted_box_min.cwiseMin(cl.cc);
+          path.lifted_box_max = path.lifted_box_max.cwiseMax(cl.cc);
+          path.max_lift_mm = std::max(path.max_lift_mm, cl.lift_mm);
           path.lifted_indices.push_back(static_cast<int>(path.points.size()));
           ++path.lifted_points;
         }
+        path.points.push_back(cl);
       }
-      path.points.push_back(cl);
+      ++pass;
     }
-    ++pass;
-    if (v >= dom.v_max) break;
-    // Across the passes: h = s²/8 · (1/r + κ), κ the largest convex curvature on this pass and the next.
-    double step = StepOver(h, r, probe.kappa_across);
-    double v_next = std::min(dom.v_max, v + step / probe.speed_v);
-    PassProbe next = ProbePass(surface, dom, v_next, r);
-    const double step_next = StepOver(h, r, next.kappa_across);
-    if (step_next < step || next.speed_v > probe.speed_v) {
-      step = std::min(step, step_next);
-      v_next = std::min(dom.v_max, v + step / std::max(probe.speed_v, next.speed_v));
-      next = ProbePass(surface, dom, v_next, r);
+    if (c >= c_max) break;
+    // Across the passes: the smallest plane spacing that keeps the scallop on this plane and the next.
+    double step = std::min(MinPlaneStep(sections), c_max - c + 1.0);
+    double c_next = std::min(c_max, c + step);
+    FL_ASSIGN_OR_RETURN(std::vector<Section> next, TraceSection(surface, dom, frame, c_next, r, h));
+    if (MinPlaneStep(next) < step) {
+      step = MinPlaneStep(next);
+      c_next = std::min(c_max, c + step);
+      FL_ASSIGN_OR_RETURN(next, TraceSection(surface, dom, frame, c_next, r, h));
     }
     path.min_step_over_mm = std::min(path.min_step_over_mm, step);
     path.max_step_over_mm = std::max(path.max_step_over_mm, step);
-    v = (v_next >= dom.v_max - 1e-9) ? dom.v_max : v_next;
-    probe = next;
+    c = (c_next >= c_max - 1e-9) ? c_max : c_next;
+    sections = std::move(next);
   }
   path.passes = pass;
+  if (path.points.empty()) return Status::Internal("PlanRaster: no section plane met Q");
   UpdateCutterLocations(&path);
   return path;
 }
@@ -259,8 +603,10 @@ void UpdateCutterLocations(Toolpath* path) {
 }
 
 nlohmann::json Toolpath::ReportJson() const {
-  return {{"strategy", "iso-v raster (section planes y = const on graph surfaces)"},
+  return {{"strategy", "section-plane raster"},
+          {"raster_angle_deg", options.raster_angle_deg},
           {"zigzag", options.zigzag},
+          {"lead_mm", options.lead_mm},
           {"tool", {{"number", options.tool.number}, {"type", "ball_end"}, {"radius_mm", options.tool.radius_mm}}},
           {"scallop_target_um", options.scallop_um},
           {"chord_tolerance_um", options.chord_tolerance_um},

@@ -2,19 +2,30 @@
 // Section-plane raster tool path for a ball-end cutter on the ideal surface Q
 // (spec/nc-gen.md §1, §2).
 //
-// Step-over per pass uses the largest convex normal curvature across the passes on this pass and on
-// the next one; point spacing along a pass bounds the sag of the straight feed segment between ball
-// centres (the centre path bends by κ_c + r κ_n² on convex parts) by the chord tolerance. Where a CC
-// point lies within r (horizontally) of a point whose smallest principal curvature is below −1/r, a
-// drop-cutter test against a dense local sample of Q lifts the CL along ẑ until the ball touches Q
-// only from above; those CLs are flagged (lifted_*). The drop-cutter test is local (gouges from
-// distant parts of Q, e.g. steep walls folding back, are not searched for).
+// Passes are the intersections of Q with vertical planes whose normal m = (−sin θ, cos θ, 0) lies in
+// the XY plane at the raster angle θ; a pass runs along d = (cos θ, sin θ, 0) (zig-zag: every other pass
+// runs along −d). A point of pass c at abscissa s solves S(u, v)·m = c, S(u, v)·d = s by Newton in
+// (u, v), so every CC point lies on its plane to rounding. The planes cover the range of S·m over Q;
+// each plane meets the boundary of the domain at its two ends (found on the four domain edges). This
+// needs Q to be a graph over the XY plane along each plane (every 3-axis ball-end surface seen from
+// above is); a plane that meets the domain in more than one piece is refused.
 //
-// This first planner cuts along iso-v curves of Q. For a B-spline fitted to a graph surface
-// (z = f(x, y), u = x, v = y) these are exactly the section planes y = const (raster angle 0°).
-// Step-over between passes keeps the scallop height below the target using the curvature across the
-// passes (h ≈ s²/8 · (1/r + κ), κ > 0 convex); points along a pass keep the chord error below the
-// chord tolerance. Cutter location: ball centre B = i + r·n, programmed tip T = B − r·ẑ.
+// Step-over from plane c to the next keeps the scallop below the target: on the surface the passes are
+// l = sqrt(8h / (1/r + κ)) apart (κ > 0 the convex normal curvature across the pass), which is a plane
+// spacing Δc = l·|m_t| (m_t the projection of m on the tangent plane); the smallest Δc over this pass
+// and the next is taken. Point spacing along a pass bounds the sag of the straight feed segment between
+// ball centres (the centre path bends by κ_c + r κ_n² on convex parts, κ_c = |κ_n| / |N·n| by Meusnier,
+// N the section curve's principal normal) by the chord tolerance. Where a CC point lies within r
+// (horizontally) of a point whose smallest principal curvature is below −1/r, a drop-cutter test
+// against a dense local sample of Q lifts the CL along ẑ until the ball touches Q only from above;
+// those CLs are flagged (lifted_*). The drop-cutter test is local (gouges from distant parts of Q, e.g.
+// steep walls folding back, are not searched for).
+//
+// Each pass starts and ends with a lead: a quarter-circle arc of radius lead_mm, tangential to the tip
+// path at the pass end and curving away from Q along its normal (smaller where Q is concave; see
+// LeadArc in toolpath.cc), so the cutter enters and leaves the surface already moving along the path;
+// lead points are CL points of kind kLeadIn/kLeadOut, off Q, never compensated.
+// Cutter location: ball centre B = i + r·n, programmed tip T = B − r·ẑ.
 
 #include <string>
 #include <vector>
@@ -37,7 +48,9 @@ struct ToolpathOptions {
   double scallop_um = 3.0;          // target scallop height between passes
   double chord_tolerance_um = 1.0;  // max chord error along a pass
   double max_point_spacing_mm = 0.5;// cap on CC spacing along a pass (feeds the virtual machine's resolution)
-  bool zigzag = true;               // alternate direction of successive passes
+  double raster_angle_deg = 0;      // angle θ of the cutting direction d in the XY plane, from +X
+  bool zigzag = true;               // alternate direction of successive passes (false: one-way)
+  double lead_mm = 2.0;             // radius of the arc lead-in/out at each pass end (0: none)
   double feed_mm_per_min = 1500;    // cutting feed
   double plunge_feed_mm_per_min = 300;
   double spindle_rpm = 12000;
@@ -45,11 +58,18 @@ struct ToolpathOptions {
   Status Validate() const;
 };
 
+enum class ClKind {
+  kCut,      // on Q: CC point, normal and (u, v) are Q's
+  kLeadIn,   // start of the tangential lead-in of a pass, off Q: cc = tip, normal = ẑ
+  kLeadOut,  // end of the lead-out of a pass, off Q: cc = tip, normal = ẑ
+};
+
 // One cutter location with its provenance.
 struct ClPoint {
+  ClKind kind = ClKind::kCut;
   int pass = 0;                      // pass index from 0
   int index_in_pass = 0;
-  double u = 0, v = 0;               // parameters of the CC point on Q
+  double u = 0, v = 0;               // parameters of the CC point on Q (leads: of the pass end they extend)
   Eigen::Vector3d cc = Eigen::Vector3d::Zero();      // cutter-contact point i on Q, mm
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ(); // unit normal of Q at i
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();  // ball centre B = i + r n + lift ẑ

@@ -48,6 +48,7 @@ TEST(ToolpathTest, StepOverMeetsTheScallopFormulaAndCentresAreOffsetAlongTheNorm
   EXPECT_EQ(path->gouge_risk_points, 0);
   for (std::size_t k = 0; k < path->points.size(); k += 97) {
     const ClPoint& cl = path->points[k];
+    if (cl.kind != ClKind::kCut) continue;  // leads are off Q
     EXPECT_NEAR((cl.centre - cl.cc).norm(), 3.0, 1e-12);
     EXPECT_NEAR((cl.centre - cl.cc).normalized().dot(q.Normal(cl.u, cl.v)), 1.0, 1e-12);
     EXPECT_NEAR((cl.tip - (cl.centre - Eigen::Vector3d(0, 0, 3))).norm(), 0.0, 1e-12);
@@ -149,7 +150,9 @@ TEST(CompensationTest, MirrorOffsetIsMinusDsAlongTheNormalAndVerifiesFromTheProg
   for (std::size_t k = 0; k < path->points.size(); k += 53) {
     const ClPoint& a = path->points[k];
     const ClPoint& b = comp->path.points[k];
-    const Eigen::Vector3d expected = -field(a.u, a.v) * a.normal;
+    // Leads are off Q and keep their place; cut points move by −d_s·n.
+    const Eigen::Vector3d expected =
+        a.kind == ClKind::kCut ? Eigen::Vector3d(-field(a.u, a.v) * a.normal) : Eigen::Vector3d::Zero();
     EXPECT_NEAR((b.cc - a.cc - expected).norm(), 0.0, 1e-12);
     EXPECT_NEAR((b.tip - a.tip - expected).norm(), 0.0, 1e-12);
   }
