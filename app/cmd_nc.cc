@@ -1,7 +1,10 @@
 // `formloop nc`: NC programs from the ideal surface Q (spec/nc-gen.md).
 //
-//   formloop nc path  --surface Q.step --out program.ngc [--dialect D] [--report toolpath.json] [tool/path options]
-//   formloop nc probe --surface Q.step --out probe.ngc   [--dialect D] [--grid NUxNV] [probe options]
+//   formloop nc path  --surface Q.step [--out program.ngc] [--toolpath path.csv] [--dialect D] [--report toolpath.json]
+//                     [tool/path options: --raster-angle, --one-way, --lead-mm, ...]
+//   formloop nc post  --toolpath path.csv --out program --dialect D           (a planned path for a controller)
+//   formloop nc compensate --toolpath path.csv --field ds.csv --out P1 --side side.csv [--nominal P0] [--dialect D]
+//   formloop nc probe --surface Q.step --out probe.ngc   [--dialect D] [--grid NUxNV | --count N --curvature-weighted]
 //   formloop nc check --nominal P0 --compensated P1 --side side.csv [--field ds.csv] [--dialect D]
 //
 // Every program passes the machine-limit check before any text exists; a refusal names the block
@@ -17,6 +20,7 @@
 #include "app/command.h"
 #include "core/atomic_file.h"
 #include "core/log.h"
+#include "core/point_io.h"
 #include "metrology/probe.h"
 #include "nc-gen/compensation.h"
 #include "nc-gen/deviation_field.h"
@@ -24,6 +28,7 @@
 #include "nc-gen/post.h"
 #include "nc-gen/probe_program.h"
 #include "nc-gen/toolpath.h"
+#include "nc-gen/toolpath_io.h"
 #include "reconstruction/cad_io.h"
 
 namespace formloop::app {
@@ -86,22 +91,36 @@ struct PathArgs {
   SurfaceArgs surface;
   MachineArgs machine;
   nc::ToolpathOptions path;
+  bool one_way = false;
   std::string out;
+  std::string toolpath;
   std::string report;
 };
 
-Status PlanAndPost(const PathArgs& args) {
-  // The dialect is checked before the (longer) planning.
-  if (nc::FindPost(args.machine.dialect) == nullptr) {
-    return Status::BadInput(Where{.field = "--dialect"}, "unknown dialect '" + args.machine.dialect + "'",
-                            "see `formloop nc path --help`");
+Status CheckDialect(const std::string& dialect) {
+  if (nc::FindPost(dialect) != nullptr) return Status::Ok();
+  std::string names;
+  for (const std::string& name : nc::PostNames()) names += (names.empty() ? "" : ", ") + name;
+  return Status::BadInput(Where{.field = "--dialect"}, "unknown dialect '" + dialect + "'", "use one of " + names);
+}
+
+Status PlanAndPost(const PathArgs& input) {
+  PathArgs args = input;
+  if (args.one_way) args.path.zigzag = false;
+  if (args.out.empty() && args.toolpath.empty()) {
+    return Status::BadInput(Where{.field = "--out"}, "nothing to write", "give --out PROGRAM, --toolpath FILE or both");
   }
+  // The dialect is checked before the (longer) planning.
+  FL_RETURN_IF_ERROR(CheckDialect(args.machine.dialect));
   FL_ASSIGN_OR_RETURN(const recon::CadFace face, args.surface.Read());
   FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::PlanRaster(face.surface, args.path));
-  FL_ASSIGN_OR_RETURN(const nc::MoveList moves, nc::BuildMoveList(path));
-  FL_ASSIGN_OR_RETURN(const std::string program,
-                      nc::Post(moves, args.machine.dialect, args.machine.Post("formloop nc path " + args.surface.surface)));
-  // Both files or neither: the report waits in its temporary file until the program is in place.
+  std::string program;
+  if (!args.out.empty()) {
+    FL_ASSIGN_OR_RETURN(const nc::MoveList moves, nc::BuildMoveList(path));
+    FL_ASSIGN_OR_RETURN(program, nc::Post(moves, args.machine.dialect,
+                                          args.machine.Post("formloop nc path " + args.surface.surface)));
+  }
+  // All files or none: the report waits in its temporary file until the others are in place.
   std::unique_ptr<AtomicFile> report;
   if (!args.report.empty()) {
     report = std::make_unique<AtomicFile>(args.report);
@@ -109,18 +128,80 @@ Status PlanAndPost(const PathArgs& args) {
     nlohmann::json json = path.ReportJson();
     json["dialect"] = args.machine.dialect;
     json["program"] = args.out;
+    json["toolpath_file"] = args.toolpath;
     json["cl_points"] = path.points.size();
     report->stream() << json.dump(2) << "\n";
   }
-  FL_RETURN_IF_ERROR(WriteFileAtomic(args.out, program));
+  if (!args.toolpath.empty()) FL_RETURN_IF_ERROR(nc::WriteToolpathFile(args.toolpath, path));
+  if (!args.out.empty()) FL_RETURN_IF_ERROR(WriteFileAtomic(args.out, program));
   if (report != nullptr) FL_RETURN_IF_ERROR(report->Commit());
-  log::Info("nc path: {} CL points in {} passes, {} program -> {}", path.points.size(), path.passes,
-            args.machine.dialect, args.out);
+  log::Info("nc path: {} CL points in {} passes at raster angle {} deg{}{}", path.points.size(), path.passes,
+            args.path.raster_angle_deg, args.out.empty() ? "" : ", " + args.machine.dialect + " program -> " + args.out,
+            args.toolpath.empty() ? "" : ", tool path -> " + args.toolpath);
   if (path.gouge_risk_points > 0) {
     log::Warn("nc path: {} CL points lie where Q is concave below the ball radius; they are lifted and the region "
               "is left uncut (see the report)",
               path.gouge_risk_points);
   }
+  return Status::Ok();
+}
+
+struct PostArgs {
+  std::string toolpath;
+  MachineArgs machine;
+  std::string out;
+};
+
+// A planned tool path (from `nc path --toolpath`) posted for a controller; the machine-limit check runs
+// on the move list first, so a refusal writes nothing.
+Status PostToolpath(const PostArgs& args) {
+  FL_RETURN_IF_ERROR(CheckDialect(args.machine.dialect));
+  FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::ReadToolpathFile(args.toolpath));
+  FL_ASSIGN_OR_RETURN(const nc::MoveList moves, nc::BuildMoveList(path));
+  FL_ASSIGN_OR_RETURN(const std::string program,
+                      nc::Post(moves, args.machine.dialect, args.machine.Post("formloop nc post " + args.toolpath)));
+  FL_RETURN_IF_ERROR(WriteFileAtomic(args.out, program));
+  log::Info("nc post: {} CL points in {} passes, {} program -> {}", path.points.size(), path.passes,
+            args.machine.dialect, args.out);
+  return Status::Ok();
+}
+
+struct CompensateArgs {
+  std::string toolpath, field, nominal, out, side;
+  double lambda = 0;
+  double max_offset_um = 200;
+  MachineArgs machine;
+};
+
+// Mirror compensation of a planned path by a systematic field: the compensated program and its side
+// file, both or neither, after the program has passed its own `nc check` (WriteCompensatedProgram).
+Status CompensateProgram(const CompensateArgs& args) {
+  FL_RETURN_IF_ERROR(CheckDialect(args.machine.dialect));
+  FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::ReadToolpathFile(args.toolpath));
+  FL_ASSIGN_OR_RETURN(nc::DeviationField field, nc::ReadDeviationField(args.field, {.smoothing = args.lambda}));
+  const nc::PostOptions post = args.machine.Post("formloop nc compensate " + args.toolpath);
+  std::string nominal;
+  if (args.nominal.empty()) {  // the nominal program is the path posted with the same options
+    FL_ASSIGN_OR_RETURN(const nc::MoveList moves, nc::BuildMoveList(path));
+    FL_ASSIGN_OR_RETURN(nominal, nc::Post(moves, args.machine.dialect, post));
+  } else {
+    FL_ASSIGN_OR_RETURN(nominal, ReadFile(args.nominal));
+  }
+  nc::CompensationOptions options;
+  options.max_offset_um = args.max_offset_um;
+  const std::string source = "systematic field " + args.field + " (thin-plate, lambda " + FormatExact(args.lambda) + ")";
+  FL_ASSIGN_OR_RETURN(const nc::Compensation compensation,
+                      nc::WriteCompensatedProgram(path, nominal, field.AsSystematicField(), source, options, post,
+                                                  args.out, args.side, args.machine.dialect));
+  nlohmann::json summary = {{"program", args.out},
+                            {"side_file", args.side},
+                            {"dialect", args.machine.dialect},
+                            {"blocks", compensation.entries.size()},
+                            {"max_offset_um", compensation.max_offset_um},
+                            {"source", source}};
+  std::cout << summary.dump(2) << "\n";
+  log::Info("nc compensate: {} blocks, largest offset {:.3f} um -> {} and {}", compensation.entries.size(),
+            compensation.max_offset_um, args.out, args.side);
   return Status::Ok();
 }
 
@@ -185,7 +266,8 @@ Status CheckPrograms(const CheckArgs& args) {
 }  // namespace
 
 void AddNcCommand(CLI::App& root, CommandAction* action) {
-  CLI::App* nc = root.add_subcommand("nc", "NC programs from the ideal surface: cutting (path) and probing (probe).");
+  CLI::App* nc = root.add_subcommand(
+      "nc", "NC programs from the ideal surface: cutting (path, post, compensate, check) and probing (probe).");
   nc->require_subcommand(1);
 
   auto path_args = std::make_shared<PathArgs>();
@@ -205,9 +287,38 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
   path->add_option("--spindle", p.spindle_rpm, "spindle speed, rpm")->capture_default_str();
   path->add_option("--clearance-mm", p.clearance_mm, "rapid height above the highest tip point, mm")
       ->capture_default_str();
-  path->add_option("--out", path_args->out, "the program")->required();
+  path->add_option("--raster-angle", p.raster_angle_deg, "angle of the cutting direction from +X in the XY plane, deg")
+      ->capture_default_str();
+  path->add_flag("--one-way", path_args->one_way, "cut every pass in the same direction (default: zig-zag)");
+  path->add_option("--lead-mm", p.lead_mm, "radius of the arc lead-in/out at each pass end, mm (0: none)")
+      ->capture_default_str();
+  path->add_option("--out", path_args->out, "the program");
+  path->add_option("--toolpath", path_args->toolpath, "the planned path as a CSV file (for `nc post`, `nc compensate`)");
   path->add_option("--report", path_args->report, "tool-path report (JSON): passes, step-over, lifted region");
   path->callback([action, path_args] { *action = [path_args] { return PlanAndPost(*path_args); }; });
+
+  auto post_args = std::make_shared<PostArgs>();
+  CLI::App* post = nc->add_subcommand("post", "Post a planned tool path (from `nc path --toolpath`) for a controller.");
+  post->add_option("--toolpath", post_args->toolpath, "the tool-path file")->required();
+  AddMachineOptions(post, &post_args->machine);
+  post->add_option("--out", post_args->out, "the program")->required();
+  post->callback([action, post_args] { *action = [post_args] { return PostToolpath(*post_args); }; });
+
+  auto comp_args = std::make_shared<CompensateArgs>();
+  CLI::App* comp = nc->add_subcommand(
+      "compensate", "Mirror compensation: move every cutting CL point by -d_s*n of a systematic field, post the "
+                    "program, check it against the nominal one and write it with its side file (both or neither).");
+  comp->add_option("--toolpath", comp_args->toolpath, "the nominal tool-path file")->required();
+  comp->add_option("--field", comp_args->field, "the systematic field as CSV u,v,ds_um (thin-plate interpolated)")
+      ->required();
+  comp->add_option("--lambda", comp_args->lambda, "smoothing of the field (0 = interpolate)")->capture_default_str();
+  comp->add_option("--nominal", comp_args->nominal, "the nominal program (default: the tool path posted anew)");
+  comp->add_option("--max-offset-um", comp_args->max_offset_um, "refuse any offset larger than this, um")
+      ->capture_default_str();
+  AddMachineOptions(comp, &comp_args->machine);
+  comp->add_option("--out", comp_args->out, "the compensated program")->required();
+  comp->add_option("--side", comp_args->side, "the side file (CSV)")->required();
+  comp->callback([action, comp_args] { *action = [comp_args] { return CompensateProgram(*comp_args); }; });
 
   auto probe_args = std::make_shared<ProbeArgs>();
   CLI::App* probe = nc->add_subcommand(

@@ -9,6 +9,7 @@
 #include "core/atomic_file.h"
 #include "core/point_io.h"
 #include "nc-gen/csv_cells.h"
+#include "nc-gen/toolpath_io.h"
 
 namespace formloop::nc {
 namespace {
@@ -34,17 +35,6 @@ constexpr const char* kSideColumns[] = {"cl_index", "pass",     "nominal_line", 
                                         "offset_y",  "offset_z",  "ds_um"};
 constexpr const char* kFieldColumns[] = {"u", "v", "nx", "ny", "nz"};
 
-const char* KindName(ClKind kind) {
-  switch (kind) {
-    case ClKind::kLeadIn:
-      return "lead-in";
-    case ClKind::kLeadOut:
-      return "lead-out";
-    case ClKind::kCut:
-      break;
-  }
-  return "cut";
-}
 
 }  // namespace
 
@@ -123,7 +113,7 @@ Status WriteSideFile(const std::filesystem::path& path, const Compensation& comp
     text += "," + FormatFixed(e.systematic_um, 4);
     text += "," + FormatExact(e.u) + "," + FormatExact(e.v);
     for (int a = 0; a < 3; ++a) text += "," + FormatFixed(e.normal[a], 9);
-    text += std::string(",") + KindName(e.kind) + "\n";
+    text += std::string(",") + ClKindName(e.kind) + "\n";
   }
   return WriteFileAtomic(path, text);
 }
@@ -365,11 +355,12 @@ Result<Compensation> WriteCompensatedProgram(const Toolpath& nominal, const std:
                                              const SystematicField& systematic, const std::string& source,
                                              const CompensationOptions& options, const PostOptions& post,
                                              const std::filesystem::path& program_path,
-                                             const std::filesystem::path& side_path) {
+                                             const std::filesystem::path& side_path, std::string_view dialect) {
   FL_ASSIGN_OR_RETURN(Compensation compensation, CompensateToolpath(nominal, systematic, source, options));
-  FL_ASSIGN_OR_RETURN(std::string program, PostLinuxCnc(compensation.path, post));
-  FL_ASSIGN_OR_RETURN(std::vector<ProgramMove> nominal_moves, ReadLinuxCncMoves(nominal_program, "nominal program"));
-  FL_ASSIGN_OR_RETURN(std::vector<ProgramMove> moves, ReadLinuxCncMoves(program, "compensated program"));
+  FL_ASSIGN_OR_RETURN(const MoveList list, BuildMoveList(compensation.path));
+  FL_ASSIGN_OR_RETURN(std::string program, Post(list, dialect, post));
+  FL_ASSIGN_OR_RETURN(std::vector<ProgramMove> nominal_moves, ReadProgram(nominal_program, dialect, "nominal program"));
+  FL_ASSIGN_OR_RETURN(std::vector<ProgramMove> moves, ReadProgram(program, dialect, "compensated program"));
   FL_RETURN_IF_ERROR(AssignProgramLines(nominal_moves, moves, &compensation));
   SideFile side{.source = source, .entries = compensation.entries, .has_field_points = true};
   FL_ASSIGN_OR_RETURN(CheckReport report,

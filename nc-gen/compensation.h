@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <functional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
@@ -124,7 +125,8 @@ Result<CheckReport> CheckCompensation(const std::vector<ProgramMove>& nominal,
                                       const SystematicField& field, const CheckOptions& options = {});
 
 // The whole mirror step with nothing written unless everything passed: CompensateToolpath (refuses
-// an offset above options.max_offset_um with SafetyLimit), PostLinuxCnc, read back both programs,
+// an offset above options.max_offset_um with SafetyLimit), the post of `dialect` (the nominal program
+// must be in the same dialect), read back both programs,
 // AssignProgramLines, CheckCompensation against the field; then the program and the side file are
 // written atomically (side file first; should the program then fail to write, the side file is
 // removed). On any refusal or failed check neither file is written.
@@ -132,7 +134,8 @@ Result<Compensation> WriteCompensatedProgram(const Toolpath& nominal, const std:
                                              const SystematicField& systematic, const std::string& source,
                                              const CompensationOptions& options, const PostOptions& post,
                                              const std::filesystem::path& program_path,
-                                             const std::filesystem::path& side_path);
+                                             const std::filesystem::path& side_path,
+                                             std::string_view dialect = "linuxcnc");
 
 // Recomputes every offset from the two programs and compares with the side entries; returns the
 // largest disagreement in µm (the program resolution limits it to about 0.1 µm).

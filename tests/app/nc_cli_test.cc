@@ -118,5 +118,65 @@ TEST_F(NcCliTest, CheckFindsACorruptedCompensatedBlock) {
   EXPECT_NE(err_.find("compensated line " + std::to_string(line)), std::string::npos) << err_;
 }
 
+// Plan once, post and compensate later: the tool-path file posts to the same program as planning did
+// (only the title comment names the other command), posts in another dialect, and compensates to a
+// program that `nc check` accepts against the field; an offset above the limit writes nothing.
+TEST_F(NcCliTest, ToolpathFilePostsAndCompensatesInSeparateSteps) {
+  const std::string toolpath = Path("t.csv"), direct = Path("direct.ngc"), posted = Path("posted.ngc");
+  ASSERT_EQ(Run("nc path --surface " + Path("Q.step") + " --scallop-um 20 --max-spacing-mm 2 --raster-angle 30 "
+                "--one-way --toolpath " + toolpath + " --out " + direct),
+            0)
+      << err_;
+  ASSERT_EQ(Run("nc post --toolpath " + toolpath + " --out " + posted), 0) << err_;
+  std::string a = ReadFile(direct).value(), b = ReadFile(posted).value();
+  const auto drop_title = [](std::string* text) {
+    const std::size_t first = text->find('\n'), second = text->find('\n', first + 1);
+    text->erase(first, second - first);
+  };
+  drop_title(&a);
+  drop_title(&b);
+  EXPECT_EQ(a, b) << "a tool path read back posts to the same program";
+  const std::string fanuc = Path("posted.nc");
+  ASSERT_EQ(Run("nc post --toolpath " + toolpath + " --dialect fanuc --decimals 3 --out " + fanuc), 0) << err_;
+  EXPECT_TRUE(nc::ReadProgram(ReadFile(fanuc).value(), "fanuc", fanuc).ok());
+
+  // A field d_s = 8 µm + 0.05 µm/mm · u on scattered (u, v) samples.
+  std::string field = "u,v,ds_um\n";
+  for (int i = 0; i < 7; ++i) {
+    for (int j = 0; j < 7; ++j) {
+      const double u = -50 + 100.0 * i / 6, v = -40 + 80.0 * j / 6;
+      field += std::to_string(u) + "," + std::to_string(v) + "," + std::to_string(8 + 0.05 * u) + "\n";
+    }
+  }
+  ASSERT_TRUE(WriteFileAtomic(dir_ / "ds.csv", field).ok());
+  const std::string compensated = Path("c.ngc"), side = Path("side.csv");
+  ASSERT_EQ(Run("nc compensate --toolpath " + toolpath + " --field " + Path("ds.csv") + " --out " + compensated +
+                " --side " + side),
+            0)
+      << err_;
+  EXPECT_EQ(Run("nc check --nominal " + direct + " --compensated " + compensated + " --side " + side + " --field " +
+                Path("ds.csv")),
+            0)
+      << err_;
+  // The limit: 5 µm is below the field's offsets; nothing is written.
+  EXPECT_EQ(Run("nc compensate --toolpath " + toolpath + " --field " + Path("ds.csv") + " --max-offset-um 5 --out " +
+                Path("c2.ngc") + " --side " + Path("side2.csv")),
+            1);
+  EXPECT_NE(err_.find("exceeds the limit"), std::string::npos) << err_;
+  EXPECT_FALSE(fs::exists(dir_ / "c2.ngc"));
+  EXPECT_FALSE(fs::exists(dir_ / "side2.csv"));
+
+  // A corrupted tool-path file is refused naming the line and field.
+  std::string text = ReadFile(toolpath).value();
+  const std::size_t row = text.find("\n0,cut,");
+  ASSERT_NE(row, std::string::npos);
+  const long line = static_cast<long>(std::count(text.begin(), text.begin() + static_cast<long>(row), '\n')) + 2;
+  text.replace(row + 1, 6, "0,cat,");
+  ASSERT_TRUE(WriteFileAtomic(dir_ / "bad.csv", text).ok());
+  EXPECT_EQ(Run("nc post --toolpath " + Path("bad.csv") + " --out " + Path("bad.ngc")), 2);
+  EXPECT_NE(err_.find("bad.csv:" + std::to_string(line) + ": field 'kind'"), std::string::npos) << err_;
+  EXPECT_FALSE(fs::exists(dir_ / "bad.ngc"));
+}
+
 }  // namespace
 }  // namespace formloop::app
