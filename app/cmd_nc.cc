@@ -4,7 +4,7 @@
 //                     [tool/path options: --raster-angle, --one-way, --lead-mm, ...]
 //   formloop nc post  --toolpath path.csv --out program --dialect D           (a planned path for a controller)
 //   formloop nc compensate --toolpath path.csv --field ds.csv --out P1 --side side.csv [--nominal P0] [--dialect D]
-//   formloop nc probe --surface Q.step --out probe.ngc   [--dialect D] [--grid NUxNV | --count N --curvature-weighted]
+//   formloop nc probe --surface Q.step --out probe.ngc   [--dialect D] [--grid NUxNV | --count N [--curvature-weight B]]
 //   formloop nc check --nominal P0 --compensated P1 --side side.csv [--field ds.csv] [--dialect D]
 //
 // Every program passes the machine-limit check before any text exists; a refusal names the block
@@ -22,6 +22,7 @@
 #include "core/log.h"
 #include "core/point_io.h"
 #include "metrology/probe.h"
+#include "metrology/probing_plan.h"
 #include "nc-gen/compensation.h"
 #include "nc-gen/deviation_field.h"
 #include "nc-gen/moves.h"
@@ -210,6 +211,8 @@ struct ProbeArgs {
   MachineArgs machine;
   nc::ProbeProgramOptions probe;
   std::string grid = "10x10";
+  int count = 0;                 // > 0: curvature-weighted plan of this many points instead of the grid
+  double curvature_weight = 1.0;
   double inset_fraction = 0.05;
   std::string out;
 };
@@ -218,8 +221,13 @@ Status PlanAndPostProbing(const ProbeArgs& args) {
   int nu = 0, nv = 0;
   FL_RETURN_IF_ERROR(ParseLayout(args.grid, "--grid", &nu, &nv));
   FL_ASSIGN_OR_RETURN(const recon::CadFace face, args.surface.Read());
-  FL_ASSIGN_OR_RETURN(const metrology::ProbingPlan plan,
-                      metrology::PlanProbingGrid(face.surface, nu, nv, args.inset_fraction));
+  metrology::ProbingPlan plan;
+  if (args.count > 0) {
+    FL_ASSIGN_OR_RETURN(plan, metrology::PlanProbingCurvatureWeighted(face.surface, args.count, args.inset_fraction,
+                                                                      args.curvature_weight));
+  } else {
+    FL_ASSIGN_OR_RETURN(plan, metrology::PlanProbingGrid(face.surface, nu, nv, args.inset_fraction));
+  }
   nc::ProbeProgramOptions options = args.probe;
   options.post = args.machine.Post("formloop nc probe " + args.surface.surface);
   FL_ASSIGN_OR_RETURN(const std::string program, nc::PostProbing(plan, args.machine.dialect, options));
@@ -326,7 +334,12 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
                "its normal from a clearance, probed along -n with a search distance, and retracted.");
   AddSurfaceOptions(probe, &probe_args->surface);
   AddMachineOptions(probe, &probe_args->machine);
-  probe->add_option("--grid", probe_args->grid, "points NUxNV over the domain")->capture_default_str();
+  probe->add_option("--grid", probe_args->grid, "points NUxNV equidistant in parameter space")->capture_default_str();
+  probe->add_option("--count", probe_args->count,
+                    "instead of the grid: this many points, denser where Q is curved (weighted farthest-point sampling)");
+  probe->add_option("--curvature-weight", probe_args->curvature_weight,
+                    "with --count: 0 = evenly spread on Q; larger = more points where curvature is high")
+      ->capture_default_str();
   probe->add_option("--inset", probe_args->inset_fraction, "keep this fraction of the domain free at each edge")
       ->capture_default_str();
   nc::ProbeProgramOptions& o = probe_args->probe;

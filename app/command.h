@@ -29,5 +29,9 @@ Status ParseLayout(const std::string& text, const std::string& option, int* nu, 
 void AddFitCommand(CLI::App& root, CommandAction* action);
 // `nc path` and `nc probe` (app/cmd_nc.cc).
 void AddNcCommand(CLI::App& root, CommandAction* action);
+// `analyse moran` (app/cmd_analyse.cc).
+void AddAnalyseCommand(CLI::App& root, CommandAction* action);
+// `calibrate sphere` and `calibrate synth-sphere` (app/cmd_calibrate.cc).
+void AddCalibrateCommand(CLI::App& root, CommandAction* action);
 
 }  // namespace formloop::app

@@ -31,6 +31,8 @@ int main(int argc, char** argv) {
   app::AddFitCommand(app, &action);
   app::AddNcCommand(app, &action);
   app::AddKbCommand(app, &action);
+  app::AddAnalyseCommand(app, &action);
+  app::AddCalibrateCommand(app, &action);
 
   try {
     app.parse(argc, argv);

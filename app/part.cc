@@ -76,8 +76,11 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
   FL_RETURN_IF_ERROR(top.Object("toolpath", &f));
   if (f) {
     auto& t = part.toolpath;
-    FL_RETURN_IF_ERROR(f->CheckKnown({"scallop_um", "chord_tolerance_um", "max_point_spacing_mm", "zigzag",
-                                      "feed_mm_per_min", "plunge_feed_mm_per_min", "spindle_rpm", "clearance_mm"}));
+    FL_RETURN_IF_ERROR(f->CheckKnown({"scallop_um", "chord_tolerance_um", "max_point_spacing_mm", "raster_angle_deg",
+                                      "zigzag", "lead_mm", "feed_mm_per_min", "plunge_feed_mm_per_min", "spindle_rpm",
+                                      "clearance_mm"}));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("raster_angle_deg", &t.raster_angle_deg, {.min = -360, .max = 360}));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("lead_mm", &t.lead_mm, {.min = 0, .max = 100}));
     FL_RETURN_IF_ERROR(f->OptionalNumber("scallop_um", &t.scallop_um, kPositive));
     FL_RETURN_IF_ERROR(f->OptionalNumber("chord_tolerance_um", &t.chord_tolerance_um, kPositive));
     FL_RETURN_IF_ERROR(f->OptionalNumber("max_point_spacing_mm", &t.max_point_spacing_mm, kPositive));
@@ -89,10 +92,17 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
   }
   FL_RETURN_IF_ERROR(top.Object("machine", &f));
   if (f) {
-    FL_RETURN_IF_ERROR(f->CheckKnown({"name", "travel_min_mm", "travel_max_mm", "max_feed_mm_per_min",
+    FL_RETURN_IF_ERROR(f->CheckKnown({"name", "dialect", "travel_min_mm", "travel_max_mm", "max_feed_mm_per_min",
                                       "max_spindle_rpm", "effects", "probe"}));
     FL_RETURN_IF_ERROR(ReadVec3(*f, "travel_min_mm", &part.limits.travel_min_mm));
     FL_RETURN_IF_ERROR(ReadVec3(*f, "travel_max_mm", &part.limits.travel_max_mm));
+    FL_RETURN_IF_ERROR(f->OptionalString("dialect", &part.dialect));
+    if (nc::FindPost(part.dialect) == nullptr) {
+      std::string names;
+      for (const std::string& name : nc::PostNames()) names += (names.empty() ? "" : ", ") + name;
+      return Status::BadInput(Where{.file = source, .field = "machine.dialect"},
+                              "unknown controller dialect '" + part.dialect + "'", "use one of " + names);
+    }
     FL_RETURN_IF_ERROR(f->OptionalNumber("max_feed_mm_per_min", &part.limits.max_feed_mm_per_min, kPositive));
     FL_RETURN_IF_ERROR(f->OptionalNumber("max_spindle_rpm", &part.limits.max_spindle_rpm, kPositive));
     std::optional<JsonFields> e;
@@ -142,9 +152,9 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
   part.probe_program.ball_radius_mm = part.probe.ball_radius_mm;
   FL_RETURN_IF_ERROR(top.Object("analysis", &f));
   if (f) {
-    FL_RETURN_IF_ERROR(f->CheckKnown({"neighbours", "max_degree", "coverage_factor"}));
+    FL_RETURN_IF_ERROR(f->CheckKnown({"neighbours", "max_control_net", "coverage_factor"}));
     FL_RETURN_IF_ERROR(ReadInt(*f, "neighbours", &part.analysis.neighbours, 1, 64));
-    FL_RETURN_IF_ERROR(ReadInt(*f, "max_degree", &part.analysis.max_degree, 0, 10));
+    FL_RETURN_IF_ERROR(ReadInt(*f, "max_control_net", &part.analysis.max_control_net, 3, 20));
     FL_RETURN_IF_ERROR(f->OptionalNumber("coverage_factor", &part.analysis.coverage_factor, kPositive));
   }
   FL_RETURN_IF_ERROR(top.Object("loops", &f));
@@ -187,13 +197,16 @@ nlohmann::json PartSpec::ToJson() const {
            {{"scallop_um", t.scallop_um},
             {"chord_tolerance_um", t.chord_tolerance_um},
             {"max_point_spacing_mm", t.max_point_spacing_mm},
+            {"raster_angle_deg", t.raster_angle_deg},
             {"zigzag", t.zigzag},
+            {"lead_mm", t.lead_mm},
             {"feed_mm_per_min", t.feed_mm_per_min},
             {"plunge_feed_mm_per_min", t.plunge_feed_mm_per_min},
             {"spindle_rpm", t.spindle_rpm},
             {"clearance_mm", t.clearance_mm}}},
           {"machine",
-           {{"travel_min_mm", {limits.travel_min_mm.x(), limits.travel_min_mm.y(), limits.travel_min_mm.z()}},
+           {{"dialect", dialect},
+            {"travel_min_mm", {limits.travel_min_mm.x(), limits.travel_min_mm.y(), limits.travel_min_mm.z()}},
             {"travel_max_mm", {limits.travel_max_mm.x(), limits.travel_max_mm.y(), limits.travel_max_mm.z()}},
             {"max_feed_mm_per_min", limits.max_feed_mm_per_min},
             {"max_spindle_rpm", limits.max_spindle_rpm},
@@ -215,7 +228,7 @@ nlohmann::json PartSpec::ToJson() const {
             {"feed_mm_per_min", probe_program.probe_feed_mm_per_min}}},
           {"analysis",
            {{"neighbours", analysis.neighbours},
-            {"max_degree", analysis.max_degree},
+            {"max_control_net", analysis.max_control_net},
             {"coverage_factor", analysis.coverage_factor}}},
           {"loops", {{"max", max_loops}, {"max_offset_um", compensation.max_offset_um}}}};
 }

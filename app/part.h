@@ -14,7 +14,7 @@
 //   "toolpath": {"scallop_um": 3, "chord_tolerance_um": 1, "feed_mm_per_min": 1500, ...},
 //   "machine": {"travel_min_mm": [..], "travel_max_mm": [..], "max_feed_mm_per_min": .., "effects": {..}},
 //   "probing": {"grid": [20, 20], "inset_fraction": 0.05, "ball_radius_mm": 1.0, ...},
-//   "analysis": {"neighbours": 8, "max_degree": 4, "coverage_factor": 2},
+//   "analysis": {"neighbours": 8, "max_control_net": 8, "coverage_factor": 2},
 //   "loops": {"max": 3, "max_offset_um": 200}
 // }
 
@@ -46,6 +46,7 @@ struct PartSpec {
   int fit_check_points = 2000;          // random points where the fit is checked against the truth
   nc::ToolpathOptions toolpath;
   nc::MachineLimits limits;
+  std::string dialect = "linuxcnc";     // controller dialect of the NC and probing programs (machine.dialect)
   sim::MachineEffects effects;          // what the virtual machine does that the plan does not know
   metrology::ProbeModel true_probe;     // the probe the virtual machine really has
   int probe_nu = 20, probe_nv = 20;

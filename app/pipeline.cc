@@ -8,6 +8,7 @@
 #include "core/point_io.h"
 #include "core/random.h"
 #include "metrology/deviations.h"
+#include "nc-gen/toolpath_io.h"
 #include "reconstruction/analytic_surface.h"
 
 namespace formloop::app {
@@ -51,7 +52,7 @@ std::vector<sim::CutterLocation> CutterLocationsFromProgram(const std::vector<nc
 }
 
 struct Field {
-  std::vector<metrology::PolynomialField> terms;  // one per compensated loop
+  std::vector<metrology::FieldModel> terms;  // one per compensated loop
   double operator()(double u, double v) const {
     double sum = 0;
     for (const auto& t : terms) sum += t.Evaluate(u, v);
@@ -102,9 +103,14 @@ Status RunStages(const PartSpec& part, const fs::path& dir, RunSummary* summary)
   nc::PostOptions post;
   post.limits = part.limits;
   post.title = "formloop " + std::string(kVersion) + " part " + part.name + " loop 0, nominal";
-  FL_ASSIGN_OR_RETURN(std::string program, nc::PostLinuxCnc(nominal, post));
+  FL_ASSIGN_OR_RETURN(const nc::MoveList nominal_moves_list, nc::BuildMoveList(nominal));
+  FL_ASSIGN_OR_RETURN(std::string program, nc::Post(nominal_moves_list, part.dialect, post));
+  // Program files carry the dialect's extension (.ngc LinuxCNC, .nc Fanuc, .h Heidenhain, .mpf Sinumerik).
+  const std::string extension(nc::FindPost(part.dialect)->FileExtension());
+  const fs::path nominal_program_path = dir / "toolpath" / ("program" + extension);
   FL_RETURN_IF_ERROR(MakeDir(dir / "toolpath"));
-  FL_RETURN_IF_ERROR(WriteFileAtomic(dir / "toolpath" / "program.ngc", program));
+  FL_RETURN_IF_ERROR(WriteFileAtomic(nominal_program_path, program));
+  FL_RETURN_IF_ERROR(nc::WriteToolpathFile(dir / "toolpath" / "toolpath.csv", nominal));
   FL_RETURN_IF_ERROR(WriteJsonFile(dir / "toolpath" / "toolpath.json", nominal.ReportJson()));
   log::Info("      {} passes, {} CL points, step-over {:.3f}..{:.3f} mm, {:.0f} s cutting", nominal.passes,
             nominal.points.size(), nominal.min_step_over_mm, nominal.max_step_over_mm, nominal.total_time_s);
@@ -115,19 +121,19 @@ Status RunStages(const PartSpec& part, const fs::path& dir, RunSummary* summary)
   probe_options.post = post;
   probe_options.post.title = "formloop " + std::string(kVersion) + " probing program for part " + part.name;
   probe_options.safe_z_mm = nominal.safe_z_mm + part.probe.ball_radius_mm + part.probe_program.clearance_mm;
-  FL_ASSIGN_OR_RETURN(std::string probe_program, nc::PostLinuxCncProbing(plan, probe_options));
-  FL_RETURN_IF_ERROR(WriteFileAtomic(dir / "toolpath" / "probe.ngc", probe_program));
+  FL_ASSIGN_OR_RETURN(std::string probe_program, nc::PostProbing(plan, part.dialect, probe_options));
+  FL_RETURN_IF_ERROR(WriteFileAtomic(dir / "toolpath" / ("probe" + extension), probe_program));
 
   // 3/4. Loops: machine the current program, probe, analyse, compensate when needed.
   Field field;
   std::string current_program = program;
-  fs::path current_program_path = dir / "toolpath" / "program.ngc";
+  fs::path current_program_path = nominal_program_path;
   for (int loop = 0; loop < part.max_loops; ++loop) {
     const fs::path loop_dir = dir / ("loop-" + std::to_string(loop));
     FL_RETURN_IF_ERROR(MakeDir(loop_dir));
     log::Info("[3/4] loop {}: virtual machining of {}", loop, fs::relative(current_program_path, dir).string());
     FL_ASSIGN_OR_RETURN(std::vector<nc::ProgramMove> moves,
-                        nc::ReadLinuxCncMoves(current_program, current_program_path.string()));
+                        nc::ReadProgram(current_program, part.dialect, current_program_path.string()));
     const std::vector<sim::CutterLocation> cls = CutterLocationsFromProgram(moves, part.toolpath.tool.radius_mm);
     sim::VirtualMachineOptions vm;
     vm.tool_radius_mm = part.toolpath.tool.radius_mm;
@@ -166,16 +172,16 @@ Status RunStages(const PartSpec& part, const fs::path& dir, RunSummary* summary)
     ls.systematic_peak_um = decomposition.systematic_peak_um;
     ls.random_sigma_um = decomposition.random_sigma_um;
     ls.raw_moran_z = decomposition.raw.z_normality;
-    ls.field_degree = decomposition.systematic.degree;
+    ls.field_degree = decomposition.systematic.degree();
     ls.within_tolerance = decomposition.form_error_um <= part.tolerance_mm * 1e3;
     nlohmann::json analysis = decomposition.ToJson();
     analysis["tolerance_um"] = part.tolerance_mm * 1e3;
     analysis["within_tolerance"] = ls.within_tolerance;
-    log::Info("      deviation rms {:.2f} um; Moran z {:.2f} ({}); d_s degree {} peak {:.2f} um; sigma(d_u) {:.2f} um;"
+    log::Info("      deviation rms {:.2f} um; Moran z {:.2f} ({}); d_s {} peak {:.2f} um; sigma(d_u) {:.2f} um;"
               " form error {:.2f} um vs tolerance {:.1f} um",
               decomposition.deviation_rms_um, decomposition.raw.z_normality,
               decomposition.raw.z_normality > metrology::kMoranZCritical ? "systematic" : "random",
-              decomposition.systematic.degree, decomposition.systematic_peak_um, decomposition.random_sigma_um,
+              decomposition.systematic.name(), decomposition.systematic_peak_um, decomposition.random_sigma_um,
               decomposition.form_error_um, part.tolerance_mm * 1e3);
 
     std::string decision;
@@ -195,22 +201,23 @@ Status RunStages(const PartSpec& part, const fs::path& dir, RunSummary* summary)
     if (compensate) {
       field.terms.push_back(decomposition.systematic);
       const std::string source = "sum of systematic fields of loops 0.." + std::to_string(loop);
-      FL_ASSIGN_OR_RETURN(nc::Compensation compensation,
-                          nc::CompensateToolpath(nominal, field, source, part.compensation));
       nc::PostOptions post_k = post;
       post_k.title = "formloop " + std::string(kVersion) + " part " + part.name + " loop " + std::to_string(loop + 1) +
                      ", mirror-compensated";
-      FL_ASSIGN_OR_RETURN(std::string compensated_program, nc::PostLinuxCnc(compensation.path, post_k));
+      // Compensate, post, check against the nominal program and the field, then write program and side
+      // file (both or neither; a refusal above the offset limit writes nothing).
+      const fs::path next_program = loop_dir / ("program_compensated" + extension);
+      FL_ASSIGN_OR_RETURN(nc::Compensation compensation,
+                          nc::WriteCompensatedProgram(nominal, program, field, source, part.compensation, post_k,
+                                                      next_program, loop_dir / "compensation_side.csv",
+                                                      part.dialect));
+      FL_ASSIGN_OR_RETURN(std::string compensated_program, ReadFile(next_program));
       FL_ASSIGN_OR_RETURN(std::vector<nc::ProgramMove> nominal_moves,
-                          nc::ReadLinuxCncMoves(program, (dir / "toolpath" / "program.ngc").string()));
+                          nc::ReadProgram(program, part.dialect, nominal_program_path.string()));
       FL_ASSIGN_OR_RETURN(std::vector<nc::ProgramMove> compensated_moves,
-                          nc::ReadLinuxCncMoves(compensated_program, "compensated program"));
-      FL_RETURN_IF_ERROR(nc::AssignProgramLines(nominal_moves, compensated_moves, &compensation));
+                          nc::ReadProgram(compensated_program, part.dialect, next_program.string()));
       FL_ASSIGN_OR_RETURN(double disagreement_um,
                           nc::VerifyCompensation(nominal_moves, compensated_moves, compensation));
-      const fs::path next_program = loop_dir / "program_compensated.ngc";
-      FL_RETURN_IF_ERROR(WriteFileAtomic(next_program, compensated_program));
-      FL_RETURN_IF_ERROR(nc::WriteSideFile(loop_dir / "compensation_side.csv", compensation));
       FL_RETURN_IF_ERROR(WriteJsonFile(loop_dir / "compensation.json",
                                        {{"source", compensation.source},
                                         {"cl_points", compensation.entries.size()},

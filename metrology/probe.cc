@@ -2,8 +2,13 @@
 
 #include <cmath>
 #include <map>
+#include <optional>
+#include <set>
+#include <string_view>
+#include <utility>
 
 #include "core/atomic_file.h"
+#include "core/json_io.h"
 #include "core/point_io.h"
 
 namespace formloop::metrology {
@@ -43,47 +48,115 @@ Result<ProbingPlan> PlanProbingGrid(const recon::BSplineSurface& surface, int nu
   return plan;
 }
 
+namespace {
+
+constexpr const char* kLogColumnsFix = "a probe log has the header row id,x,y,z,ax,ay,az,t (any order)";
+
+// 1-based line numbers of the data rows of a CSV text, in order: the lines ReadCsv reads as rows
+// (not blank, not '#', after the header). Same line rules as core/point_io.cc.
+std::vector<long> CsvDataLines(std::string_view text) {
+  std::vector<long> lines;
+  long number = 0;
+  bool header_seen = false;
+  std::size_t pos = 0;
+  while (pos < text.size()) {
+    const std::size_t end = text.find('\n', pos);
+    const std::size_t stop = end == std::string_view::npos ? text.size() : end;
+    std::string_view line = text.substr(pos, stop - pos);
+    pos = end == std::string_view::npos ? text.size() : end + 1;
+    ++number;
+    const std::size_t first = line.find_first_not_of(" \t\r");
+    if (first == std::string_view::npos || line[first] == '#') continue;
+    if (!header_seen) {
+      header_seen = true;
+      continue;
+    }
+    lines.push_back(number);
+  }
+  return lines;
+}
+
+}  // namespace
+
 Result<ProbeLog> ReadProbeLog(const std::filesystem::path& path) {
-  FL_ASSIGN_OR_RETURN(PointSet points, ReadCsv(path));
   const std::string file = path.string();
-  const auto* ax = points.FindScalar("ax");
-  const auto* ay = points.FindScalar("ay");
-  const auto* az = points.FindScalar("az");
-  if (ax == nullptr || ay == nullptr || az == nullptr) {
-    return Status::BadInput(Where{.file = file, .field = "ax/ay/az"}, "approach-direction columns are missing",
-                            "a probe log has the columns id,x,y,z,ax,ay,az,t");
+  FL_ASSIGN_OR_RETURN(PointSet points, ReadCsv(path));
+  std::string missing;
+  for (const char* column : {"ax", "ay", "az"}) {
+    if (points.FindScalar(column) == nullptr) missing += std::string(missing.empty() ? "" : ", ") + column;
   }
-  if (!points.has_ids()) {
-    return Status::BadInput(Where{.file = file, .field = "id"}, "column is missing",
-                            "a probe log has the columns id,x,y,z,ax,ay,az,t");
+  if (!points.has_ids()) missing = "id" + std::string(missing.empty() ? "" : ", ") + missing;
+  if (!points.has_times()) missing += std::string(missing.empty() ? "" : ", ") + "t";
+  if (!missing.empty()) {
+    return Status::BadInput(
+        Where{.file = file, .field = missing},
+        "column" + std::string(missing.find(',') == std::string::npos ? " is" : "s are") + " missing", kLogColumnsFix);
   }
-  if (!points.has_times()) {
-    return Status::BadInput(Where{.file = file, .field = "t"}, "column is missing",
-                            "a probe log has the columns id,x,y,z,ax,ay,az,t");
-  }
+  const auto& ax = *points.FindScalar("ax");
+  const auto& ay = *points.FindScalar("ay");
+  const auto& az = *points.FindScalar("az");
+  // ReadCsv does not keep line numbers; recount them on the same text so errors can name the line.
+  FL_ASSIGN_OR_RETURN(const std::string text, ReadFile(path));
+  std::vector<long> lines = CsvDataLines(text);
+  if (lines.size() != points.size()) lines.assign(points.size(), 0);  // cannot happen; keep messages safe
+
   ProbeLog log;
-  std::map<std::int64_t, std::size_t> seen;
+  log.source = file;
+  log.records.reserve(points.size());
+  std::map<std::int64_t, long> seen;  // id -> line
   for (std::size_t i = 0; i < points.size(); ++i) {
     ProbeRecord r;
     r.id = points.ids[i];
     r.centre = points.points[i];
-    r.approach = Eigen::Vector3d((*ax)[i], (*ay)[i], (*az)[i]);
+    r.approach = Eigen::Vector3d(ax[i], ay[i], az[i]);
     r.t_s = points.times_s[i];
+    r.line = lines[i];
+    const Where where{.file = file, .line = r.line, .field = "ax,ay,az"};
     const double norm = r.approach.norm();
-    if (std::abs(norm - 1.0) > 1e-3) {
-      return Status::BadInput(Where{.file = file, .field = "ax/ay/az"},
+    if (!(norm > 1e-9)) {
+      return Status::BadInput(where, "approach direction of id " + std::to_string(r.id) + " is zero",
+                              "write the unit approach direction (from the probe towards the surface, usually "
+                              "the negated planned normal) for every point");
+    }
+    if (std::abs(norm - 1.0) > kApproachUnitTolerance) {
+      return Status::BadInput(where,
                               "approach direction of id " + std::to_string(r.id) + " has length " +
-                                  FormatFixed(norm, 6) + ", not 1",
-                              "write unit approach vectors");
+                                  FormatFixed(norm, 9) + "; a unit vector is needed (|length − 1| ≤ " +
+                                  FormatExact(kApproachUnitTolerance) + ")",
+                              "check that ax,ay,az hold the approach direction and write it normalised (a/|a|) "
+                              "with at least 6 decimals");
     }
     r.approach /= norm;
-    if (!seen.emplace(r.id, i).second) {
-      return Status::BadInput(Where{.file = file, .field = "id"}, "id " + std::to_string(r.id) + " appears twice",
-                              "give every probe point its own id");
+    const auto [it, inserted] = seen.emplace(r.id, r.line);
+    if (!inserted) {
+      return Status::BadInput(
+          Where{.file = file, .line = r.line, .field = "id"},
+          "id " + std::to_string(r.id) + " appears again (first on line " + std::to_string(it->second) + ")",
+          "give every probe point its own id; remove a repeated measurement or renumber it");
     }
     log.records.push_back(r);
   }
   return log;
+}
+
+Result<std::vector<std::int64_t>> CheckProbeLogAgainstPlan(const ProbeLog& log, const ProbingPlan& plan) {
+  std::set<std::int64_t> planned;
+  for (const ProbePoint& p : plan.points) planned.insert(p.id);
+  std::set<std::int64_t> measured;
+  for (const ProbeRecord& r : log.records) {
+    if (planned.count(r.id) == 0) {
+      return Status::BadInput(Where{.file = log.source, .line = r.line, .field = "id"},
+                              "id " + std::to_string(r.id) + " is not in the probing plan (" +
+                                  std::to_string(plan.points.size()) + " planned points)",
+                              "use the log measured with this plan, or the plan the log was measured with");
+    }
+    measured.insert(r.id);
+  }
+  std::vector<std::int64_t> missing;
+  for (const ProbePoint& p : plan.points) {
+    if (measured.count(p.id) == 0) missing.push_back(p.id);
+  }
+  return missing;
 }
 
 Status WriteProbeLog(const std::filesystem::path& path, const ProbeLog& log) {
@@ -103,16 +176,196 @@ Status WriteProbeLog(const std::filesystem::path& path, const ProbeLog& log) {
   return WriteFileAtomic(path, text);
 }
 
+ProbingAngles AnglesOfApproach(const Eigen::Vector3d& approach) {
+  const Eigen::Vector3d d = -approach;
+  ProbingAngles angles;
+  const double horizontal = std::hypot(d.x(), d.y());
+  angles.elevation_rad = std::atan2(d.z(), horizontal);
+  angles.at_pole = horizontal < 1e-9;
+  angles.azimuth_rad = angles.at_pole ? 0.0 : std::atan2(d.y(), d.x());
+  return angles;
+}
+
+PretravelLobing PretravelLobing::Zero(int max_order, int elevation_degree) {
+  PretravelLobing lobing;
+  lobing.max_order = max_order;
+  lobing.elevation_degree = elevation_degree;
+  lobing.cos_mm = Eigen::MatrixXd::Zero(max_order + 1, elevation_degree + 1);
+  lobing.sin_mm = Eigen::MatrixXd::Zero(max_order + 1, elevation_degree + 1);
+  return lobing;
+}
+
+double PretravelLobing::Evaluate(const Eigen::Vector3d& approach) const {
+  if (IsZero()) return 0.0;
+  const ProbingAngles angles = AnglesOfApproach(approach);
+  const double s = std::sin(angles.elevation_rad);
+  double sum = 0;
+  for (int k = 0; k <= max_order; ++k) {
+    if (k > 0 && angles.at_pole) break;
+    const double c = std::cos(k * angles.azimuth_rad), sn = std::sin(k * angles.azimuth_rad);
+    double power = 1;
+    for (int j = 0; j <= elevation_degree; ++j) {
+      sum += power * (cos_mm(k, j) * c + sin_mm(k, j) * sn);
+      power *= s;
+    }
+  }
+  return sum;
+}
+
+double PretravelLobing::BoundMm() const { return cos_mm.cwiseAbs().sum() + sin_mm.cwiseAbs().sum(); }
+
+bool PretravelLobing::IsZero() const { return cos_mm.isZero(0.0) && sin_mm.isZero(0.0); }
+
+Status PretravelLobing::Validate(const std::string& field_prefix) const {
+  if (max_order < 0 || max_order > kMaxOrder) {
+    return Status::BadInput(Where{.field = field_prefix + ".max_order"},
+                            "must be in 0.." + std::to_string(kMaxOrder) + ", got " + std::to_string(max_order));
+  }
+  if (elevation_degree < 0 || elevation_degree > kMaxElevationDegree) {
+    return Status::BadInput(
+        Where{.field = field_prefix + ".elevation_degree"},
+        "must be in 0.." + std::to_string(kMaxElevationDegree) + ", got " + std::to_string(elevation_degree));
+  }
+  for (const auto* m : {&cos_mm, &sin_mm}) {
+    if (m->rows() != max_order + 1 || m->cols() != elevation_degree + 1) {
+      return Status::Internal(field_prefix + ": coefficient matrix is " + std::to_string(m->rows()) + " × " +
+                              std::to_string(m->cols()) + ", expected (max_order + 1) × (elevation_degree + 1)");
+    }
+    if (!m->allFinite()) {
+      return Status::BadInput(Where{.field = field_prefix + ".terms"}, "coefficients must be finite");
+    }
+  }
+  if (!sin_mm.row(0).isZero(0.0)) {
+    return Status::BadInput(Where{.field = field_prefix + ".terms"}, "k = 0 terms have no sine part",
+                            "set sin_mm to 0 for k = 0");
+  }
+  return Status::Ok();
+}
+
 Status ProbeModel::Validate() const {
   if (!(ball_radius_mm > 0)) return Status::BadInput(Where{.field = "probe.ball_radius_mm"}, "must be > 0");
   if (!(std::abs(pretravel_mm) < ball_radius_mm)) {
     return Status::BadInput(Where{.field = "probe.pretravel_mm"}, "must be smaller than the ball radius");
+  }
+  FL_RETURN_IF_ERROR(lobing.Validate());
+  if (!(std::abs(pretravel_mm) + lobing.BoundMm() < ball_radius_mm)) {
+    return Status::BadInput(Where{.field = "probe.lobing"},
+                            "the pretravel can reach the ball radius in some direction (|pretravel| + Σ|coefficients| "
+                            "= " +
+                                FormatFixed(std::abs(pretravel_mm) + lobing.BoundMm(), 6) + " mm)",
+                            "check the units: lobing coefficients are in mm");
   }
   return Status::Ok();
 }
 
 Eigen::Vector3d ContactPoint(const ProbeRecord& record, const ProbeModel& model) {
   return record.centre + model.EffectiveRadius(record.approach) * record.approach;
+}
+
+namespace {
+constexpr const char* kProfileFormat = "formloop probe profile";
+constexpr int kProfileVersion = 1;
+}  // namespace
+
+nlohmann::json ProbeProfileToJson(const ProbeModel& model) {
+  nlohmann::json terms = nlohmann::json::array();
+  for (int k = 0; k <= model.lobing.max_order; ++k) {
+    for (int j = 0; j <= model.lobing.elevation_degree; ++j) {
+      const double c = model.lobing.cos_mm(k, j), s = model.lobing.sin_mm(k, j);
+      if (c == 0 && s == 0) continue;
+      terms.push_back({{"k", k}, {"j", j}, {"cos_mm", c}, {"sin_mm", s}});
+    }
+  }
+  return {{"format", kProfileFormat},
+          {"version", kProfileVersion},
+          {"ball_radius_mm", model.ball_radius_mm},
+          {"pretravel_mm", model.pretravel_mm},
+          {"lobing",
+           {{"max_order", model.lobing.max_order},
+            {"elevation_degree", model.lobing.elevation_degree},
+            {"angles",
+             "theta = atan2(-ay, -ax), sin(phi) = -az; delta = pretravel_mm + sum_kj "
+             "sin(phi)^j (cos_mm cos(k theta) + sin_mm sin(k theta))"},
+            {"terms", terms}}}};
+}
+
+Result<ProbeModel> ProbeProfileFromJson(const nlohmann::json& json, const std::string& source) {
+  JsonFields f(json, source);
+  FL_RETURN_IF_ERROR(f.CheckKnown({"format", "version", "ball_radius_mm", "pretravel_mm", "lobing", "calibration"}));
+  std::string format;
+  FL_RETURN_IF_ERROR(f.String("format", &format));
+  if (format != kProfileFormat) {
+    return Status::BadInput(Where{.file = source, .field = "format"},
+                            "is '" + format + "', not '" + kProfileFormat + "'",
+                            "pass a probe profile written by `formloop calibrate sphere`");
+  }
+  long long version = 0;
+  FL_RETURN_IF_ERROR(f.Integer("version", &version));
+  if (version != kProfileVersion) {
+    return Status::BadInput(Where{.file = source, .field = "version"},
+                            "version " + std::to_string(version) + " is not supported (this formloop reads " +
+                                std::to_string(kProfileVersion) + ")",
+                            "recalibrate with this formloop");
+  }
+  ProbeModel model;
+  FL_RETURN_IF_ERROR(f.Number("ball_radius_mm", &model.ball_radius_mm, {.min = 0, .exclusive_min = true}));
+  FL_RETURN_IF_ERROR(f.Number("pretravel_mm", &model.pretravel_mm));
+  std::optional<JsonFields> lobing_fields;
+  FL_RETURN_IF_ERROR(f.Object("lobing", &lobing_fields));
+  if (lobing_fields) {
+    const JsonFields& l = *lobing_fields;
+    FL_RETURN_IF_ERROR(l.CheckKnown({"max_order", "elevation_degree", "angles", "terms"}));
+    long long order = 0, degree = 0;
+    FL_RETURN_IF_ERROR(l.Integer("max_order", &order, 0, PretravelLobing::kMaxOrder));
+    FL_RETURN_IF_ERROR(l.Integer("elevation_degree", &degree, 0, PretravelLobing::kMaxElevationDegree));
+    model.lobing = PretravelLobing::Zero(static_cast<int>(order), static_cast<int>(degree));
+    if (l.Has("terms")) {
+      const nlohmann::json& terms = l.json().at("terms");
+      if (!terms.is_array()) {
+        return Status::BadInput(Where{.file = source, .field = l.Path("terms")}, "must be an array",
+                                "write [{\"k\": 3, \"j\": 0, \"cos_mm\": ..., \"sin_mm\": ...}, ...]");
+      }
+      std::set<std::pair<long long, long long>> seen;
+      for (std::size_t t = 0; t < terms.size(); ++t) {
+        const std::string prefix = l.Path("terms") + "[" + std::to_string(t) + "].";
+        JsonFields term(terms[t], source, prefix);
+        FL_RETURN_IF_ERROR(term.CheckKnown({"k", "j", "cos_mm", "sin_mm", "cos_se_mm", "sin_se_mm"}));
+        long long k = 0, j = 0;
+        FL_RETURN_IF_ERROR(term.Integer("k", &k, 0, order));
+        FL_RETURN_IF_ERROR(term.Integer("j", &j, 0, degree));
+        if (!seen.emplace(k, j).second) {
+          return Status::BadInput(Where{.file = source, .field = prefix + "k"},
+                                  "term k = " + std::to_string(k) + ", j = " + std::to_string(j) + " appears twice",
+                                  "give each (k, j) once");
+        }
+        double c = 0, s = 0;
+        FL_RETURN_IF_ERROR(term.Number("cos_mm", &c));
+        FL_RETURN_IF_ERROR(term.OptionalNumber("sin_mm", &s));
+        if (k == 0 && s != 0) {
+          return Status::BadInput(Where{.file = source, .field = prefix + "sin_mm"}, "k = 0 terms have no sine part",
+                                  "remove sin_mm or set it to 0");
+        }
+        model.lobing.cos_mm(k, j) = c;
+        model.lobing.sin_mm(k, j) = s;
+      }
+    }
+  }
+  Status valid = model.Validate();
+  if (!valid.ok()) return valid.WithContext(source);
+  return model;
+}
+
+Status WriteProbeProfile(const std::filesystem::path& path, const ProbeModel& model,
+                         const nlohmann::json& calibration) {
+  FL_RETURN_IF_ERROR(model.Validate());
+  nlohmann::json json = ProbeProfileToJson(model);
+  if (!calibration.is_null()) json["calibration"] = calibration;
+  return WriteJsonFile(path, json);
+}
+
+Result<ProbeModel> ReadProbeProfile(const std::filesystem::path& path) {
+  FL_ASSIGN_OR_RETURN(const nlohmann::json json, ReadJsonFile(path));
+  return ProbeProfileFromJson(json, path.string());
 }
 
 }  // namespace formloop::metrology

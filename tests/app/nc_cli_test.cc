@@ -74,6 +74,19 @@ TEST_F(NcCliTest, ProbingProgramsNameEveryPoint) {
           << dialect << " misses point " << id;
     }
   }
+  // A curvature-weighted plan of 15 points: every id in the program; a bad weight is refused by name.
+  const std::string weighted = Path("weighted.ngc");
+  ASSERT_EQ(Run("nc probe --surface " + Path("Q.step") + " --count 15 --curvature-weight 2 --out " + weighted), 0)
+      << err_;
+  const std::string text = ReadFile(weighted).value();
+  for (int id = 1; id <= 15; ++id) {
+    EXPECT_NE(text.find("point " + std::to_string(id) + ")"), std::string::npos) << "misses point " << id;
+  }
+  EXPECT_EQ(Run("nc probe --surface " + Path("Q.step") + " --count 15 --curvature-weight -1 --out " +
+                Path("bad.ngc")),
+            2);
+  EXPECT_NE(err_.find("curvature_weight"), std::string::npos) << err_;
+  EXPECT_FALSE(fs::exists(dir_ / "bad.ngc"));
 }
 
 TEST_F(NcCliTest, LimitsAndBadOptionsAreRefusedWithNothingWritten) {
@@ -176,6 +189,36 @@ TEST_F(NcCliTest, ToolpathFilePostsAndCompensatesInSeparateSteps) {
   EXPECT_EQ(Run("nc post --toolpath " + Path("bad.csv") + " --out " + Path("bad.ngc")), 2);
   EXPECT_NE(err_.find("bad.csv:" + std::to_string(line) + ": field 'kind'"), std::string::npos) << err_;
   EXPECT_FALSE(fs::exists(dir_ / "bad.ngc"));
+}
+
+// The pipeline in another controller's dialect at another raster angle: programs carry the dialect's
+// extension, the compensated program passes `nc check` in that dialect, and an unknown dialect is
+// refused naming the field.
+TEST_F(NcCliTest, RunPostsInThePartsDialectAndRasterAngle) {
+  auto part = ReadJsonFile(std::string(FORMLOOP_SOURCE_DIR) + "/data/parts/demo-saddle.json");
+  ASSERT_TRUE(part.ok());
+  (*part)["machine"]["dialect"] = "heidenhain";
+  (*part)["toolpath"]["raster_angle_deg"] = 45;
+  ASSERT_TRUE(WriteJsonFile(dir_ / "part.json", *part).ok());
+  const fs::path run = dir_ / "run";
+  ASSERT_EQ(Run("run " + Path("part.json") + " --out " + run.string()), 0) << err_;
+  EXPECT_TRUE(fs::exists(run / "toolpath" / "program.h"));
+  EXPECT_TRUE(fs::exists(run / "toolpath" / "probe.h"));
+  EXPECT_TRUE(fs::exists(run / "toolpath" / "toolpath.csv"));
+  const auto toolpath = ReadJsonFile(run / "toolpath" / "toolpath.json");
+  ASSERT_TRUE(toolpath.ok());
+  EXPECT_EQ((*toolpath)["raster_angle_deg"].get<double>(), 45.0);
+  ASSERT_TRUE(fs::exists(run / "loop-0" / "program_compensated.h")) << "the demo compensates after loop 0";
+  EXPECT_EQ(Run("nc check --dialect heidenhain --nominal " + (run / "toolpath" / "program.h").string() +
+                " --compensated " + (run / "loop-0" / "program_compensated.h").string() + " --side " +
+                (run / "loop-0" / "compensation_side.csv").string()),
+            0)
+      << err_;
+
+  (*part)["machine"]["dialect"] = "haas";
+  ASSERT_TRUE(WriteJsonFile(dir_ / "bad.json", *part).ok());
+  EXPECT_EQ(Run("run " + Path("bad.json") + " --out " + (dir_ / "bad").string()), 2);
+  EXPECT_NE(err_.find("machine.dialect"), std::string::npos) << err_;
 }
 
 }  // namespace
