@@ -128,24 +128,43 @@ Result<ThinQr> OrthonormalBasis(const Eigen::MatrixXd& x, const Eigen::VectorXd&
   return out;
 }
 
+// The common start of global and local Moran: sizes and permutation count checked, islands resolved by
+// the policy, the kept values centred (z = y − ȳ, Σz²), constant values refused.
+struct CentredValues {
+  IslandResolution resolved;
+  Eigen::VectorXd z;
+  double sum_z2 = 0;
+};
+
+Result<CentredValues> CentreValues(const Eigen::VectorXd& values, const SpatialWeights& weights, IslandPolicy islands,
+                                   int permutations, const std::string& what) {
+  FL_RETURN_IF_ERROR(CheckSize(weights, values.size()));
+  if (permutations < 0) {
+    return Status::BadInput(Where{.field = "permutations"}, "must be >= 0", "use e.g. 999, or 0 for none");
+  }
+  CentredValues out;
+  FL_ASSIGN_OR_RETURN(out.resolved, ResolveIslands(weights, islands));
+  const Eigen::VectorXd y = out.resolved.dropped.empty() ? values : SelectRows(values, out.resolved.kept);
+  FL_RETURN_IF_ERROR(CheckCount(y.size()));
+  out.z = y.array() - y.mean();
+  out.sum_z2 = out.z.squaredNorm();
+  if (!(out.sum_z2 > 0)) return Status::BadInput(what + ": all values are equal; spatial correlation is undefined");
+  return out;
+}
+
 }  // namespace
 
 double NormalUpperTail(double z) { return 0.5 * std::erfc(z / std::sqrt(2.0)); }
 
 Result<MoranResult> MoranI(const Eigen::VectorXd& values, const SpatialWeights& weights, const MoranOptions& options) {
-  FL_RETURN_IF_ERROR(CheckSize(weights, values.size()));
-  if (options.permutations < 0) {
-    return Status::BadInput(Where{.field = "permutations"}, "must be >= 0", "use e.g. 999, or 0 for none");
-  }
-  FL_ASSIGN_OR_RETURN(const IslandResolution resolved, ResolveIslands(weights, options.islands));
-  const Eigen::VectorXd y = resolved.dropped.empty() ? values : SelectRows(values, resolved.kept);
+  FL_ASSIGN_OR_RETURN(const CentredValues centred,
+                      CentreValues(values, weights, options.islands, options.permutations, "Moran's I"));
+  const IslandResolution& resolved = centred.resolved;
   const RowSparse& w = resolved.weights.w;
-  const long n_long = y.size();
-  FL_RETURN_IF_ERROR(CheckCount(n_long));
+  const long n_long = centred.z.size();
   const double n = static_cast<double>(n_long);
-  const Eigen::VectorXd z = y.array() - y.mean();
-  const double m2 = z.squaredNorm();
-  if (!(m2 > 0)) return Status::BadInput("Moran's I: all values are equal; spatial correlation is undefined");
+  const Eigen::VectorXd& z = centred.z;
+  const double m2 = centred.sum_z2;
   const WeightSums s = ComputeSums(w);
   if (!(s.s0 > 0)) return Status::BadInput("Moran's I: the weights have no neighbour pairs (S0 = 0)");
   MoranResult r;
@@ -280,22 +299,17 @@ const char* LisaClusterName(LisaCluster cluster) {
 
 Result<LocalMoranResult> LocalMoranI(const Eigen::VectorXd& values, const SpatialWeights& weights,
                                      const LocalMoranOptions& options) {
-  FL_RETURN_IF_ERROR(CheckSize(weights, values.size()));
-  if (options.permutations < 0) {
-    return Status::BadInput(Where{.field = "permutations"}, "must be >= 0", "use e.g. 999, or 0 for none");
-  }
   if (!(options.alpha > 0 && options.alpha < 1)) {
     return Status::BadInput(Where{.field = "alpha"}, "the significance level must be in (0, 1)", "use e.g. 0.05");
   }
-  FL_ASSIGN_OR_RETURN(const IslandResolution resolved, ResolveIslands(weights, options.islands));
-  const Eigen::VectorXd y = resolved.dropped.empty() ? values : SelectRows(values, resolved.kept);
+  FL_ASSIGN_OR_RETURN(const CentredValues centred,
+                      CentreValues(values, weights, options.islands, options.permutations, "local Moran"));
+  const IslandResolution& resolved = centred.resolved;
   const RowSparse& w = resolved.weights.w;
-  const long n_long = y.size();
-  FL_RETURN_IF_ERROR(CheckCount(n_long));
+  const long n_long = centred.z.size();
   const double n = static_cast<double>(n_long);
-  const Eigen::VectorXd z = y.array() - y.mean();
-  const double sum_z2 = z.squaredNorm();
-  if (!(sum_z2 > 0)) return Status::BadInput("local Moran: all values are equal; spatial correlation is undefined");
+  const Eigen::VectorXd& z = centred.z;
+  const double sum_z2 = centred.sum_z2;
   const double c = (n - 1.0) / sum_z2;
 
   const long rows = values.size();

@@ -549,17 +549,8 @@ Result<Toolpath> PlanRaster(const recon::BSplineSurface& surface, const Toolpath
         }
       }
       for (std::size_t i = 0; i < points.size(); ++i) {
-        ClPoint& cl = points[i];
-        cl.index_in_pass = static_cast<int>(i);
-        if (cl.lift_mm > 0) {
-          if (path.lifted_points == 0) path.lifted_box_min = path.lifted_box_max = cl.cc;
-          path.lifted_box_min = path.lifted_box_min.cwiseMin(cl.cc);
-          path.lifted_box_max = path.lifted_box_max.cwiseMax(cl.cc);
-          path.max_lift_mm = std::max(path.max_lift_mm, cl.lift_mm);
-          path.lifted_indices.push_back(static_cast<int>(path.points.size()));
-          ++path.lifted_points;
-        }
-        path.points.push_back(cl);
+        points[i].index_in_pass = static_cast<int>(i);
+        path.points.push_back(points[i]);
       }
       ++pass;
     }
@@ -580,8 +571,26 @@ Result<Toolpath> PlanRaster(const recon::BSplineSurface& surface, const Toolpath
   }
   path.passes = pass;
   if (path.points.empty()) return Status::Internal("PlanRaster: no section plane met Q");
+  SummariseLifted(&path);
   UpdateCutterLocations(&path);
   return path;
+}
+
+void SummariseLifted(Toolpath* path) {
+  path->lifted_points = 0;
+  path->lifted_indices.clear();
+  path->max_lift_mm = 0;
+  path->lifted_box_min = path->lifted_box_max = Eigen::Vector3d::Zero();
+  for (std::size_t k = 0; k < path->points.size(); ++k) {
+    const ClPoint& cl = path->points[k];
+    if (!(cl.lift_mm > 0)) continue;
+    if (path->lifted_points == 0) path->lifted_box_min = path->lifted_box_max = cl.cc;
+    path->lifted_box_min = path->lifted_box_min.cwiseMin(cl.cc);
+    path->lifted_box_max = path->lifted_box_max.cwiseMax(cl.cc);
+    path->max_lift_mm = std::max(path->max_lift_mm, cl.lift_mm);
+    path->lifted_indices.push_back(static_cast<int>(k));
+    ++path->lifted_points;
+  }
 }
 
 void UpdateCutterLocations(Toolpath* path) {

@@ -105,4 +105,7 @@ Result<Toolpath> PlanRaster(const recon::BSplineSurface& surface, const Toolpath
 // Recomputes centre, tip, path length and time after the CC points moved (compensation).
 void UpdateCutterLocations(Toolpath* path);
 
+// Rebuilds lifted_points, lifted_indices, the lifted box and max_lift_mm from the points' lift_mm.
+void SummariseLifted(Toolpath* path);
+
 }  // namespace formloop::nc

@@ -182,14 +182,6 @@ Result<Toolpath> ParseToolpath(const std::string& text, const std::string& sourc
     }
     cl.index_in_pass = (cl.pass == last_pass) ? t.points.back().index_in_pass + 1 : 0;
     last_pass = cl.pass;
-    if (cl.lift_mm > 0) {
-      if (t.lifted_points == 0) t.lifted_box_min = t.lifted_box_max = cl.cc;
-      t.lifted_box_min = t.lifted_box_min.cwiseMin(cl.cc);
-      t.lifted_box_max = t.lifted_box_max.cwiseMax(cl.cc);
-      t.max_lift_mm = std::max(t.max_lift_mm, cl.lift_mm);
-      t.lifted_indices.push_back(static_cast<int>(t.points.size()));
-      ++t.lifted_points;
-    }
     t.points.push_back(cl);
   }
   if (!have_options) {
@@ -199,6 +191,7 @@ Result<Toolpath> ParseToolpath(const std::string& text, const std::string& sourc
   if (columns == 0) return Status::BadInput(Where{.file = source}, "no header row");
   if (t.points.empty()) return Status::BadInput(Where{.file = source}, "no CL points");
   t.passes = last_pass + 1;
+  SummariseLifted(&t);
   UpdateCutterLocations(&t);
   return t;
 }

@@ -17,6 +17,7 @@
 #include "nc-gen/moves.h"
 #include "nc-gen/post.h"
 #include "nc-gen/toolpath.h"
+#include "tests/support/golden.h"
 #include "tests/support/locale.h"
 
 namespace formloop::nc {
@@ -54,16 +55,8 @@ PostOptions GoldenOptions() {
   return o;
 }
 
-std::filesystem::path GoldenPath(const std::string& dialect) {
-  return std::filesystem::path(FORMLOOP_SOURCE_DIR) / "tests" / "nc-gen" / "golden" /
-         ("small_" + dialect + std::string(FindPost(dialect)->FileExtension()));
-}
-
-// The golden file's text, or "" when it is missing (the comparison then fails and says so).
-std::string ReadText(const std::filesystem::path& path) {
-  auto text = ReadFile(path);
-  return text.ok() ? *text : std::string();
-}
+std::filesystem::path GoldenPath(const std::string& dialect) { return testing::GoldenPath("small", dialect); }
+using testing::ReadGoldenText;
 
 using formloop::testing::CommaNumpunct;
 using formloop::testing::GlobalLocale;
@@ -106,7 +99,7 @@ TEST_P(DialectTest, MatchesTheGoldenFileByteForByte) {
     GTEST_SKIP() << "rewrote " << golden;
   }
   ASSERT_TRUE(std::filesystem::exists(golden)) << golden;
-  EXPECT_EQ(*text, ReadText(golden)) << "output of the " << GetParam() << " post changed";
+  EXPECT_EQ(*text, ReadGoldenText(golden)) << "output of the " << GetParam() << " post changed";
 }
 
 TEST_P(DialectTest, ReaderRecoversTheMovesToThePrintedPrecision) {

@@ -21,6 +21,7 @@
 #include "metrology/probe.h"
 #include "nc-gen/post.h"
 #include "nc-gen/probe_program.h"
+#include "tests/support/golden.h"
 #include "tests/support/locale.h"
 
 namespace formloop::nc {
@@ -54,16 +55,8 @@ ProbeProgramOptions GoldenOptions() {
   return o;
 }
 
-std::filesystem::path GoldenPath(const std::string& dialect) {
-  return std::filesystem::path(FORMLOOP_SOURCE_DIR) / "tests" / "nc-gen" / "golden" /
-         ("probe_small_" + dialect + std::string(FindPost(dialect)->FileExtension()));
-}
-
-// The golden file's text, or "" when it is missing (the comparison then fails and says so).
-std::string ReadText(const std::filesystem::path& path) {
-  auto text = ReadFile(path);
-  return text.ok() ? *text : std::string();
-}
+std::filesystem::path GoldenPath(const std::string& dialect) { return testing::GoldenPath("probe_small", dialect); }
+using testing::ReadGoldenText;
 
 // Occurrences of the word pair "point <id>", case-insensitive ("point 17" is not "point 1", and the
 // Heidenhain parameter text "1ST POINT 1ST AXIS" is not "point 1").
@@ -104,7 +97,7 @@ TEST_P(ProbeDialectTest, MatchesTheGoldenFileByteForByte) {
     GTEST_SKIP() << "rewrote " << golden;
   }
   ASSERT_TRUE(std::filesystem::exists(golden)) << golden;
-  EXPECT_EQ(*text, ReadText(golden)) << "output of the " << GetParam() << " probing post changed";
+  EXPECT_EQ(*text, ReadGoldenText(golden)) << "output of the " << GetParam() << " probing post changed";
 }
 
 TEST_P(ProbeDialectTest, CommaDecimalLocaleGivesTheSameProgram) {

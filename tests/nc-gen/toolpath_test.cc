@@ -6,12 +6,17 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
+#include <sstream>
 #include <string>
 #include <vector>
+
+#include <unistd.h>
 
 #include <gtest/gtest.h>
 
 #include "nc-gen/toolpath.h"
+#include "nc-gen/toolpath_io.h"
 #include "reconstruction/analytic_surface.h"
 #include "reconstruction/bspline_surface.h"
 #include "tests/support/swept_ball.h"
@@ -143,6 +148,26 @@ TEST(ToolpathGougeTest, ConcaveBowlBelowTheBallRadiusIsLiftedFlaggedAndNotGouged
   EXPECT_LE(c.max_gouge_um, 1.0);
   const nlohmann::json j = path->ReportJson();
   EXPECT_EQ(j.at("lifted_points").get<int>(), path->lifted_points);
+
+  // The tool-path file keeps every CL point exactly and rebuilds the lifted region from lift_mm.
+  std::ostringstream name;
+  name << "formloop-bowl-" << ::getpid() << ".csv";
+  const std::filesystem::path file = std::filesystem::temp_directory_path() / name.str();
+  ASSERT_TRUE(WriteToolpathFile(file, *path).ok());
+  const auto back = ReadToolpathFile(file);
+  std::filesystem::remove(file);
+  ASSERT_TRUE(back.ok()) << back.status().message();
+  ASSERT_EQ(back->points.size(), path->points.size());
+  for (std::size_t k = 0; k < path->points.size(); ++k) {
+    ASSERT_EQ(back->points[k].tip, path->points[k].tip) << k;
+    ASSERT_EQ(back->points[k].kind, path->points[k].kind) << k;
+  }
+  EXPECT_EQ(back->lifted_indices, path->lifted_indices);
+  EXPECT_EQ(back->max_lift_mm, path->max_lift_mm);
+  EXPECT_EQ(back->lifted_box_min, path->lifted_box_min);
+  EXPECT_EQ(back->lifted_box_max, path->lifted_box_max);
+  EXPECT_EQ(back->passes, path->passes);
+  EXPECT_EQ(back->safe_z_mm, path->safe_z_mm);
 }
 
 // Section planes at other raster angles, zig-zag and one-way: the same independent scallop/gouge check,
@@ -221,8 +246,8 @@ INSTANTIATE_TEST_SUITE_P(Angles, RasterAngleTest,
                          ::testing::Values(AngleCase{"franke", 30, true}, AngleCase{"saddle", 45, false},
                                            AngleCase{"blade", 90, true}, AngleCase{"tilted_paraboloid", 60, true},
                                            AngleCase{"sphere_cap", 135, false}, AngleCase{"egg_box", -20, true}),
-                         [](const ::testing::TestParamInfo<AngleCase>& info) {
-                           return info.param.surface + "_" + std::to_string(static_cast<int>(info.index));
+                         [](const ::testing::TestParamInfo<AngleCase>& case_info) {
+                           return case_info.param.surface + "_" + std::to_string(static_cast<int>(case_info.index));
                          });
 
 TEST(ToolpathOptionsTest, BadRasterAngleAndLeadAreRefusedNamingTheField) {
