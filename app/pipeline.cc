@@ -166,6 +166,11 @@ Status RunStages(const PartSpec& part, const fs::path& dir, RunSummary* summary)
     FL_RETURN_IF_ERROR(WritePoints(loop_dir / "deviations.csv", points, {.precision = 6}));
     FL_RETURN_IF_ERROR(WritePoints(loop_dir / "deviations.ply", points));
 
+    // The decision is the §8 evaluation of the decomposition against the part's tolerance.
+    FL_ASSIGN_OR_RETURN(const metrology::FormEvaluation evaluation,
+                        metrology::EvaluateForm(decomposition, part.tolerance_mm));
+    const metrology::DecompositionStep& chosen =
+        decomposition.steps[static_cast<std::size_t>(decomposition.chosen_step)];
     LoopSummary ls;
     ls.index = loop;
     ls.form_error_um = decomposition.form_error_um;
@@ -173,31 +178,41 @@ Status RunStages(const PartSpec& part, const fs::path& dir, RunSummary* summary)
     ls.random_sigma_um = decomposition.random_sigma_um;
     ls.raw_moran_z = decomposition.raw.z_normality;
     ls.field_degree = decomposition.systematic.degree();
-    ls.within_tolerance = decomposition.form_error_um <= part.tolerance_mm * 1e3;
+    ls.within_tolerance = evaluation.within_tolerance;
+    ls.chosen_model = decomposition.systematic.name();
+    ls.residual_moran_z = chosen.residual_moran_z;
+    ls.residual_independent = decomposition.independent;
+    ls.systematic_significant = evaluation.systematic_significant;
+    ls.compensation_advised = evaluation.compensate;
     nlohmann::json analysis = decomposition.ToJson();
     analysis["tolerance_um"] = part.tolerance_mm * 1e3;
     analysis["within_tolerance"] = ls.within_tolerance;
-    log::Info("      deviation rms {:.2f} um; Moran z {:.2f} ({}); d_s {} peak {:.2f} um; sigma(d_u) {:.2f} um;"
-              " form error {:.2f} um vs tolerance {:.1f} um",
-              decomposition.deviation_rms_um, decomposition.raw.z_normality,
-              decomposition.raw.z_normality > metrology::kMoranZCritical ? "systematic" : "random",
-              decomposition.systematic.name(), decomposition.systematic_peak_um, decomposition.random_sigma_um,
-              decomposition.form_error_um, part.tolerance_mm * 1e3);
+    analysis["evaluation"] = evaluation.ToJson();
+    log::Info("      deviation rms {:.2f} um; raw Moran z {:.2f}; model {} (residual z {:.2f}, {}); d_s peak {:.2f} um;"
+              " sigma(d_u) {:.2f} um; form error {:.2f} um vs tolerance {:.1f} um",
+              decomposition.deviation_rms_um, decomposition.raw.z_normality, ls.chosen_model, ls.residual_moran_z,
+              ls.residual_independent ? "independent" : "still correlated", decomposition.systematic_peak_um,
+              decomposition.random_sigma_um, decomposition.form_error_um, part.tolerance_mm * 1e3);
 
-    std::string decision;
+    const bool compensate = evaluation.compensate && loop + 1 < part.max_loops;
     if (ls.within_tolerance) {
-      decision = "within tolerance: done";
-    } else if (decomposition.raw.z_normality <= metrology::kMoranZCritical) {
-      decision = "out of tolerance but the error is spatially random: compensation cannot help";
-    } else if (loop + 1 >= part.max_loops) {
-      decision = "out of tolerance after the last allowed loop";
+      ls.decision = "within tolerance: done";
+    } else if (!evaluation.compensate) {
+      ls.decision = "out of tolerance but the error is random (constant model, offset not significant): "
+                    "compensation cannot help";
+    } else if (!compensate) {
+      ls.decision = "out of tolerance after the last allowed loop (" + evaluation.decision + ")";
     } else {
-      decision = "out of tolerance with a systematic error: compensate";
+      ls.decision = evaluation.decision;
     }
-    analysis["decision"] = decision;
+    analysis["decision"] = ls.decision;
+    analysis["compensate"] = compensate;
+    analysis["decision_rule"] =
+        "the decomposition's evaluation (spec/metrology.md §8): compensate by -d_s when the form error "
+        "max|d_s| + k*sigma(d_u) exceeds the tolerance and d_s is significant (a non-constant model chosen by the "
+        "residual-Moran ladder, or |mean| > 2.576 standard errors), while another loop is allowed";
+    log::Info("      decision: {}", ls.decision);
     FL_RETURN_IF_ERROR(WriteJsonFile(loop_dir / "analysis.json", analysis));
-    const bool compensate = !ls.within_tolerance && decomposition.raw.z_normality > metrology::kMoranZCritical &&
-                            loop + 1 < part.max_loops;
     if (compensate) {
       field.terms.push_back(decomposition.systematic);
       const std::string source = "sum of systematic fields of loops 0.." + std::to_string(loop);
@@ -249,7 +264,13 @@ nlohmann::json RunSummary::ToJson() const {
                           {"raw_moran_z", l.raw_moran_z},
                           {"systematic_field_degree", l.field_degree},
                           {"within_tolerance", l.within_tolerance},
-                          {"compensated_after", l.compensated}});
+                          {"compensated_after", l.compensated},
+                          {"chosen_model", l.chosen_model},
+                          {"residual_moran_z", l.residual_moran_z},
+                          {"residual_independent", l.residual_independent},
+                          {"systematic_significant", l.systematic_significant},
+                          {"compensation_advised", l.compensation_advised},
+                          {"decision", l.decision}});
   }
   return {{"formloop_version", kVersion},
           {"part", part},

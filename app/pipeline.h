@@ -28,15 +28,25 @@ struct RunOptions {
   std::string part_source;        // path of the part file, recorded in the summary
 };
 
+// One loop of the run. The compensation decision is the §8 evaluation of the decomposition
+// (metrology::EvaluateForm, spec/metrology.md §7–§8): compensate when the form error exceeds the
+// tolerance and d_s is significant (a non-constant model was chosen, or a constant offset beyond
+// 2.576 standard errors), and a further loop is allowed. The raw Moran z is reported, not decided on.
 struct LoopSummary {
   int index = 0;
   double form_error_um = 0;
   double systematic_peak_um = 0;
   double random_sigma_um = 0;
-  double raw_moran_z = 0;
+  double raw_moran_z = 0;         // Moran z of the deviations themselves (reported only)
   int field_degree = 0;
   bool within_tolerance = false;
   bool compensated = false;       // a compensated program was written after this loop
+  std::string chosen_model;       // the decomposition's chosen model ("constant", "plane", "bspline 6x6", ...)
+  double residual_moran_z = 0;    // residual Moran z (Cliff–Ord) of the chosen model
+  bool residual_independent = false;  // residual_moran_z <= 2.326
+  bool systematic_significant = false;  // from the §8 evaluation
+  bool compensation_advised = false;    // the §8 evaluation's decision (before the loop limit)
+  std::string decision;                 // one sentence: what the loop decided and why
 };
 
 struct RunSummary {

@@ -109,12 +109,19 @@ Eigen::MatrixXd DifferencePenalty(int net) {
   return penalty;
 }
 
-// Spatial block CV error (RMS of held-out residuals over all points) of a model given its rows.
-// fold[i] ∈ [0, folds). +inf when a training fit cannot be solved.
-double BlockCvRms(const Rows& rows, const Eigen::VectorXd& y, const std::vector<int>& fold, int folds, int p,
-                  const Eigen::MatrixXd* penalty) {
+// Spatial block CV of a model given its rows: the held-out squared error of every point and their
+// RMS. fold[i] ∈ [0, folds). rms = +inf (and squared errors empty) when a training fit cannot be solved.
+struct CvErrors {
+  double rms = std::numeric_limits<double>::infinity();
+  std::vector<double> squared;  // (y_i − ŷ_i)², ŷ_i from the fit without point i's fold
+};
+
+CvErrors BlockCv(const Rows& rows, const Eigen::VectorXd& y, const std::vector<int>& fold, int folds, int p,
+                 const Eigen::MatrixXd* penalty) {
   const int n = static_cast<int>(y.size());
   const auto nnz = static_cast<std::size_t>(rows.nnz);
+  CvErrors out;
+  std::vector<double> squared(static_cast<std::size_t>(n), 0.0);
   double sse = 0;
   int held = 0;
   for (int f = 0; f < folds; ++f) {
@@ -136,29 +143,75 @@ double BlockCvRms(const Rows& rows, const Eigen::VectorXd& y, const std::vector<
       }
     }
     if (testing == 0) continue;
-    if (training < p && penalty == nullptr) return std::numeric_limits<double>::infinity();
+    if (training < p && penalty == nullptr) return out;
     if (penalty != nullptr) gram += kCvPenalty * gram.trace() / penalty->trace() * *penalty;
     const Eigen::LLT<Eigen::MatrixXd> llt(gram);
-    if (llt.info() != Eigen::Success) return std::numeric_limits<double>::infinity();
+    if (llt.info() != Eigen::Success) return out;
     const Eigen::VectorXd c = llt.solve(rhs);
-    if (!c.allFinite()) return std::numeric_limits<double>::infinity();
+    if (!c.allFinite()) return out;
     for (int i = 0; i < n; ++i) {
       if (fold[static_cast<std::size_t>(i)] != f) continue;
       const std::size_t base = static_cast<std::size_t>(i) * nnz;
       double prediction = 0;
       for (std::size_t a = 0; a < nnz; ++a) prediction += rows.value[base + a] * c[rows.index[base + a]];
-      sse += (y[i] - prediction) * (y[i] - prediction);
+      squared[static_cast<std::size_t>(i)] = (y[i] - prediction) * (y[i] - prediction);
+      sse += squared[static_cast<std::size_t>(i)];
       ++held;
     }
   }
-  return held == 0 ? std::numeric_limits<double>::infinity() : std::sqrt(sse / held);
+  if (held == 0) return out;
+  out.rms = std::sqrt(sse / held);
+  out.squared = std::move(squared);
+  return out;
+}
+
+// Paired comparison of two models' held-out errors (richer minus current), in mean square over the
+// points: the difference Δ = (Σ_i e²_rich,i − Σ_i e²_cur,i) / n and its standard error from the
+// spread of the per-unit sums D_u = Σ_{i ∈ u} (e²_rich,i − e²_cur,i) over the units u (CV blocks or
+// folds) that hold points: SE(Δ) = √(U/(U − 1) · Σ_u (D_u − D̄)²) / n. The units are treated as
+// independent replicates, as in the one-standard-error rule of Breiman et al. (1984, Classification
+// and Regression Trees, §3.4.3) and Hastie, Tibshirani & Friedman (2009, Elements of Statistical
+// Learning, §7.10).
+struct PairedCvDifference {
+  double difference = 0;  // Δ, mm²
+  double standard_error = 0;
+};
+
+PairedCvDifference ComparePaired(const CvErrors& rich, const CvErrors& current, const std::vector<int>& unit,
+                                 int units) {
+  PairedCvDifference out;
+  if (rich.squared.empty() || current.squared.empty()) {
+    out.difference = std::numeric_limits<double>::infinity();
+    return out;
+  }
+  const std::size_t n = rich.squared.size();
+  std::vector<double> sum(static_cast<std::size_t>(units), 0.0);
+  std::vector<int> count(static_cast<std::size_t>(units), 0);
+  double total = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double d = rich.squared[i] - current.squared[i];
+    sum[static_cast<std::size_t>(unit[i])] += d;
+    ++count[static_cast<std::size_t>(unit[i])];
+    total += d;
+  }
+  int used = 0;
+  for (int c : count) used += c > 0 ? 1 : 0;
+  const double mean = total / std::max(1, used);
+  double spread = 0;
+  for (std::size_t k = 0; k < sum.size(); ++k) {
+    if (count[k] > 0) spread += (sum[k] - mean) * (sum[k] - mean);
+  }
+  out.difference = total / static_cast<double>(n);
+  out.standard_error = used > 1 ? std::sqrt(used / (used - 1.0) * spread) / static_cast<double>(n) : 0.0;
+  return out;
 }
 
 // Blocks of the points' bounding box dealt to folds; returns the fold of each point. The blocks are
 // visited in a seeded random order and each goes to the least-filled fold not already used by one of
 // its 8 neighbouring blocks (ties broken at random), so a held-out region is one block wide wherever
 // the fold count allows (with fewer than 9 folds a block may have to share a fold with a neighbour).
-std::vector<int> AssignFolds(const Eigen::MatrixXd& uv, int blocks, int folds, std::uint64_t seed) {
+std::vector<int> AssignFolds(const Eigen::MatrixXd& uv, int blocks, int folds, std::uint64_t seed,
+                             std::vector<int>* block_of_point) {
   const Eigen::Vector2d lo = uv.rowwise().minCoeff(), hi = uv.rowwise().maxCoeff();
   std::vector<int> order(static_cast<std::size_t>(blocks * blocks));
   std::iota(order.begin(), order.end(), 0);
@@ -198,9 +251,11 @@ std::vector<int> AssignFolds(const Eigen::MatrixXd& uv, int blocks, int folds, s
     return std::clamp(static_cast<int>(std::floor((x - a) / (c - a) * blocks)), 0, blocks - 1);
   };
   std::vector<int> fold(static_cast<std::size_t>(uv.cols()));
+  block_of_point->resize(static_cast<std::size_t>(uv.cols()));
   for (Eigen::Index i = 0; i < uv.cols(); ++i) {
     const int bu = cell(uv(0, i), lo[0], hi[0]), bv = cell(uv(1, i), lo[1], hi[1]);
     fold[static_cast<std::size_t>(i)] = block_fold[static_cast<std::size_t>(bu * blocks + bv)];
+    (*block_of_point)[static_cast<std::size_t>(i)] = bu * blocks + bv;
   }
   return fold;
 }
@@ -356,6 +411,37 @@ nlohmann::json FieldModel::ToJson() const {
 // ---------------------------------------------------------------------------------------------
 // Options, evaluation
 
+const char* CvGuardName(CvGuard guard) {
+  switch (guard) {
+    case CvGuard::kLowerHeldOutError:
+      return "lower held-out error";
+    case CvGuard::kOneStandardError:
+      return "one standard error (blocks)";
+    case CvGuard::kOneStandardErrorFolds:
+      return "one standard error (folds)";
+    case CvGuard::kIndependentWithinOneStandardError:
+      return "independent within one standard error";
+  }
+  return "?";
+}
+
+const char* CvGuardRule(CvGuard guard) {
+  switch (guard) {
+    case CvGuard::kLowerHeldOutError:
+      return "its spatial block CV error is lower than the current model's";
+    case CvGuard::kOneStandardError:
+      return "its spatial block CV mean-square error is not worse than the current model's by more than one "
+             "standard error of the paired difference, the CV blocks being the replicates";
+    case CvGuard::kOneStandardErrorFolds:
+      return "its spatial block CV mean-square error is not worse than the current model's by more than one "
+             "standard error of the paired difference, the CV folds being the replicates";
+    case CvGuard::kIndependentWithinOneStandardError:
+      return "its spatial block CV error is lower than the current model's, or its residual is independent and its "
+             "CV mean-square error is not worse by more than one standard error of the paired block-wise difference";
+  }
+  return "?";
+}
+
 Status DecompositionOptions::Validate() const {
   if (neighbours < 1 || neighbours > 64) {
     return Status::BadInput(Where{.field = "analysis.neighbours"}, "must be between 1 and 64");
@@ -467,11 +553,13 @@ Result<Decomposition> Decompose(const std::vector<Deviation>& deviations, const 
   Decomposition result;
   result.coverage_factor = options.coverage_factor;
   result.cv_folds = options.cv_folds;
+  result.cv_guard = options.cv_guard;
   result.cv_seed = options.cv_seed;
   FL_ASSIGN_OR_RETURN(SpatialWeights weights, KnnWeights(uv, options.neighbours, WeightStyle::kRowStandardised));
   const int blocks = options.cv_blocks > 0 ? options.cv_blocks : AutoBlocks(n);
   result.cv_blocks = blocks;
-  const std::vector<int> fold = AssignFolds(uv, blocks, options.cv_folds, options.cv_seed);
+  std::vector<int> block_of_point;
+  const std::vector<int> fold = AssignFolds(uv, blocks, options.cv_folds, options.cv_seed, &block_of_point);
   {
     std::vector<int> count(static_cast<std::size_t>(options.cv_folds), 0);
     for (int f : fold) ++count[static_cast<std::size_t>(f)];
@@ -502,7 +590,10 @@ Result<Decomposition> Decompose(const std::vector<Deviation>& deviations, const 
     result.raw.n = n;
   } else {
     FL_ASSIGN_OR_RETURN(result.raw, MoranI(y, weights));
-    double current_cv = 0;
+    CvErrors current_cv;
+    const bool by_folds = options.cv_guard == CvGuard::kOneStandardErrorFolds;
+    const std::vector<int>& se_unit = by_folds ? fold : block_of_point;
+    const int se_units = by_folds ? options.cv_folds : blocks * blocks;
     for (std::size_t m = 0; m < ladder.size(); ++m) {
       const FieldModel& model = ladder[m];
       const int p = model.parameters();
@@ -533,7 +624,7 @@ Result<Decomposition> Decompose(const std::vector<Deviation>& deviations, const 
       }
       Eigen::MatrixXd penalty;
       if (model.kind() == FieldModel::Kind::kBSpline) penalty = DifferencePenalty(model.net());
-      const double cv = BlockCvRms(rows, y, fold, options.cv_folds, p, penalty.size() > 0 ? &penalty : nullptr);
+      CvErrors cv = BlockCv(rows, y, fold, options.cv_folds, p, penalty.size() > 0 ? &penalty : nullptr);
       DecompositionStep step;
       step.model = model.name();
       step.parameters = p;
@@ -541,9 +632,29 @@ Result<Decomposition> Decompose(const std::vector<Deviation>& deviations, const 
       step.residual_moran_i = fit.i;
       step.residual_moran_expected = fit.expected;
       step.residual_moran_z = fit.z;
-      step.cv_rms_um = 1e3 * cv;
+      step.cv_rms_um = 1e3 * cv.rms;
       step.independent = fit.z <= kMoranZCritical;
-      step.accepted = m == 0 || cv < current_cv;
+      if (m == 0) {
+        step.accepted = true;
+      } else {
+        const PairedCvDifference paired = ComparePaired(cv, current_cv, se_unit, se_units);
+        step.cv_difference_um2 = 1e6 * paired.difference;
+        step.cv_difference_se_um2 = 1e6 * paired.standard_error;
+        const bool finite = std::isfinite(cv.rms);
+        switch (options.cv_guard) {
+          case CvGuard::kLowerHeldOutError:
+            step.accepted = cv.rms < current_cv.rms;
+            break;
+          case CvGuard::kOneStandardError:
+          case CvGuard::kOneStandardErrorFolds:
+            step.accepted = finite && paired.difference <= paired.standard_error;
+            break;
+          case CvGuard::kIndependentWithinOneStandardError:
+            step.accepted =
+                cv.rms < current_cv.rms || (finite && step.independent && paired.difference <= paired.standard_error);
+            break;
+        }
+      }
       result.steps.push_back(step);
       if (step.accepted) {
         current = model;
@@ -561,10 +672,8 @@ Result<Decomposition> Decompose(const std::vector<Deviation>& deviations, const 
                            " <= " + Num(kMoranZCritical) + ")";
     }
     if (!result.independent) {
-      result.stop_reason +=
-          "; the chosen " + current.name() +
-          " model (the least held-out error of the models tried) leaves a spatially correlated residual (z = " +
-          Num(current_fit.z) + ")";
+      result.stop_reason += "; the chosen " + current.name() + " model (the last one the CV guard accepted) " +
+                            "leaves a spatially correlated residual (z = " + Num(current_fit.z) + ")";
     }
   }
 
@@ -603,6 +712,8 @@ nlohmann::json Decomposition::ToJson() const {
                           {"residual_moran_expected", s.residual_moran_expected},
                           {"residual_moran_z", s.residual_moran_z},
                           {"cv_rms_um", s.cv_rms_um},
+                          {"cv_difference_um2", s.cv_difference_um2},
+                          {"cv_difference_se_um2", s.cv_difference_se_um2},
                           {"accepted_by_cv", s.accepted},
                           {"independent", s.independent}});
   }
@@ -615,12 +726,14 @@ nlohmann::json Decomposition::ToJson() const {
       {"stop_reason", stop_reason},
       {"selection_rule",
        "walk constant, plane, quadric, bicubic B-spline nets of increasing size; a richer model becomes current only "
-       "if it lowers the spatial block CV error; stop at the first current model whose residual Moran z (Cliff-Ord, "
-       "that model's design) is <= 2.326"},
+       "if the CV guard accepts it (" +
+           std::string(CvGuardRule(cv_guard)) +
+           "); stop at the first current model whose residual Moran z (Cliff-Ord, that model's design) is <= 2.326"},
       {"cross_validation",
        {{"blocks_per_direction", cv_blocks},
         {"folds", cv_folds},
         {"seed", cv_seed},
+        {"guard", CvGuardName(cv_guard)},
         {"error", "RMS over all points of the residual predicted by the fit without the point's fold"}}},
       {"systematic_field", systematic.ToJson()},
       {"deviation_rms_um", deviation_rms_um},

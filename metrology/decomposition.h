@@ -45,16 +45,31 @@
 // which extends the field smoothly into the hole and leaves determined coefficients practically
 // unchanged. The main fit is never penalised.
 //
-// The rule (stated once, applied literally):
+// The rule (stated once, applied literally). Δ(m, c) is the paired difference of the held-out mean-
+// square errors of a richer model m and the current model c over all points, and SE its standard
+// error over the CV blocks as replicates (the per-block sums of e²_m − e²_c; the one-standard-error
+// rule of Breiman et al. 1984, Classification and Regression Trees §3.4.3, and Hastie, Tibshirani &
+// Friedman 2009, Elements of Statistical Learning §7.10):
 //   current := constant model.
 //   for each richer model m of the ladder, in order:
 //     if z(current) ≤ 2.326: stop.                      (the simplest independent model wins)
 //     if CV(m) < CV(current): current := m              (accepted: it lowers the held-out error)
+//     else if z(m) ≤ 2.326 and Δ(m, current) ≤ SE:      (accepted: it gives the independent residual the
+//       current := m                                     ladder looks for, and CV has no evidence — not
+//                                                        one standard error — that it predicts worse)
 //     else: m is rejected and the ladder goes on        (a richer model may still predict better)
 //   d_s := the fit of current at the points; d_u := y − d_s; independent := z(current) ≤ 2.326.
-// So the chosen model always has the least held-out error of the models tried, and a richer model
-// is never taken on the strength of the Moran test alone.
-//
+// So a richer model is never taken on the strength of the Moran test alone: either it predicts
+// better, or it is independent and no worse than the noise of the CV comparison allows
+// (CvGuard::kIndependentWithinOneStandardError, the default; the other CvGuard rules are kept for
+// the comparison study in tests/metrology/decomposition_test.cc, DISABLED_CvGuardStudy).
+//   Why not "always end independent". The test rejects at level 0.01, so even the exact field leaves
+// a "correlated" residual (the noise alone has z > 2.326) in about 1 % of data sets: in 4 of the 200
+// seeds of the tests. A rule that always ended independent would have to fit that noise. Measured on
+// those 200 seeds (1,000 points, σ = 1 µm; "residual independent / d_s ≤ 0.3σ at points / on a grid
+// / pure noise → constant / field of RMS σ detected"): the strict rule CV(m) < CV(c) gives 191 / 199
+// / 196 / 198 / 200; this rule 196 / 200 / 197 / 198 / 200, its four correlated seeds against the four
+// of the noise alone, three of them the same seeds.
 // Evaluation (§8, the rule stated): form error = max_i |d_s(u_i, v_i)| + k · σ(d_u), with coverage
 // factor k (default 2) and σ(d_u) = sqrt(Σ d_u² / (n − p)). Out of tolerance when form error > α;
 // compensation (nc-gen offsets the CC points by −d_s along the normal) is advised only when out of
@@ -123,6 +138,18 @@ class FieldModel {
   Eigen::VectorXd coefficients_ = Eigen::VectorXd::Zero(1);
 };
 
+// The over-fitting guard's acceptance rule for a richer model m against the current model c
+// (Δ = paired difference of the held-out mean-square errors, m minus c; SE its standard error over
+// the replicates, see the header comment).
+enum class CvGuard {
+  kLowerHeldOutError,                 // accept iff CV(m) < CV(c) (the rule up to issue 5's first note)
+  kOneStandardError,                  // accept iff Δ ≤ SE, the CV blocks being the replicates
+  kOneStandardErrorFolds,             // accept iff Δ ≤ SE, the CV folds being the replicates
+  kIndependentWithinOneStandardError, // accept iff CV(m) < CV(c), or m's residual is independent and Δ ≤ SE
+};
+const char* CvGuardName(CvGuard guard);  // "one standard error (blocks)", ...
+const char* CvGuardRule(CvGuard guard);  // the rule in words
+
 struct DecompositionOptions {
   int neighbours = 8;                // k of the k-NN weights in (u, v): the usual choice for scattered probe points
   int max_control_net = 8;           // largest B-spline net tried (8 × 8 = 64 parameters); 3 = polynomials only
@@ -130,6 +157,7 @@ struct DecompositionOptions {
   int cv_blocks = 0;                 // CV blocks per direction; 0 = round(√n / 2), about 4 points a block (see above)
   int cv_folds = 10;                 // each fold holds out a tenth of the blocks, none adjacent to another
   std::uint64_t cv_seed = 20170301;  // seeds the block-to-fold shuffle; fixed so a rerun repeats its choice
+  CvGuard cv_guard = CvGuard::kIndependentWithinOneStandardError;  // see CvGuard and the header comment
   double coverage_factor = 2.0;      // k in form error = max|d_s| + k σ(d_u); 2 ≈ 95 % for normal d_u
   std::optional<double> tolerance_mm;  // α; when given, Decompose also fills Decomposition::evaluation
   Status Validate() const;
@@ -144,6 +172,8 @@ struct DecompositionStep {
   double residual_moran_expected = 0;  // Cliff–Ord E[I] for this design
   double residual_moran_z = 0;
   double cv_rms_um = 0;      // spatial block CV error
+  double cv_difference_um2 = 0;     // Δ: held-out mean-square error minus the current model's (0 for the first)
+  double cv_difference_se_um2 = 0;  // its standard error over the replicates (blocks or folds)
   bool accepted = false;     // became the current model (the constant always is)
   bool independent = false;  // z ≤ kMoranZCritical
 };
@@ -179,6 +209,7 @@ struct Decomposition {
   double coverage_factor = 2.0;
   int cv_blocks = 0, cv_folds = 0;
   std::uint64_t cv_seed = 0;
+  CvGuard cv_guard = CvGuard::kIndependentWithinOneStandardError;
   std::optional<FormEvaluation> evaluation;  // when options.tolerance_mm was given
   nlohmann::json ToJson() const;
 };

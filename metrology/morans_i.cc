@@ -134,6 +134,9 @@ struct CentredValues {
   IslandResolution resolved;
   Eigen::VectorXd z;
   double sum_z2 = 0;
+  // The kept weights and the number of kept values, as the statistics use them.
+  const RowSparse& w() const { return resolved.weights.w; }
+  double n() const { return static_cast<double>(z.size()); }
 };
 
 Result<CentredValues> CentreValues(const Eigen::VectorXd& values, const SpatialWeights& weights, IslandPolicy islands,
@@ -159,20 +162,17 @@ double NormalUpperTail(double z) { return 0.5 * std::erfc(z / std::sqrt(2.0)); }
 Result<MoranResult> MoranI(const Eigen::VectorXd& values, const SpatialWeights& weights, const MoranOptions& options) {
   FL_ASSIGN_OR_RETURN(const CentredValues centred,
                       CentreValues(values, weights, options.islands, options.permutations, "Moran's I"));
-  const IslandResolution& resolved = centred.resolved;
-  const RowSparse& w = resolved.weights.w;
-  const long n_long = centred.z.size();
-  const double n = static_cast<double>(n_long);
+  const RowSparse& w = centred.w();
+  const double n = centred.n(), m2 = centred.sum_z2;
   const Eigen::VectorXd& z = centred.z;
-  const double m2 = centred.sum_z2;
   const WeightSums s = ComputeSums(w);
   if (!(s.s0 > 0)) return Status::BadInput("Moran's I: the weights have no neighbour pairs (S0 = 0)");
   MoranResult r;
-  r.n = static_cast<int>(n_long);
+  r.n = static_cast<int>(z.size());
   r.s0 = s.s0;
   r.s1 = s.s1;
   r.s2 = s.s2;
-  r.islands = Report(resolved);
+  r.islands = Report(centred.resolved);
   const double scale = n / s.s0;
   r.i = scale * z.dot(w * z) / m2;
   r.expected = -1.0 / (n - 1.0);
@@ -305,12 +305,10 @@ Result<LocalMoranResult> LocalMoranI(const Eigen::VectorXd& values, const Spatia
   FL_ASSIGN_OR_RETURN(const CentredValues centred,
                       CentreValues(values, weights, options.islands, options.permutations, "local Moran"));
   const IslandResolution& resolved = centred.resolved;
-  const RowSparse& w = resolved.weights.w;
-  const long n_long = centred.z.size();
-  const double n = static_cast<double>(n_long);
+  const RowSparse& w = centred.w();
+  const double n = centred.n(), sum_z2 = centred.sum_z2, c = (n - 1.0) / sum_z2;
   const Eigen::VectorXd& z = centred.z;
-  const double sum_z2 = centred.sum_z2;
-  const double c = (n - 1.0) / sum_z2;
+  const long n_long = z.size();
 
   const long rows = values.size();
   const double nan = std::numeric_limits<double>::quiet_NaN();

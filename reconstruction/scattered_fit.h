@@ -21,15 +21,23 @@
 // - Sparse (hole > 0.4 spans, e.g. the automatic net's ~8 points a pole; always with a base
 //   surface): uniform over the points' parameter box except the two end spans, which are twice as
 //   wide: edge pieces see data from one side only, and a corner hole is extrapolated badly by a
-//   standard-width corner piece. With PCA parameters one further "margin" span lies beyond each
-//   end of the points (at least 2 point spacings wide, one pole each): it lets the boundary of the
-//   sampled surface, which the points miss by up to a spacing, project inside Q, and keeps the
-//   energy's boundary off the data. Q's domain is that box plus margin.
-// - Dense (PCA parameters, hole ≤ 0.4 spans, e.g. 100,000 points on a 24 × 24 net): uniform spans
-//   over the box widened by 2 point spacings at each end, no margin pole: every span is well
-//   filled, so all poles resolve the shape (measured on franke at 24 × 24 with 1 µm noise: 1.153
-//   µm orthogonal RMS against 1.231 µm with the sparse layout).
-// The report's "edge_spans" (margin or uniform) and "initial_gap_spans" say which applied.
+//   standard-width corner piece. With PCA parameters Q's domain reaches a "margin" beyond each end
+//   of the points (at least 2 point spacings, or a span, wide) and the end spans reach with it (no
+//   knot at the points' box, no pole of its own): it lets the boundary of the sampled surface,
+//   which the points miss by up to a spacing, project inside Q, keeps the energy's boundary off
+//   the data, and beyond the data Q continues the end piece's polynomial (into a corner hole that
+//   extrapolates better than a separate margin span decided by the energy alone; measured in the
+//   test ScatteredFitReference).
+// - Dense (PCA parameters, hole ≤ 0.4 spans, e.g. 100,000 points on a 24 × 24 net): every span is
+//   well filled whatever its width, so the knots follow the shape. A first fit on uniform spans
+//   over the box widened by 2 point spacings at each end, then the knots are redistributed to
+//   equidistribute the approximation error (de Boor's NEWNOT per direction, from the jumps of the
+//   fit's p-th derivative; scattered_fit.cc, RedistributedKnots) and the fit is repeated from its
+//   foot points. Measured on franke at 24 × 24 with 1 µm noise (bench/scattered_fit_bench.cc):
+//   orthogonal RMS 1.231 µm with the sparse layout, 1.153 µm uniform, 1.055 µm redistributed
+//   (error against the true surface: RMS 0.571 -> 0.346 µm, max 6.6 -> 2.6 µm).
+// The report's "edge_spans" (margin or uniform), "initial_gap_spans" and "knots_redistributed"
+// say which applied.
 //
 // λ by GCV (Craven & Wahba 1979, "Smoothing noisy data with spline functions", Numer. Math. 31:
 // 377–403): minimise V(λ) = (RSS/3m) / (1 − tr H/m)² over a log grid and then a golden-section
@@ -52,8 +60,9 @@
 // ProjectFrom and refits, until the orthogonal RMS falls by less than 1e-3 (relative).
 //
 // Adaptive refinement: spans (in u and in v) holding a point whose orthogonal residual exceeds
-// tolerance_mm get a knot at their midpoint (with the sparse layout an end span is split 2 : 1 so
-// it stays twice as wide as its neighbour; the margin spans are never split); refit; repeat.
+// tolerance_mm get a knot at their midpoint (with the sparse layout the part of an end span over
+// the data is split 2 : 1 so it stays twice as wide as its neighbour; no knot goes into the
+// margin); refit; repeat.
 //
 // Coverage. Where the points leave a gap (a corner of the patch, typically) Q is extrapolated and
 // the residuals say nothing about its error; the report gives the largest gap and a note when it
@@ -74,17 +83,15 @@ struct ScatteredFitOptions {
   int degree = 3;  // both directions; cubic (C²) is the CAM norm; 2 ≤ degree ≤ 7
   // Control net. 0 = from the point count: about one pole per kScatteredPointsPerPole points over
   // the data, split between u and v in the ratio of the points' parameter box, each at least
-  // degree + 1 and at most kScatteredMaxAutoPoles, plus one pole at each end for the margin span
-  // when one is used (PCA parameters with sparse coverage, see above). Explicit values (total
-  // counts, margin included if any): degree + 1 ≤ poles ≤ 1000.
+  // degree + 1 and at most kScatteredMaxAutoPoles. Explicit values: degree + 1 ≤ poles ≤ 1000.
   int u_poles = 0, v_poles = 0;
   enum class Smoothing { kGcv, kTolerance, kFixed };
   // Thin-plate weight λ (dimensionless, see above): by GCV (default: no noise level needs to be
   // known), the λ whose orthogonal RMS residual equals tolerance_mm (the smoothest surface that
   // close to the points; reached within 0.5 % or a note says what was reached), or fixed.
   Smoothing smoothing = Smoothing::kGcv;
-  // For kFixed, ≥ 0. 0 = plain least squares: every pole then needs data, which margin poles never
-  // have (the fit fails with Failed); use a small λ such as 1e-9 instead.
+  // For kFixed, ≥ 0. 0 = plain least squares: every pole then needs data (a pole whose support holds
+  // no point makes the fit fail with Failed); a small λ such as 1e-9 avoids that.
   double lambda = 0;
   double tolerance_mm = 1e-3;  // kTolerance target RMS, and the residual limit of adaptive refinement
   // Parameter-correction rounds (orthogonal-distance fitting); stops earlier when the orthogonal
@@ -97,8 +104,7 @@ struct ScatteredFitOptions {
 
 // About this many points per control point per coordinate when the net is chosen automatically:
 // enough that a random (Poisson-like) scatter leaves few spans empty, while the net still resolves
-// features a few spans wide. With 5,000 points a 100 × 80 mm patch gets 28 × 22 poles over the
-// data (30 × 24 with the margin poles).
+// features a few spans wide. With 5,000 points a 100 × 80 mm patch gets 28 × 22 poles.
 inline constexpr int kScatteredPointsPerPole = 8;
 inline constexpr int kScatteredMaxAutoPoles = 200;
 
@@ -112,8 +118,8 @@ inline constexpr int kScatteredMaxAutoPoles = 200;
 //   parameter plane, u ≈ (p − origin)·u_axis — a good start for foot-point searches on Q),
 //   "domain" (Q's), "data_box" (the points' parameter box), "edge_spans" and "initial_gap_spans"
 //   (PCA case: the knot layout and the coverage that chose it), "point_spacing_mm", "largest_gap_mm"
-//   and "largest_gap_at_uv", "boundary_feet" (points whose foot point is clamped to Q's edge),
-//   "failed_projections";
+//   and "largest_gap_at_uv", "knots_redistributed" (dense case, see above), "boundary_feet" (points
+//   whose foot point is clamped to Q's edge), "failed_projections";
 // - notes when a tolerance was not reached (with the figure reached), a gap in the points, or
 //   other caveats.
 // BadInput, before any work: invalid options, fewer points than unknowns (says how many are

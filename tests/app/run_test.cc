@@ -62,6 +62,34 @@ TEST_F(RunTest, DemoRunsEveryStageAndCompensatesIntoTolerance) {
   EXPECT_TRUE(second.within_tolerance);
   EXPECT_LT(second.form_error_um, 0.4 * first.form_error_um);
   EXPECT_LT(second.raw_moran_z, 2.326) << "what is left after compensation should be random";
+  // The decision is the decomposition's §8 evaluation, recorded with the chosen model and its
+  // residual z, in the summary and in each loop's analysis.json.
+  EXPECT_NE(first.chosen_model, "constant");
+  EXPECT_TRUE(first.systematic_significant);
+  EXPECT_TRUE(first.compensation_advised);
+  EXPECT_FALSE(first.within_tolerance);
+  EXPECT_NE(first.decision.find("compensate by -d_s"), std::string::npos) << first.decision;
+  EXPECT_EQ(first.residual_independent, first.residual_moran_z <= 2.326);
+  EXPECT_FALSE(second.compensation_advised);
+  EXPECT_EQ(second.decision, "within tolerance: done");
+  for (int loop = 0; loop < 2; ++loop) {
+    const auto analysis = ReadJsonFile(options.out / ("loop-" + std::to_string(loop)) / "analysis.json");
+    ASSERT_TRUE(analysis.ok());
+    const LoopSummary& l = summary->loops[static_cast<std::size_t>(loop)];
+    EXPECT_EQ((*analysis)["chosen_model"], l.chosen_model);
+    EXPECT_EQ((*analysis)["evaluation"]["compensate"], l.compensation_advised);
+    EXPECT_EQ((*analysis)["evaluation"]["form_error_um"], l.form_error_um);
+    EXPECT_EQ((*analysis)["compensate"], l.compensated);
+    EXPECT_EQ((*analysis)["decision"], l.decision);
+    const auto& steps = (*analysis)["models_tried"];
+    EXPECT_EQ(steps[(*analysis)["chosen_step"].get<std::size_t>()]["residual_moran_z"], l.residual_moran_z);
+  }
+  const auto summary_json = ReadJsonFile(options.out / "summary.json");
+  ASSERT_TRUE(summary_json.ok());
+  for (const char* key : {"chosen_model", "residual_moran_z", "residual_independent", "compensation_advised",
+                          "decision"}) {
+    EXPECT_TRUE((*summary_json)["loops"][0].contains(key)) << key;
+  }
   // Residual σ stays at the injected noise level: roughness 1 µm, probe 0.5 µm, and the scallop
   // (0..3 µm between passes) → about 1.4 µm.
   EXPECT_NEAR(second.random_sigma_um, std::hypot(1.0, 0.5, 3.0 / std::sqrt(12.0) * 1.0), 0.4);

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "core/random.h"
+#include "metrology/spatial_weights.h"
 
 namespace formloop::metrology {
 namespace {
@@ -93,48 +94,89 @@ std::vector<Deviation> Sample(std::uint64_t seed, int n, const Field& field, std
 const auto kZero = [](double, double) { return 0.0; };
 
 // The selection rule of decomposition.h, checked on a report: the constant is accepted first; a later
-// step is accepted exactly when it lowers the CV error of the model current before it; the ladder
-// stops right after the first current model whose residual is independent; the chosen step is the
-// last accepted one and has the least CV error of all steps tried.
-void ExpectTheRuleWasFollowed(const Decomposition& d) {
+// step is accepted exactly when the guard accepts it against the model current before it (for the
+// strict guard: it lowers the CV error); the ladder stops right after the first current model whose
+// residual is independent; the chosen step is the last accepted one (for the strict guard it has the
+// least CV error of all steps tried).
+void ExpectTheRuleWasFollowed(const Decomposition& d, CvGuard guard) {
   ASSERT_FALSE(d.steps.empty());
   EXPECT_TRUE(d.steps[0].accepted);
   std::size_t current = 0;
   for (std::size_t k = 1; k < d.steps.size(); ++k) {
+    const DecompositionStep& s = d.steps[k];
     EXPECT_FALSE(d.steps[current].independent) << "step " << k << " tried after an independent current model";
-    EXPECT_EQ(d.steps[k].accepted, d.steps[k].cv_rms_um < d.steps[current].cv_rms_um) << "step " << k;
-    if (d.steps[k].accepted) current = k;
+    const bool lower = s.cv_rms_um < d.steps[current].cv_rms_um;
+    const bool within_se = std::isfinite(s.cv_rms_um) && s.cv_difference_um2 <= s.cv_difference_se_um2;
+    bool expected = lower;
+    if (guard == CvGuard::kOneStandardError || guard == CvGuard::kOneStandardErrorFolds) expected = within_se;
+    if (guard == CvGuard::kIndependentWithinOneStandardError) expected = lower || (s.independent && within_se);
+    EXPECT_EQ(s.accepted, expected) << "step " << k;
+    EXPECT_GE(s.cv_difference_se_um2, 0) << "step " << k;
+    if (s.accepted) current = k;
   }
   EXPECT_EQ(static_cast<std::size_t>(d.chosen_step), current);
-  for (const auto& s : d.steps) EXPECT_GE(s.cv_rms_um, d.steps[current].cv_rms_um);
+  if (guard == CvGuard::kLowerHeldOutError) {
+    for (const auto& s : d.steps) EXPECT_GE(s.cv_rms_um, d.steps[current].cv_rms_um);
+  }
   EXPECT_EQ(d.independent, d.steps[current].independent);
   EXPECT_EQ(d.steps[current].model, d.systematic.name());
 }
 
 std::string Rate(int k, int n) { return std::to_string(k) + "/" + std::to_string(n); }
+std::string Seeds(const std::vector<int>& seeds) {
+  std::string out;
+  for (int s : seeds) out += (out.empty() ? "" : " ") + std::to_string(s);
+  return out.empty() ? "none" : out;
+}
 
-// Claims 1 and 2 of issue 5 item 4: on smooth fields (RMS 1..4 σ) + noise with 1,000 points the
-// chosen model's residual passes the Moran test, and d_s is recovered to ≤ 30 % of σ RMS, both at
-// the points and on a 41 × 41 grid over the domain (the compensation evaluates d_s anywhere).
-TEST(DecompositionTest, SmoothFieldsGiveAnIndependentResidualAndRecoverTheField) {
-  int independent = 0, recovered_points = 0, recovered_grid = 0;
-  std::vector<double> grid_errors;
-  std::vector<int> model_counts(12, 0);
+// The four figures of issue 5 item 4 for one set of options, each over kSeeds seeds (1,000 points,
+// σ = 1 µm): smooth fields of RMS 1..4 σ (residual independent, d_s within 0.3 σ at the points and on
+// a 41 × 41 grid), pure noise (constant chosen) and a field of RMS σ (detected).
+struct ItemFourFigures {
+  int independent = 0, recovered_points = 0, recovered_grid = 0, constant_on_noise = 0, detected = 0;
+  std::vector<double> grid_errors;      // d_s RMS error on the grid / σ, sorted
+  std::vector<int> model_counts = std::vector<int>(12, 0);
+  std::vector<int> not_independent;     // seeds of the smooth fields whose chosen residual is correlated
+  // The oracle: the noise alone (deviation − true field) under the same test (residual Moran of the
+  // constant model on the same weights). The test rejects at level 0.01, so even the exact field
+  // leaves a "correlated" residual in about 1 % of seeds: no honest rule can do better than this.
+  std::vector<int> noise_not_independent;
+};
+
+void MeasureSmoothFields(const DecompositionOptions& options, ItemFourFigures* f) {
   for (int seed = 1; seed <= kSeeds; ++seed) {
     Rng pick(static_cast<std::uint64_t>(seed) * 7919);
     const SmoothField field(static_cast<std::uint64_t>(seed), kSigmaMm * pick.Uniform(1.0, 4.0));
     std::vector<double> truth;
     const auto deviations = Sample(static_cast<std::uint64_t>(seed), 1000, field, &truth);
-    const auto d = Decompose(deviations, kDomain, {});
+    const auto d = Decompose(deviations, kDomain, options);
     ASSERT_TRUE(d.ok()) << d.status().message();
     const DecompositionStep& chosen = d->steps[static_cast<std::size_t>(d->chosen_step)];
     EXPECT_EQ(chosen.model, d->systematic.name());
-    ++model_counts[static_cast<std::size_t>(d->chosen_step)];
-    if (d->independent && chosen.residual_moran_z <= kMoranZCritical) ++independent;
-    ExpectTheRuleWasFollowed(*d);
+    ++f->model_counts[static_cast<std::size_t>(d->chosen_step)];
+    if (d->independent && chosen.residual_moran_z <= kMoranZCritical) {
+      ++f->independent;
+    } else {
+      f->not_independent.push_back(seed);
+    }
+    ExpectTheRuleWasFollowed(*d, options.cv_guard);
+    {
+      Eigen::MatrixXd uv(2, static_cast<Eigen::Index>(truth.size()));
+      Eigen::VectorXd noise(static_cast<Eigen::Index>(truth.size()));
+      for (std::size_t i = 0; i < truth.size(); ++i) {
+        uv(0, static_cast<Eigen::Index>(i)) = deviations[i].u;
+        uv(1, static_cast<Eigen::Index>(i)) = deviations[i].v;
+        noise[static_cast<Eigen::Index>(i)] = deviations[i].deviation_mm - truth[i];
+      }
+      const auto w = KnnWeights(uv, options.neighbours, WeightStyle::kRowStandardised);
+      ASSERT_TRUE(w.ok());
+      const auto oracle = ResidualMoranI(noise, Eigen::MatrixXd::Ones(noise.size(), 1), *w);
+      ASSERT_TRUE(oracle.ok());
+      if (oracle->z > kMoranZCritical) f->noise_not_independent.push_back(seed);
+    }
     double e2 = 0;
     for (std::size_t i = 0; i < truth.size(); ++i) e2 += std::pow(d->systematic_mm[i] - truth[i], 2);
-    if (std::sqrt(e2 / static_cast<double>(truth.size())) <= 0.3 * kSigmaMm) ++recovered_points;
+    if (std::sqrt(e2 / static_cast<double>(truth.size())) <= 0.3 * kSigmaMm) ++f->recovered_points;
     double g2 = 0;
     const int g = 41;
     for (int i = 0; i < g; ++i) {
@@ -145,49 +187,96 @@ TEST(DecompositionTest, SmoothFieldsGiveAnIndependentResidualAndRecoverTheField)
       }
     }
     const double grid_rms = std::sqrt(g2 / (g * g));
-    grid_errors.push_back(grid_rms / kSigmaMm);
-    if (grid_rms <= 0.3 * kSigmaMm) ++recovered_grid;
+    f->grid_errors.push_back(grid_rms / kSigmaMm);
+    if (grid_rms <= 0.3 * kSigmaMm) ++f->recovered_grid;
   }
-  std::sort(grid_errors.begin(), grid_errors.end());
+  std::sort(f->grid_errors.begin(), f->grid_errors.end());
+}
+
+void MeasurePureNoise(const DecompositionOptions& options, ItemFourFigures* f) {
+  for (int seed = 1; seed <= kSeeds; ++seed) {
+    const auto d = Decompose(Sample(static_cast<std::uint64_t>(seed) + 1000, 1000, kZero), kDomain, options);
+    ASSERT_TRUE(d.ok()) << d.status().message();
+    if (d->systematic.kind() == FieldModel::Kind::kConstant) ++f->constant_on_noise;
+  }
+}
+
+void MeasureDetection(const DecompositionOptions& options, ItemFourFigures* f) {
+  for (int seed = 1; seed <= kSeeds; ++seed) {
+    const SmoothField field(static_cast<std::uint64_t>(seed) + 2000, kSigmaMm);
+    const auto d = Decompose(Sample(static_cast<std::uint64_t>(seed) + 2000, 1000, field), kDomain, options);
+    ASSERT_TRUE(d.ok()) << d.status().message();
+    if (d->steps[0].residual_moran_z > kMoranZCritical && d->systematic.kind() != FieldModel::Kind::kConstant) {
+      ++f->detected;
+    }
+  }
+}
+
+// Claims 1 and 2 of issue 5 item 4: on smooth fields (RMS 1..4 σ) + noise with 1,000 points the
+// chosen model's residual passes the Moran test, and d_s is recovered to ≤ 30 % of σ RMS, both at
+// the points and on a 41 × 41 grid over the domain (the compensation evaluates d_s anywhere).
+TEST(DecompositionTest, SmoothFieldsGiveAnIndependentResidualAndRecoverTheField) {
+  ItemFourFigures f;
+  MeasureSmoothFields({}, &f);
   std::printf("smooth fields, n = 1000: independent %s, d_s within 0.3 sigma at points %s, on grid %s\n",
-              Rate(independent, kSeeds).c_str(), Rate(recovered_points, kSeeds).c_str(),
-              Rate(recovered_grid, kSeeds).c_str());
+              Rate(f.independent, kSeeds).c_str(), Rate(f.recovered_points, kSeeds).c_str(),
+              Rate(f.recovered_grid, kSeeds).c_str());
+  std::printf("  seeds whose chosen residual is correlated: %s; the noise alone fails the same test in %s: %s\n",
+              Seeds(f.not_independent).c_str(), Rate(static_cast<int>(f.noise_not_independent.size()), kSeeds).c_str(),
+              Seeds(f.noise_not_independent).c_str());
   std::printf("  grid RMS error / sigma: median %.3f, 95th %.3f, max %.3f; chosen step counts:",
-              grid_errors[kSeeds / 2], grid_errors[kSeeds * 95 / 100], grid_errors.back());
-  for (int c : model_counts) std::printf(" %d", c);
+              f.grid_errors[kSeeds / 2], f.grid_errors[kSeeds * 95 / 100], f.grid_errors.back());
+  for (int c : f.model_counts) std::printf(" %d", c);
   std::printf("\n");
-  EXPECT_GE(independent, kSeeds * 95 / 100);
-  EXPECT_GE(recovered_points, kSeeds * 95 / 100);
-  EXPECT_GE(recovered_grid, kSeeds * 95 / 100);
+  EXPECT_GE(f.independent, kSeeds * 95 / 100);
+  EXPECT_GE(f.recovered_points, kSeeds * 95 / 100);
+  EXPECT_GE(f.recovered_grid, kSeeds * 95 / 100);
+  // "Every seed" cannot hold at test level 0.01 (see noise_not_independent). What the guard must not
+  // do is veto a model the data support: the failures stay within two seeds of the oracle's count
+  // (measured: 4 against 4, three of them the same seeds).
+  EXPECT_LE(kSeeds - f.independent, static_cast<int>(f.noise_not_independent.size()) + 2);
 }
 
 // Claim 3: on pure noise the constant model is chosen in ≥ 95 % of seeds (the Moran test at 0.01
 // alone would give about 99 %).
 TEST(DecompositionTest, PureNoiseChoosesTheConstantModel) {
-  int constant = 0;
-  for (int seed = 1; seed <= kSeeds; ++seed) {
-    const auto d = Decompose(Sample(static_cast<std::uint64_t>(seed) + 1000, 1000, kZero), kDomain, {});
-    ASSERT_TRUE(d.ok()) << d.status().message();
-    if (d->systematic.kind() == FieldModel::Kind::kConstant) ++constant;
-  }
-  std::printf("pure noise, n = 1000: constant model chosen %s\n", Rate(constant, kSeeds).c_str());
-  EXPECT_GE(constant, kSeeds * 95 / 100);
+  ItemFourFigures f;
+  MeasurePureNoise({}, &f);
+  std::printf("pure noise, n = 1000: constant model chosen %s\n", Rate(f.constant_on_noise, kSeeds).c_str());
+  EXPECT_GE(f.constant_on_noise, kSeeds * 95 / 100);
 }
 
 // Claim 4: a smooth field whose RMS equals σ is detected with 1,000 points: the constant model's
 // residual is significant and a non-constant model is chosen.
 TEST(DecompositionTest, FieldOfOneSigmaIsDetectedWithAThousandPoints) {
-  int detected = 0;
-  for (int seed = 1; seed <= kSeeds; ++seed) {
-    const SmoothField field(static_cast<std::uint64_t>(seed) + 2000, kSigmaMm);
-    const auto d = Decompose(Sample(static_cast<std::uint64_t>(seed) + 2000, 1000, field), kDomain, {});
-    ASSERT_TRUE(d.ok()) << d.status().message();
-    if (d->steps[0].residual_moran_z > kMoranZCritical && d->systematic.kind() != FieldModel::Kind::kConstant) {
-      ++detected;
-    }
+  ItemFourFigures f;
+  MeasureDetection({}, &f);
+  std::printf("field RMS = sigma, n = 1000: detected %s\n", Rate(f.detected, kSeeds).c_str());
+  EXPECT_GE(f.detected, kSeeds * 95 / 100);
+}
+
+// The study behind the default CV guard (issue 5 item 4: "the chosen model's residual z ≤ 2.326" in
+// every seed against "never overfit"): the four figures for every guard of CvGuard, as a table.
+// Disabled by default (about four times the three tests above); run with
+//   formloop_metrology_tests --gtest_also_run_disabled_tests --gtest_filter='*CvGuardStudy*'
+TEST(DecompositionTest, DISABLED_CvGuardStudy) {
+  std::printf("%-40s %12s %12s %12s %12s %10s %10s  %s\n", "guard", "independent", "d_s@points", "d_s@grid",
+              "noise->const", "detected", "grid_max", "seeds not independent");
+  for (CvGuard guard : {CvGuard::kLowerHeldOutError, CvGuard::kOneStandardError, CvGuard::kOneStandardErrorFolds,
+                        CvGuard::kIndependentWithinOneStandardError}) {
+    DecompositionOptions options;
+    options.cv_guard = guard;
+    ItemFourFigures f;
+    MeasureSmoothFields(options, &f);
+    MeasurePureNoise(options, &f);
+    MeasureDetection(options, &f);
+    std::printf("%-40s %12s %12s %12s %12s %10s %10.3f  %s (noise alone: %s)\n", CvGuardName(guard),
+                Rate(f.independent, kSeeds).c_str(), Rate(f.recovered_points, kSeeds).c_str(),
+                Rate(f.recovered_grid, kSeeds).c_str(), Rate(f.constant_on_noise, kSeeds).c_str(),
+                Rate(f.detected, kSeeds).c_str(), f.grid_errors.back(), Seeds(f.not_independent).c_str(),
+                Seeds(f.noise_not_independent).c_str());
+    std::fflush(stdout);
   }
-  std::printf("field RMS = sigma, n = 1000: detected %s\n", Rate(detected, kSeeds).c_str());
-  EXPECT_GE(detected, kSeeds * 95 / 100);
 }
 
 // The field d_s is usable away from the points: Evaluate reproduces the fitted values at the points,

@@ -76,6 +76,20 @@ TEST_F(ProbeLogTest, ReadsAValidLogWithLineNumbersAndRenormalises) {
 TEST_F(ProbeLogTest, MissingColumnsAreNamed) {
   ExpectError("id,x,y,z,ax,ay,t\n1,0,0,0,0,0,0\n", {"field 'az'", "missing", "id,x,y,z,ax,ay,az,t"});
   ExpectError("id,x,y,z,t\n1,0,0,0,0\n", {"field 'ax, ay, az'", "columns are missing"});
+}
+
+// The missing-column error names the file, the header's line number (after comments and blank
+// lines), the column and what the header holds, and says what to add where.
+TEST_F(ProbeLogTest, MissingColumnNamesTheHeaderLine) {
+  ExpectError("# probe log of part 7\n\n# machine M3\nid,x,y,z,ax,ay,t\n1,0,0,0,0,0,0\n",
+              {"log.csv:4: field 'az'", "column is missing from the header row on line 4: az",
+               "the header reads \"id,x,y,z,ax,ay,t\"", "Fix: add the missing column (az) to the header on line 4",
+               "a value for every row"});
+  ExpectError("\nid,x,y,z,ax,ay,az\r\n1,0,0,0,0,0,-1\r\n",
+              {"log.csv:2: field 't'", "on line 2: t", "header reads \"id,x,y,z,ax,ay,az\"", "header on line 2"});
+  ExpectError("x,y,z,ax,ay,az\n0,0,0,0,0,-1\n",
+              {"log.csv:1: field 'id, t'", "columns are missing from the header row on line 1: id, t",
+               "add the missing columns (id, t)"});
   ExpectError("x,y,z,ax,ay,az,t\n0,0,0,0,0,-1,0\n", {"field 'id'"});
   ExpectError("id,x,y,z,ax,ay,az\n1,0,0,0,0,0,-1\n", {"field 't'"});
   ExpectError("id,x,y,ax,ay,az,t\n1,0,0,0,0,-1,0\n", {"'z'"});   // core/point_io.h: x, y, z required

@@ -258,15 +258,25 @@ TEST_P(ScatteredFitReference, GridAndScatteredFitsAreWithinOneMicron) {
   EXPECT_EQ(grid_check.failures, 0);
   EXPECT_LE(grid_check.max_mm, kMicron);
 
-  // (ii) Scattered points, degree 5, automatic net (about 8 points per pole), adaptive refinement
-  // to 0.5 µm. Cubic (same settings) reaches 1 µm over the whole domain on plane, saddle,
-  // tilted_paraboloid, sphere_cap (0.78 µm), ellipsoid_cap and blade, but not on cylinder (1.2 µm),
-  // egg_box (6.7 µm, 55 × 42 poles after refinement) or franke (18 µm, 43 × 45), each at the corner
-  // hole: the finer cubic net extrapolates worse there. So the test uses quintic for every surface.
+  // (ii) Scattered points, degree 6, automatic net (about 8 points per pole), adaptive refinement
+  // to 0.5 µm. Seed 11 leaves a 2.6 mm point-free hole at the corner (0, 0) (3.4 mm on franke),
+  // and there Q extrapolates: its error is the model error near the hole (what Q misses between
+  // the samples) amplified by the extrapolation, 5 to 12 times here. The degree sets that model
+  // error. Measured worst error over the whole domain / inside the samples' hull, µm:
+  //            quartic        quintic        degree 6       degree 7
+  //   egg_box  13.4 / 1.96    1.11 / 0.28    0.13 / 0.05    0.03 / 0.005
+  //   franke   0.74 / 0.70    0.50 / 0.34    0.98 / 0.08    1.10 / 0.05
+  // (quartic measured with the margin as a span of its own, before the current knot
+  // layout; every other surface is below 0.1 µm from degree 5 up; cubic, earlier: egg_box 6.7 and
+  // franke 18 µm after refinement, cylinder 1.2 µm). Only degree 6 keeps both within 1 µm,
+  // franke by a small margin. The smoothing weight moves the corner error erratically (quintic
+  // egg_box at fixed λ = 1e-12, 1e-10, 1e-9, 1e-8, 1e-6: 1.46, 1.19, 0.28, 1.01, 13.1 µm; franke
+  // 1.61, 1.43, 0.69, 0.77, 10.6 µm), so GCV's λ is kept. With the margin as a span of its own
+  // (scattered_fit.h) quintic egg_box was 1.35 µm, degree 6 franke 1.50 µm.
   // Three correction rounds: later rounds gain < 1 % in RMS here.
   const Samples samples = Scatter(*s, kScatteredPoints, 11);
   ScatteredFitOptions options;
-  options.degree = 5;
+  options.degree = 6;
   options.adaptive = true;
   options.tolerance_mm = 0.5 * kMicron;
   options.max_correction_iterations = 3;
@@ -290,14 +300,10 @@ TEST_P(ScatteredFitReference, GridAndScatteredFitsAreWithinOneMicron) {
   EXPECT_LE(report.max_mm, options.tolerance_mm);  // adaptive refinement reached its tolerance
   // Where the samples surround the check point, Q is within 1 µm.
   EXPECT_LE(check.max_inside_hull_mm, kMicron);
-  // Outside the samples' hull Q extrapolates (seed 11 leaves a 2.6 mm hole at the corner (0, 0)):
-  // measured up to 1.35 µm there (egg_box; every other surface ≤ 0.52 µm over the whole domain).
-  // That is extrapolation 2.6 mm beyond the nearest sample, and no setting tried fixes it in a
-  // principled way: the margin span's width (1 to 4 interior spans) gives egg_box 0.96-1.35 µm
-  // not monotonically (1.35, 1.18, 0.96, 1.04, 1.13, 0.97 for 1, 1.5, 2, 2.5, 3, 4), franke 0.44-0.84;
-  // end spans 1.5 times as wide: egg_box 0.38 µm but franke 2.2 µm. Any error above 1 µm must come
-  // with the report's gap note.
+  // Over the whole domain, the corner hole included (see above): within 1 µm (issue item 1).
+  // Measured at most 0.98 µm (franke, at the corner (0, 0)); egg_box 0.13 µm.
   EXPECT_LE(check.max_outside_hull_mm, 5 * kMicron);
+  EXPECT_LE(check.max_mm, kMicron);
   if (check.max_mm > kMicron) {
     EXPECT_TRUE(HasNote(report, "Q is extrapolated there")) << "no gap note";
   }
@@ -318,49 +324,87 @@ std::string ParamName(const ::testing::TestParamInfo<std::string>& param) { retu
 INSTANTIATE_TEST_SUITE_P(ScatteredFit, ScatteredFitReference, ::testing::ValuesIn(ReferenceSurfaceNames()), ParamName);
 
 // ---------------------------------------------------------------------------------------------
-// Noise: 5 µm Gaussian along the normal on 10,000 scattered points of seven reference surfaces,
-// with the default options (cubic, GCV, parameter correction).
+// Noise: 5 µm Gaussian along the normal on 10,000 scattered points of the reference surfaces, with
+// the default options (cubic, GCV, parameter correction).
 //
 // The boundary criterion is taken over check points inside the samples' convex hull. Outside it
 // (the corners the random samples miss: here a 1.8 mm hole at (100, 0)) any fit extrapolates the
-// noise; measured there 20-55 µm on the reference surfaces, with λ → 0 as well, so it is printed
+// noise; measured there 10-49 µm on the reference surfaces, with λ → 0 as well, so it is printed
 // and only bounded loosely. Measured inside the hull, outer-5 %-band max / interior max: plane
-// 1.04, sphere_cap 1.93, cylinder 1.88, saddle 1.05, egg_box 1.53, franke 1.33, tilted_paraboloid
-// 1.05. Left out: ellipsoid_cap 2.60 and blade 2.61. Both are smoothing bias, not noise: without
+// 1.05, sphere_cap 1.83, cylinder 1.75, saddle 1.05, egg_box 1.54, franke 1.35, tilted_paraboloid
+// 1.05 (ScatteredFitNoise); ellipsoid_cap 2.50 and blade 2.75 miss the issue's 2.0
+// (ScatteredFitNoiseCornerBias below states them).
+//
+// Why those two miss it: smoothing bias at the corners, not noise and not oscillation. Without
 // noise at the same fixed λ the band error is 12.6 µm (ellipsoid_cap, λ = 2.2, worst at the corner
-// (100, 0)) and 14 µm (blade, λ = 0.2) against interior 1.3 and 2.0 µm; with noise, a fixed
-// λ = 0.02 gives ratios 1.24 and 1.56 (but a larger interior error). The thin-plate energy of
+// (100, 0)) and 14 µm (blade, λ = 0.2) against interior 1.3 and 2.0 µm. The thin-plate energy of
 // S − S₀ flattens what the cubic trend S₀ misses, most at the corners where these shapes curve
-// fastest, and GCV's λ minimises the global error, not the band's. A quartic trend (its
-// monomials above the spline degree L2-projected into the spline space) cut the band error of
-// ellipsoid_cap from 6.5 to 4.8 µm, but GCV then chose λ = 18 and the interior improved more:
-// ratio 3.07 (blade 3.81), so it was not kept.
+// fastest, and GCV's λ minimises the global error, not the band's. Every variant measured either
+// leaves the ratio above 2 or meets it by making the interior worse rather than the band better
+// (ratios ellipsoid_cap / blade; truth RMS in µm where it moved):
+// - fixed λ = 0.02 (instead of GCV's 2.2 / 0.17): 1.24 / 1.56, but the interior max doubles
+//   (ellipsoid_cap 2.5 -> 6.5 µm) and egg_box fails (2.30);
+// - quartic trend (monomials above the spline degree L2-projected): band 6.5 -> 4.8 µm, but GCV
+//   then chose λ = 18 and the interior improved more: 3.07 / 3.81;
+// - a separate weight κ on the energy of the end spans, chosen by GCV together with λ: GCV takes
+//   κ ≈ 0.1 (less smoothing at the edge): 2.30 / 3.57 (truth RMS 1.00 -> 0.83, 1.53 -> 1.27);
+// - κ fixed at 0.1 / 0.01: 2.59 / 3.14, 2.27 / 4.23; κ chosen to equalise the mean leverage of edge
+//   and interior points (κ ≈ 1.8): 2.29 / 1.45;
+// - κ fixed at 10 (more smoothing at the edge): all nine surfaces ≤ 1.63 (1.51 / 1.63), but GCV
+//   then lowers λ 10-20 times and the interior gets noisier: ellipsoid_cap band max 6.3 -> 7.1 µm,
+//   interior 2.5 -> 4.7 µm, truth RMS 0.99 -> 1.29 (sphere_cap 1.31 -> 1.60, blade 1.54 -> 1.70):
+//   it meets the ratio with a worse surface, so it was not kept;
+// - separate λ for the u and v energies (2-D GCV): 2.14 / 3.22 (sphere_cap 2.06);
+// - end spans 3 or 4 times as wide (instead of 2): 2.31-2.38 / 1.77-2.49, but the noise-free
+//   egg_box corner (ScatteredFitReference) goes to 1.58 µm;
+// - uniform knots with no margin: 2.62 / 2.98; a third-order penalty, edge-down-weighted
+//   penalties, wider margins: worse (earlier measurements);
+// - parameter plane tilted from the principal one to the plane whose projection best fills its
+//   bounding rectangle: blade 1.81 (ellipsoid_cap unchanged), but noise-free franke's corner error
+//   2.9 µm.
 constexpr double kNoiseMm = 5e-3;
+
+struct NoisyFit {
+  FitReport report;
+  TruthCheck check;
+  double ratio = 0;
+};
+
+NoisyFit FitNoisy(const AnalyticSurface& s, const std::string& name) {
+  const Samples samples = Scatter(s, 10000, 23, kNoiseMm);
+  NoisyFit out;
+  const auto q = FitScattered(samples.points, ScatteredFitOptions{}, &out.report);
+  EXPECT_TRUE(q.ok()) << q.status().ToString();
+  if (!q.ok()) return out;
+  const FitReport& report = out.report;
+  out.check = CheckAgainstTruth(s, *q, kCheckPoints, 302, Hull(samples.uv), 0.05,
+                                [&](const Vector3d& p, double, double) { return FrameStart(report, p); });
+  const TruthCheck& check = out.check;
+  out.ratio = check.max_band_mm / check.max_interior_mm;
+  std::printf(
+      "[ measured ] %-8s noisy scattered: %d x %d poles, lambda %.2e, dof %.0f, residual rms %.3f um; vs truth rms "
+      "%.3f um; inside the hull: interior max %.3f um, outer 5%% band max %.3f um (ratio %.2f); outside the hull (%d "
+      "points) max %.3f um; initial gap %.2f spans (%s)\n",
+      name.c_str(), q->u_poles(), q->v_poles(), report.details.at("lambda").get<double>(),
+      report.details.at("effective_dof").get<double>(), report.rms_mm * 1e3, check.rms_mm * 1e3,
+      check.max_interior_mm * 1e3, check.max_band_mm * 1e3, out.ratio, check.outside_hull,
+      check.max_outside_hull_mm * 1e3, report.details.at("initial_gap_spans").get<double>(),
+      report.details.at("edge_spans").get<std::string>().c_str());
+  EXPECT_EQ(check.failures, 0);
+  EXPECT_NEAR(report.rms_mm, kNoiseMm, 0.1 * kNoiseMm);
+  EXPECT_LT(check.rms_mm, 0.5 * kNoiseMm);  // most of the noise is removed
+  EXPECT_LT(check.max_outside_hull_mm, 20 * kNoiseMm);
+  return out;
+}
 
 class ScatteredFitNoise : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(ScatteredFitNoise, ResidualMatchesNoiseAndBoundaryDoesNotOscillate) {
   const auto s = Make(GetParam());
-  const Samples samples = Scatter(*s, 10000, 23, kNoiseMm);
-  FitReport report;
-  const auto q = FitScattered(samples.points, ScatteredFitOptions{}, &report);
-  ASSERT_TRUE(q.ok()) << q.status().ToString();
-  const TruthCheck check = CheckAgainstTruth(*s, *q, kCheckPoints, 302, Hull(samples.uv), 0.05,
-                                             [&](const Vector3d& p, double, double) { return FrameStart(report, p); });
-  const double ratio = check.max_band_mm / check.max_interior_mm;
-  std::printf(
-      "[ measured ] %-8s noisy scattered: %d x %d poles, lambda %.2e, dof %.0f, residual rms %.3f um; vs truth rms "
-      "%.3f um; inside the hull: interior max %.3f um, outer 5%% band max %.3f um (ratio %.2f); outside the hull (%d "
-      "points) max %.3f um; initial gap %.2f spans (%s)\n",
-      GetParam().c_str(), q->u_poles(), q->v_poles(), report.details.at("lambda").get<double>(),
-      report.details.at("effective_dof").get<double>(), report.rms_mm * 1e3, check.rms_mm * 1e3,
-      check.max_interior_mm * 1e3, check.max_band_mm * 1e3, ratio, check.outside_hull, check.max_outside_hull_mm * 1e3,
-      report.details.at("initial_gap_spans").get<double>(), report.details.at("edge_spans").get<std::string>().c_str());
-  EXPECT_EQ(check.failures, 0);
-  EXPECT_NEAR(report.rms_mm, kNoiseMm, 0.1 * kNoiseMm);
+  const NoisyFit fit = FitNoisy(*s, GetParam());
+  const TruthCheck& check = fit.check;
+  const double ratio = fit.ratio;
   EXPECT_LE(ratio, 2.0);
-  EXPECT_LT(check.rms_mm, 0.5 * kNoiseMm);  // most of the noise is removed
-  EXPECT_LT(check.max_outside_hull_mm, 20 * kNoiseMm);
 
   // OpenCASCADE's grid approximator on a noisy 100 × 100 grid (same noise), default degrees 3-5,
   // tolerance 5σ. Its boundary behaviour depends erratically on the settings; measured band max /
@@ -392,10 +436,25 @@ TEST_P(ScatteredFitNoise, ResidualMatchesNoiseAndBoundaryDoesNotOscillate) {
   EXPECT_LT(check.max_band_mm, grid_check.max_band_mm);
 }
 
-// ellipsoid_cap and blade are left out (see above).
+// ellipsoid_cap and blade: ScatteredFitNoiseCornerBias (see above).
 INSTANTIATE_TEST_SUITE_P(ScatteredFit, ScatteredFitNoise,
                          ::testing::Values("plane", "sphere_cap", "cylinder", "saddle", "egg_box", "franke",
                                            "tilted_paraboloid"),
+                         ParamName);
+
+// The two surfaces whose corner smoothing bias keeps the band ratio above 2 (see above): the same
+// checks on RMS and truth, and the ratio held to the figure measured (2.50 and 2.75) with a little
+// room, so that a change that makes it worse is seen.
+class ScatteredFitNoiseCornerBias : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(ScatteredFitNoiseCornerBias, ResidualMatchesNoiseAndBandRatioIsAsStated) {
+  const auto s = Make(GetParam());
+  const NoisyFit fit = FitNoisy(*s, GetParam());
+  EXPECT_LE(fit.ratio, 2.9);
+  EXPECT_LT(fit.check.max_band_mm, 4 * kNoiseMm);
+}
+
+INSTANTIATE_TEST_SUITE_P(ScatteredFit, ScatteredFitNoiseCornerBias, ::testing::Values("ellipsoid_cap", "blade"),
                          ParamName);
 
 // ---------------------------------------------------------------------------------------------
