@@ -40,6 +40,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/command.h"
+#include "app/run_folder.h"
 #include "core/atomic_file.h"
 #include "core/json_io.h"
 #include "core/log.h"
@@ -371,73 +372,6 @@ struct PartArgs {
   }
 };
 
-Status ReadVector3(const nlohmann::json& object, const std::string& source, const std::string& prefix,
-                   const std::string& key, Eigen::Vector3d* out) {
-  const auto it = object.find(key);
-  if (it == object.end() || !it->is_array() || it->size() != 3) {
-    return Status::BadInput(Where{.file = source, .field = prefix + key}, "must be an array of 3 numbers",
-                            "write it as [x, y, z]");
-  }
-  for (int a = 0; a < 3; ++a) {
-    const nlohmann::json& c = (*it)[static_cast<std::size_t>(a)];
-    if (!c.is_number() || !std::isfinite(c.get<double>())) {
-      return Status::BadInput(Where{.file = source, .field = prefix + key + "[" + std::to_string(a) + "]"},
-                              "is not a finite number", "write a decimal number");
-    }
-    (*out)[a] = c.get<double>();
-  }
-  return Status::Ok();
-}
-
-// A probing plan as written by ProbingPlan::ToJson ({"count": n, "points": [{"id", "u", "v", "point",
-// "normal"}, ...]}), e.g. toolpath/probing_plan.json of `formloop run`.
-Result<metrology::ProbingPlan> ReadProbingPlan(const std::string& path) {
-  FL_ASSIGN_OR_RETURN(const Json json, ReadJsonFile(path));
-  if (!json.is_object() || !json.contains("points") || !json["points"].is_array() || json["points"].empty()) {
-    return Status::BadInput(Where{.file = path, .field = "points"}, "a probing plan needs a non-empty array 'points'",
-                            "use a plan written by formloop (e.g. toolpath/probing_plan.json of `formloop run`)");
-  }
-  JsonFields top(json, path);
-  FL_RETURN_IF_ERROR(top.CheckKnown({"count", "points"}));
-  metrology::ProbingPlan plan;
-  std::set<std::int64_t> ids;
-  const nlohmann::json& points = json["points"];
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    const std::string prefix = "points[" + std::to_string(i) + "].";
-    if (!points[i].is_object()) {
-      return Status::BadInput(Where{.file = path, .field = "points[" + std::to_string(i) + "]"}, "is not an object",
-                              "write {\"id\": .., \"u\": .., \"v\": .., \"point\": [..], \"normal\": [..]}");
-    }
-    JsonFields f(points[i], path, prefix);
-    FL_RETURN_IF_ERROR(f.CheckKnown({"id", "u", "v", "point", "normal"}));
-    metrology::ProbePoint p;
-    long long id = 0;
-    FL_RETURN_IF_ERROR(f.Integer("id", &id));
-    p.id = id;
-    FL_RETURN_IF_ERROR(f.Number("u", &p.u));
-    FL_RETURN_IF_ERROR(f.Number("v", &p.v));
-    FL_RETURN_IF_ERROR(ReadVector3(points[i], path, prefix, "point", &p.point));
-    FL_RETURN_IF_ERROR(ReadVector3(points[i], path, prefix, "normal", &p.normal));
-    const double length = p.normal.norm();
-    if (!(length > 0.5 && length < 1.5)) {
-      return Status::BadInput(Where{.file = path, .field = prefix + "normal"}, "is not a unit vector",
-                              "write the unit outward normal of Q at the point");
-    }
-    p.normal /= length;
-    if (!ids.insert(p.id).second) {
-      return Status::BadInput(Where{.file = path, .field = prefix + "id"}, "id " + std::to_string(p.id) + " is repeated",
-                              "give every planned point its own id");
-    }
-    plan.points.push_back(p);
-  }
-  if (json.contains("count") && (!json["count"].is_number_integer() || json["count"].get<long long>() !=
-                                                                            static_cast<long long>(plan.points.size()))) {
-    return Status::BadInput(Where{.file = path, .field = "count"},
-                            "does not match the " + std::to_string(plan.points.size()) + " points",
-                            "write the number of points, or leave 'count' out");
-  }
-  return plan;
-}
 
 Status ValidatePartArgs(const PartArgs& a) {
   if (a.knn < 1) return Status::BadInput(Where{.field = "--knn"}, "must be at least 1", "use e.g. 8");
@@ -526,7 +460,8 @@ Status RunPartAnalysis(const PartArgs& args) {
   std::optional<metrology::ProbingPlan> plan;
   std::vector<std::int64_t> not_measured;
   if (!args.plan.empty()) {
-    FL_ASSIGN_OR_RETURN(plan, ReadProbingPlan(args.plan));
+    FL_ASSIGN_OR_RETURN(const PlanWithApproaches read_plan, ReadPlanFile(args.plan));
+    plan = read_plan.plan;
     FL_ASSIGN_OR_RETURN(not_measured, metrology::CheckProbeLogAgainstPlan(log, *plan));
   }
 
@@ -627,6 +562,22 @@ Status RunPartAnalysis(const PartArgs& args) {
                                               .seed = args.seed,
                                               .alpha = args.alpha}));
 
+  // 5b. Local Moran of the random part d_u on the same weights: where the ladder's residual still
+  // clusters. d_u is a least-squares residual, so its values are not exchangeable in the strict
+  // sense; the conditional-randomisation p-values are the usual screening approximation (as for the
+  // raw deviations) and the global residual test of the ladder is the exact one. When d_u is
+  // identically zero (the model reproduces every point) there is nothing to map.
+  Eigen::VectorXd y_random(n);
+  for (long i = 0; i < n; ++i) y_random[i] = dec.random_mm[static_cast<std::size_t>(i)];
+  std::optional<metrology::LocalMoranResult> lisa_random;
+  if ((y_random.array() - y_random.mean()).square().sum() > 0) {
+    FL_ASSIGN_OR_RETURN(lisa_random, metrology::LocalMoranI(y_random, weights,
+                                                            {.islands = IslandPolicy::kRefuse,
+                                                             .permutations = args.lisa_permutations,
+                                                             .seed = args.seed,
+                                                             .alpha = args.alpha}));
+  }
+
   // 6. Per-point summary.
   double sum = 0, sum2 = 0;
   long peak = 0;
@@ -655,7 +606,8 @@ Status RunPartAnalysis(const PartArgs& args) {
   // 7. The output, all computed before anything is written.
   PointSet points = metrology::DeviationsToPoints(deviations);
   points.scalars.clear();
-  std::vector<double> u_col, v_col, dev_col, ds_col, du_col, lisa_col;
+  std::vector<double> u_col, v_col, dev_col, ds_col, du_col, lisa_col, cluster_col, lisa_random_col,
+      cluster_random_col;
   for (long i = 0; i < n; ++i) {
     const auto k = static_cast<std::size_t>(i);
     u_col.push_back(deviations[k].u);
@@ -664,6 +616,14 @@ Status RunPartAnalysis(const PartArgs& args) {
     ds_col.push_back(dec.systematic_mm[k] * 1e3);
     du_col.push_back(dec.random_mm[k] * 1e3);
     lisa_col.push_back(std::isfinite(lisa.i[i]) ? lisa.i[i] : 0.0);
+    cluster_col.push_back(static_cast<double>(static_cast<int>(lisa.cluster[k])));
+    if (lisa_random) {
+      lisa_random_col.push_back(std::isfinite(lisa_random->i[i]) ? lisa_random->i[i] : 0.0);
+      cluster_random_col.push_back(static_cast<double>(static_cast<int>(lisa_random->cluster[k])));
+    } else {
+      lisa_random_col.push_back(0.0);
+      cluster_random_col.push_back(static_cast<double>(static_cast<int>(metrology::LisaCluster::kNotSignificant)));
+    }
   }
   points.SetScalar("u", std::move(u_col));
   points.SetScalar("v", std::move(v_col));
@@ -671,6 +631,9 @@ Status RunPartAnalysis(const PartArgs& args) {
   points.SetScalar("systematic", std::move(ds_col));
   points.SetScalar("random", std::move(du_col));
   points.SetScalar("local_moran", std::move(lisa_col));
+  points.SetScalar("lisa_cluster", std::move(cluster_col));
+  points.SetScalar("local_moran_random", std::move(lisa_random_col));
+  points.SetScalar("lisa_cluster_random", std::move(cluster_random_col));
   FL_RETURN_IF_ERROR(points.Validate("analyse deviations"));
 
   nlohmann::json probe_json = metrology::ProbeProfileToJson(probe);
@@ -714,6 +677,32 @@ Status RunPartAnalysis(const PartArgs& args) {
   analysis["form_error_um"] = dec.form_error_um;
   analysis["lisa"] = lisa.SummaryJson();
   analysis["lisa"]["of"] = "the deviations, k-NN weights in (u, v), row-standardised";
+  if (lisa_random) {
+    analysis["lisa_random"] = lisa_random->SummaryJson();
+    analysis["lisa_random"]["of"] =
+        "the random part d_u (the chosen model's residual), same k-NN weights in (u, v), row-standardised";
+    analysis["lisa_random"]["note"] =
+        "d_u is a least-squares residual: its p-values are a screening approximation; the ladder's residual Moran "
+        "z (Cliff-Ord) is the exact global test";
+    nlohmann::json significant = nlohmann::json::array();
+    for (long i = 0; i < n; ++i) {
+      const auto k = static_cast<std::size_t>(i);
+      const metrology::LisaCluster c = lisa_random->cluster[k];
+      if (c == metrology::LisaCluster::kNotSignificant || c == metrology::LisaCluster::kIsland) continue;
+      significant.push_back({{"id", deviations[k].id},
+                             {"u", deviations[k].u},
+                             {"v", deviations[k].v},
+                             {"random_um", dec.random_mm[k] * 1e3},
+                             {"I_i", lisa_random->i[i]},
+                             {"z", lisa_random->z[i]},
+                             {"p", lisa_random->permutations > 0 ? lisa_random->p_sim[i] : lisa_random->p_analytical[i]},
+                             {"cluster", metrology::LisaClusterName(c)}});
+    }
+    analysis["lisa_random"]["significant_points"] = significant;
+  } else {
+    analysis["lisa_random"] = {{"of", "the random part d_u"},
+                               {"note", "d_u is identically zero (the model reproduces every point): nothing to map"}};
+  }
   if (dec.evaluation) {
     analysis["evaluation"] = dec.evaluation->ToJson();
     analysis["compensate"] = dec.evaluation->compensate;
@@ -733,7 +722,10 @@ Status RunPartAnalysis(const PartArgs& args) {
           {"deviation", "signed normal deviation, um (positive = material left)"},
           {"systematic", "d_s at the point, um"},
           {"random", "d_u = deviation - d_s, um"},
-          {"local_moran", "local Moran I_i of the deviations (dimensionless)"}}}}}};
+          {"local_moran", "local Moran I_i of the deviations (dimensionless)"},
+          {"lisa_cluster", "LISA cluster of the deviations: 0 not significant, 1 HH, 2 LH, 3 LL, 4 HL, 5 island"},
+          {"local_moran_random", "local Moran I_i of the random part d_u (dimensionless; 0 when d_u is all zero)"},
+          {"lisa_cluster_random", "LISA cluster of d_u, same codes as lisa_cluster"}}}}}};
 
   // 8. Write: inputs, points, then analysis.json last.
   const fs::path dir(args.out);

@@ -1,29 +1,346 @@
-// `formloop kb ...`: the case-library maintenance tool. This first version creates and migrates.
+// `formloop kb ...`: the case-library maintenance tool (spec/case-library.md; kb/library.h).
+//
+//   formloop kb init    PATH [--starter] [--data DIR]  create or migrate a library; --starter fills a new one with
+//                                                   the synthetic starter cases (data/starter/) and trains it
+//   formloop kb train   PATH [--tau1 T] [--tau2 T] [--seed S]  standardise, train and store the GHSOM (JSON report)
+//   formloop kb calibrate PATH [--breadth B] [--data DIR]  leave-one-out routing report (JSON)
+//   formloop kb migrate PATH                        bring an existing library to the current schema
+//   formloop kb add     PATH CASE.json [--replace]  add one case (refuses an existing uid unless --replace); when
+//                                                   the stored GHSOM was current, the case is inserted into it
+//                                                   (Ghsom::Insert, local retraining) and it stays current;
+//                                                   otherwise the GHSOM is left stale (kb check) until kb train
+//   formloop kb import  PATH FILE.jsonl [--replace] import an export file in one transaction
+//   formloop kb export  PATH --out FILE.jsonl       deterministic JSON Lines, written atomically
+//   formloop kb list    PATH [--family F] [--json]  the cases, sorted by uid
+//   formloop kb show    PATH UID                    one case as its case-file JSON
+//   formloop kb remove  PATH UID
+//   formloop kb stats   PATH                        counts per family and facet concept, GHSOM status
+//   formloop kb check   PATH                        JSON report; exit 1 when the library is not clean
+//   formloop kb rules   PATH [--set RULES.json]     print the active rule base, or write a new version
+//
+// Machine-readable output goes to stdout (JSON unless `list` without --json); logs go to stderr.
 
 #include <iostream>
 #include <memory>
+#include <string>
+
+#include <nlohmann/json.hpp>
 
 #include "app/command.h"
+#include "core/json_io.h"
 #include "core/log.h"
+#include "kb/library.h"
 #include "kb/schema.h"
+#include "retrieval/retrieve.h"
+#include "retrieval/starter.h"
 
 namespace formloop::app {
+namespace {
+
+struct KbArgs {
+  std::string path;
+  std::string file;
+  std::string uid;
+  std::string out;
+  std::string family;
+  std::string rules;
+  bool replace = false;
+  bool json = false;
+  bool starter = false;
+  std::string data;
+  double tau1 = -1, tau2 = -1;
+  long long seed = -1;
+  int breadth = 1;
+};
+
+std::filesystem::path DataDir(const KbArgs& args) {
+  return args.data.empty() ? retrieval::DefaultDataDir() : std::filesystem::path(args.data);
+}
+
+Result<retrieval::FeatureOptions> FeatureOptionsFor(const KbArgs& args) {
+  FL_ASSIGN_OR_RETURN(retrieval::FacetTaxonomies tax, retrieval::FacetTaxonomies::Load(DataDir(args) / "taxonomies"));
+  retrieval::FeatureOptions options;
+  options.taxonomies = std::make_shared<const retrieval::FacetTaxonomies>(std::move(tax));
+  return options;
+}
+
+retrieval::GhsomOptions TrainOptions(const KbArgs& args) {
+  retrieval::GhsomOptions o = retrieval::LibraryGhsomDefaults();
+  if (args.tau1 > 0) o.tau1 = args.tau1;
+  if (args.tau2 > 0) o.tau2 = args.tau2;
+  if (args.seed >= 0) o.seed = static_cast<std::uint64_t>(args.seed);
+  return o;
+}
+
+// kb init --starter: the starter cases, the starter rule base, a trained GHSOM.
+Result<nlohmann::json> FillStarter(const KbArgs& args) {
+  FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args.path));
+  FL_ASSIGN_OR_RETURN(kb::LibraryStats stats, library->Stats());
+  if (stats.cases > 0) {
+    return Status::BadInput("case library '" + args.path + "' already holds " + std::to_string(stats.cases) +
+                            " case(s); --starter fills only an empty library");
+  }
+  const std::filesystem::path data = DataDir(args);
+  FL_ASSIGN_OR_RETURN(retrieval::StarterSpec spec, retrieval::StarterSpec::Load(data / "starter" / "families.json"));
+  FL_ASSIGN_OR_RETURN(retrieval::FeatureOptions options, FeatureOptionsFor(args));
+  log::Info("starter library: generating {} families x {} cases", spec.families.size(), spec.cases_per_family);
+  FL_ASSIGN_OR_RETURN(auto cases, retrieval::GenerateStarterCases(spec, options));
+  // One transaction for all cases: the export format (kb/library.h), header line then one case per line.
+  std::string text =
+      nlohmann::json{{"format", kb::kExportFormatName}, {"format_version", kb::kExportFormatVersion}}.dump();
+  text += "\n";
+  for (const auto& c : cases) text += nlohmann::json{{"type", "case"}, {"case", c.ToJson()}}.dump() + "\n";
+  FL_ASSIGN_OR_RETURN(kb::ImportReport imported, library->ImportText(text, "<starter cases>"));
+  FL_ASSIGN_OR_RETURN(Json rules, ReadJsonFile(data / "starter" / "rules.json"));
+  FL_ASSIGN_OR_RETURN(int rules_version, library->SetRules(rules, (data / "starter" / "rules.json").string()));
+  FL_ASSIGN_OR_RETURN(nlohmann::json trained, retrieval::TrainLibraryGhsom(*library, TrainOptions(args)));
+  return nlohmann::json{{"cases", imported.cases_added},
+                        {"families", spec.families.size()},
+                        {"rules_version", rules_version},
+                        {"ghsom", trained}};
+}
+
+CLI::App* PathCommand(CLI::App* kb, const std::string& name, const std::string& help, KbArgs* args) {
+  CLI::App* sub = kb->add_subcommand(name, help);
+  sub->add_option("path", args->path, "case library file, e.g. cases.db")->required();
+  return sub;
+}
+
+void Print(const nlohmann::json& j) { std::cout << j.dump(2) << std::endl; }
+
+}  // namespace
 
 void AddKbCommand(CLI::App& root, CommandAction* action) {
   CLI::App* kb = root.add_subcommand("kb", "Case-library maintenance (SQLite).");
   kb->require_subcommand(1);
-  auto path = std::make_shared<std::string>();
-  CLI::App* init = kb->add_subcommand(
-      "init",
+  auto args = std::make_shared<KbArgs>();
+
+  CLI::App* init = PathCommand(
+      kb, "init",
       "Create the case library at PATH (schema version in PRAGMA user_version, foreign keys on, WAL journal), or "
-      "migrate an existing library to the current schema. Prints a JSON report on stdout.");
-  init->add_option("path", *path, "case library file, e.g. cases.db")->required();
-  init->callback([path, action] {
-    *action = [path]() -> Status {
-      FL_ASSIGN_OR_RETURN(kb::InitReport report, kb::InitLibrary(*path));
+      "migrate an existing library to the current schema. Prints a JSON report on stdout.",
+      args.get());
+  init->add_flag("--starter", args->starter,
+                 "fill a new library with the synthetic starter cases (data/starter/families.json), write the starter "
+                 "rule base (data/starter/rules.json) and train the GHSOM");
+  init->add_option("--data", args->data, "data folder with taxonomies/ and starter/ (default: the source tree's data/)");
+  init->callback([args, action] {
+    *action = [args]() -> Status {
+      FL_ASSIGN_OR_RETURN(kb::InitReport report, kb::InitLibrary(args->path));
       log::Info("case library {} at schema version {} ({} migration(s) applied)", report.path,
                 report.migration.to_version, report.migration.applied.size());
-      std::cout << report.ToJson().dump(2) << std::endl;
+      nlohmann::json out = report.ToJson();
+      if (args->starter) {
+        FL_ASSIGN_OR_RETURN(out["starter"], FillStarter(*args));
+        log::Info("starter library: {} cases, GHSOM trained", out["starter"]["cases"].get<long long>());
+      }
+      Print(out);
+      return Status::Ok();
+    };
+  });
+
+  CLI::App* train = PathCommand(
+      kb, "train",
+      "Standardise the case descriptors, train the GHSOM (spec §2) and store it with its scaling, parameters, quality "
+      "figures (per-map QE/TE/MQE) and the change counter. JSON report on stdout.",
+      args.get());
+  train->add_option("--tau1", args->tau1, "breadth threshold (default: retrieval::LibraryGhsomDefaults)");
+  train->add_option("--tau2", args->tau2, "depth threshold (default: retrieval::LibraryGhsomDefaults)");
+  train->add_option("--seed", args->seed, "seed of the degenerate initial directions");
+  train->callback([args, action] {
+    *action = [args]() -> Status {
+      FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
+      FL_ASSIGN_OR_RETURN(nlohmann::json report, retrieval::TrainLibraryGhsom(*library, TrainOptions(*args)));
+      log::Info("GHSOM {} trained on {} case(s)", report["ghsom_id"].get<long long>(), report["cases"].get<long long>());
+      Print(report);
+      return Status::Ok();
+    };
+  });
+
+  CLI::App* calibrate = PathCommand(
+      kb, "calibrate",
+      "Leave-one-out: retrieve every case against the others; per route how often the best case is of the same "
+      "family, the distribution of A and the family confusion (JSON).",
+      args.get());
+  calibrate->add_option("--breadth", args->breadth, "candidate breadth (0 leaf, 1 + neighbours, 2 + the leaf's map ...)");
+  calibrate->add_option("--data", args->data, "data folder with taxonomies/ (default: the source tree's data/)");
+  calibrate->callback([args, action] {
+    *action = [args]() -> Status {
+      FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
+      FL_ASSIGN_OR_RETURN(retrieval::FeatureOptions options, FeatureOptionsFor(*args));
+      FL_ASSIGN_OR_RETURN(retrieval::RetrievalModel model,
+                          retrieval::RetrievalModel::Load(*library, *options.taxonomies));
+      retrieval::RetrieveOptions ro;
+      ro.breadth = args->breadth;
+      FL_ASSIGN_OR_RETURN(nlohmann::json report, model.LeaveOneOut(ro));
+      Print(report);
+      return Status::Ok();
+    };
+  });
+
+  CLI::App* migrate = PathCommand(kb, "migrate",
+                                  "Migrate an existing case library to this formloop's schema (never downgrades).",
+                                  args.get());
+  migrate->callback([args, action] {
+    *action = [args]() -> Status {
+      FL_RETURN_IF_ERROR(kb::ProbeLibraryFile(args->path, /*allow_unversioned=*/false).status());
+      FL_ASSIGN_OR_RETURN(kb::InitReport report, kb::InitLibrary(args->path));
+      log::Info("case library {}: schema {} -> {}", report.path, report.migration.from_version,
+                report.migration.to_version);
+      Print(report.ToJson());
+      return Status::Ok();
+    };
+  });
+
+  CLI::App* add = PathCommand(kb, "add", "Add one case from a case file (JSON; format in kb/library.h).", args.get());
+  add->add_option("case", args->file, "case file, e.g. blade-017.json")->required();
+  add->add_flag("--replace", args->replace, "overwrite a case with the same uid (keeps its created_at)");
+  add->callback([args, action] {
+    *action = [args]() -> Status {
+      FL_ASSIGN_OR_RETURN(kb::CaseRecord record, kb::ReadCaseFile(args->file));
+      FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
+      FL_ASSIGN_OR_RETURN(long long changes_before, library->ChangeCounter());
+      FL_RETURN_IF_ERROR(library->AddCase(record, args->replace));
+      log::Info("added case {} to {}", record.uid, args->path);
+      // The case is committed; a failed GHSOM insertion only leaves the GHSOM stale (kb check reports it).
+      nlohmann::json ghsom;
+      auto inserted = retrieval::InsertCaseIntoGhsom(*library, record, changes_before);
+      if (inserted.ok()) {
+        ghsom = *inserted;
+      } else {
+        log::Warn("case {} not inserted into the GHSOM: {}", record.uid, inserted.status().ToString());
+        ghsom = {{"inserted", false}, {"reason", inserted.status().ToString()}};
+      }
+      Print({{"added", record.uid}, {"replace", args->replace}, {"ghsom", ghsom}});
+      return Status::Ok();
+    };
+  });
+
+  CLI::App* import_cmd = PathCommand(kb, "import", "Import a `kb export` file (JSON Lines) in one transaction.",
+                                 args.get());
+  import_cmd->add_option("file", args->file, "export file, e.g. cases.jsonl")->required();
+  import_cmd->add_flag("--replace", args->replace, "replace cases whose uid exists instead of refusing the import");
+  import_cmd->callback([args, action] {
+    *action = [args]() -> Status {
+      FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
+      kb::ImportOptions options;
+      options.replace = args->replace;
+      FL_ASSIGN_OR_RETURN(kb::ImportReport report, library->ImportFile(args->file, options));
+      log::Info("imported {} case(s) into {}", report.cases_added + report.cases_replaced, args->path);
+      Print(report.ToJson());
+      return Status::Ok();
+    };
+  });
+
+  CLI::App* export_cmd = PathCommand(kb, "export", "Export the library as deterministic JSON Lines.", args.get());
+  export_cmd->add_option("--out", args->out, "output file (written through a temporary file and renamed)")
+      ->required();
+  export_cmd->callback([args, action] {
+    *action = [args]() -> Status {
+      FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
+      FL_RETURN_IF_ERROR(library->ExportToFile(args->out));
+      FL_ASSIGN_OR_RETURN(kb::LibraryStats stats, library->Stats());
+      log::Info("exported {} case(s) to {}", stats.cases, args->out);
+      Print({{"out", args->out}, {"cases", stats.cases}, {"format", kb::kExportFormatName}});
+      return Status::Ok();
+    };
+  });
+
+  CLI::App* list = PathCommand(kb, "list", "List the cases, sorted by uid.", args.get());
+  list->add_option("--family", args->family, "only this surface family");
+  list->add_flag("--json", args->json, "a JSON array instead of a table");
+  list->callback([args, action] {
+    *action = [args]() -> Status {
+      FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
+      FL_ASSIGN_OR_RETURN(auto cases, library->ListCases(args->family));
+      if (args->json) {
+        nlohmann::json rows = nlohmann::json::array();
+        for (const auto& c : cases) {
+          rows.push_back({{"uid", c.uid},
+                          {"name", c.name},
+                          {"family", c.family},
+                          {"created_at", c.created_at},
+                          {"updated_at", c.updated_at},
+                          {"descriptor_length", c.descriptor ? c.descriptor->size() : 0},
+                          {"concepts", c.concepts}});
+        }
+        Print(rows);
+      } else {
+        for (const auto& c : cases) std::cout << c.uid << "\t" << c.family << "\t" << c.name << "\n";
+        std::cout.flush();
+      }
+      return Status::Ok();
+    };
+  });
+
+  CLI::App* show = PathCommand(kb, "show", "Print one case as its case-file JSON.", args.get());
+  show->add_option("uid", args->uid, "the case's uid")->required();
+  show->callback([args, action] {
+    *action = [args]() -> Status {
+      FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
+      FL_ASSIGN_OR_RETURN(kb::CaseRecord record, library->GetCase(args->uid));
+      Print(record.ToJson());
+      return Status::Ok();
+    };
+  });
+
+  CLI::App* remove = PathCommand(kb, "remove", "Remove one case (its concepts go with it).", args.get());
+  remove->add_option("uid", args->uid, "the case's uid")->required();
+  remove->callback([args, action] {
+    *action = [args]() -> Status {
+      FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
+      FL_RETURN_IF_ERROR(library->RemoveCase(args->uid));
+      log::Info("removed case {} from {}", args->uid, args->path);
+      Print({{"removed", args->uid}});
+      return Status::Ok();
+    };
+  });
+
+  CLI::App* stats = PathCommand(kb, "stats", "Counts per family and per facet concept, rule version, GHSOM status.",
+                                args.get());
+  stats->callback([args, action] {
+    *action = [args]() -> Status {
+      FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
+      FL_ASSIGN_OR_RETURN(kb::LibraryStats s, library->Stats());
+      Print(s.ToJson());
+      return Status::Ok();
+    };
+  });
+
+  CLI::App* check = PathCommand(
+      kb, "check",
+      "Integrity, foreign keys, orphan concepts, descriptors, rule-base sanity, GHSOM staleness. JSON report; "
+      "exit 1 when not clean.",
+      args.get());
+  check->callback([args, action] {
+    *action = [args]() -> Status {
+      FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
+      FL_ASSIGN_OR_RETURN(kb::CheckReport report, library->Check());
+      Print(report.ToJson());
+      if (!report.clean()) {
+        return Status::Failed("case library '" + args->path + "' is not clean: " + report.problems.front() +
+                              (report.problems.size() > 1 ? " (and " + std::to_string(report.problems.size() - 1) +
+                                                                " more)"
+                                                          : ""));
+      }
+      for (const auto& w : report.warnings) log::Warn("{}", w);
+      return Status::Ok();
+    };
+  });
+
+  CLI::App* rules = PathCommand(kb, "rules", "Print the active rule base, or write a new version with --set.",
+                                args.get());
+  rules->add_option("--set", args->rules, "rules file: {\"rules\": [{\"name\", \"condition\", \"choice\"}, ...]}");
+  rules->callback([args, action] {
+    *action = [args]() -> Status {
+      FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
+      if (!args->rules.empty()) {
+        FL_ASSIGN_OR_RETURN(Json input, ReadJsonFile(args->rules));
+        FL_ASSIGN_OR_RETURN(int version, library->SetRules(input, args->rules));
+        log::Info("rule base of {} is now version {}", args->path, version);
+      }
+      FL_ASSIGN_OR_RETURN(kb::RuleSet set, library->GetRules());
+      Print(set.ToJson());
       return Status::Ok();
     };
   });

@@ -22,6 +22,8 @@ void AddRunCommand(CLI::App& root, CommandAction* action);
 void AddRegressCommand(CLI::App& root, CommandAction* action);
 void AddSurfacesCommand(CLI::App& root, CommandAction* action);
 void AddKbCommand(CLI::App& root, CommandAction* action);
+// `retrieve` (app/cmd_retrieve.cc).
+void AddRetrieveCommand(CLI::App& root, CommandAction* action);
 // "NUxNV" (or "NU,NV") into two integers of at least 2; `option` names the option in the message.
 Status ParseLayout(const std::string& text, const std::string& option, int* nu, int* nv);
 
@@ -33,5 +35,8 @@ void AddNcCommand(CLI::App& root, CommandAction* action);
 void AddAnalyseCommand(CLI::App& root, CommandAction* action);
 // `calibrate sphere` and `calibrate synth-sphere` (app/cmd_calibrate.cc).
 void AddCalibrateCommand(CLI::App& root, CommandAction* action);
+// `simulate` and `diagnose` (app/cmd_simulate.cc).
+void AddSimulateCommand(CLI::App& root, CommandAction* action);
+void AddDiagnoseCommand(CLI::App& root, CommandAction* action);
 
 }  // namespace formloop::app

@@ -31,8 +31,11 @@ int main(int argc, char** argv) {
   app::AddFitCommand(app, &action);
   app::AddNcCommand(app, &action);
   app::AddKbCommand(app, &action);
+  app::AddRetrieveCommand(app, &action);
   app::AddAnalyseCommand(app, &action);
   app::AddCalibrateCommand(app, &action);
+  app::AddSimulateCommand(app, &action);
+  app::AddDiagnoseCommand(app, &action);
 
   try {
     app.parse(argc, argv);

@@ -2,6 +2,10 @@
 
 #include <sqlite3.h>
 
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+
 namespace formloop::kb {
 
 Status Database::Check(int rc, const std::string& what) const {
@@ -32,14 +36,59 @@ Result<std::unique_ptr<Database>> Database::Open(const std::filesystem::path& pa
   if (std::filesystem::is_directory(path, ec)) {
     return Status::BadInput("case library path '" + path.string() + "' is a folder; give a file name such as cases.db");
   }
-  const int flags = SQLITE_OPEN_READWRITE | (mode == Mode::kCreate ? SQLITE_OPEN_CREATE : 0);
+  if (mode == Mode::kReadOnly && !std::filesystem::exists(path, ec)) {
+    return Status::NotFound("case library '" + path.string() + "' does not exist");
+  }
+  bool wal_without_log = false;
+  if (std::filesystem::exists(path, ec) && std::filesystem::file_size(path, ec) > 0) {
+    // Check the header ourselves: SQLite must never be handed (and never write to) a foreign file.
+    std::ifstream in(path, std::ios::binary);
+    char header[20] = {};
+    in.read(header, sizeof header);
+    // Bytes 18 and 19 are 2 in a WAL-mode database. Without a -wal file nobody has it open and the main
+    // file holds everything.
+    wal_without_log = in && header[18] == 2 && header[19] == 2 &&
+                      !std::filesystem::exists(path.string() + "-wal", ec);
+    static const char kMagic[16] = {'S', 'Q', 'L', 'i', 't', 'e', ' ', 'f', 'o', 'r', 'm', 'a', 't', ' ', '3', '\0'};
+    if (!in || std::memcmp(header, kMagic, sizeof kMagic) != 0) {
+      return Status::BadInput("'" + path.string() +
+                              "' is not a formloop case library (not an SQLite database); the file was not changed. "
+                              "Fix: check the path");
+    }
+  }
+  const int flags = mode == Mode::kReadOnly
+                        ? SQLITE_OPEN_READONLY
+                        : SQLITE_OPEN_READWRITE | (mode == Mode::kCreate ? SQLITE_OPEN_CREATE : 0);
   sqlite3* raw = nullptr;
-  const int rc = sqlite3_open_v2(path.string().c_str(), &raw, flags, nullptr);
+  std::string name = path.string();
+  int open_flags = flags;
+  if (mode == Mode::kReadOnly && wal_without_log) {
+    // A read-only connection to a WAL database would create (and leave behind) -wal and -shm files;
+    // nobody has this one open, so read the main file as immutable instead.
+    std::string uri = "file:";
+    for (char c : name) {
+      if (c == '%' || c == '?' || c == '#') {
+        char escaped[4];
+        std::snprintf(escaped, sizeof escaped, "%%%02X", static_cast<unsigned char>(c));
+        uri += escaped;
+      } else {
+        uri += c;
+      }
+    }
+    name = uri + "?immutable=1";
+    open_flags |= SQLITE_OPEN_URI;
+  }
+  const int rc = sqlite3_open_v2(name.c_str(), &raw, open_flags, nullptr);
   std::unique_ptr<Database> db(new Database(path, raw));
   if (rc != SQLITE_OK) return db->Check(rc, "opening");
   sqlite3_extended_result_codes(raw, 1);
-  sqlite3_busy_timeout(raw, 5000);
+  sqlite3_busy_timeout(raw, kBusyTimeoutMs);
   FL_RETURN_IF_ERROR(db->Execute("PRAGMA foreign_keys = ON;"));
+  if (mode == Mode::kReadOnly) {
+    // A file that is not a database fails here, on the first read.
+    FL_RETURN_IF_ERROR(db->QueryInt("PRAGMA user_version;").status());
+    return db;
+  }
   // A file that is not a database fails here, on the first read.
   FL_ASSIGN_OR_RETURN(std::string journal, db->QueryText("PRAGMA journal_mode = WAL;"));
   if (journal != "wal") {
@@ -48,6 +97,9 @@ Result<std::unique_ptr<Database>> Database::Open(const std::filesystem::path& pa
   }
   return db;
 }
+
+long long Database::LastInsertRowId() const { return sqlite3_last_insert_rowid(db_); }
+int Database::Changes() const { return sqlite3_changes(db_); }
 
 Database::~Database() {
   if (db_ != nullptr) sqlite3_close_v2(db_);

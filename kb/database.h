@@ -20,9 +20,13 @@ class Statement;
 
 class Database {
  public:
-  enum class Mode { kOpenExisting, kCreate };
+  static constexpr int kBusyTimeoutMs = 10000;
+  enum class Mode { kOpenExisting, kCreate, kReadOnly };
   // kCreate makes the file (and fails if it cannot); kOpenExisting fails with NotFound when absent.
-  // Foreign keys are switched on for the connection; the journal is WAL.
+  // Foreign keys are switched on for the connection; the journal is WAL. kReadOnly opens an existing
+  // file without writing anything to it (no WAL switch): used to inspect a file before adopting it.
+  // An existing, non-empty file whose first 16 bytes are not the SQLite header is refused with
+  // BadInput before SQLite touches it. Writers wait up to kBusyTimeoutMs for each other.
   static Result<std::unique_ptr<Database>> Open(const std::filesystem::path& path, Mode mode);
   ~Database();
   Database(const Database&) = delete;
@@ -36,6 +40,10 @@ class Database {
   Result<std::string> QueryText(const std::string& sql);
   // Every table name, sorted.
   Result<std::vector<std::string>> TableNames();
+
+  // The rowid of the last INSERT and the rows changed by the last statement on this connection.
+  long long LastInsertRowId() const;
+  int Changes() const;
 
   const std::filesystem::path& path() const { return path_; }
   sqlite3* handle() const { return db_; }

@@ -36,6 +36,13 @@ struct MigrationReport {
 // Applies every migration above the library's version. `migrations` must be numbered 1..N in order.
 Result<MigrationReport> Migrate(Database* db, const std::vector<Migration>& migrations);
 
+// Inspects an existing file read-only, before formloop writes to it, and refuses (BadInput, naming the
+// file; the file is left unchanged) anything that is not a formloop case library this formloop can use:
+// a non-SQLite file, an SQLite file with tables but no formloop schema, a library whose user_version is
+// newer than LatestSchemaVersion(). `allow_unversioned` accepts an empty, version-0 SQLite file (kb init).
+// Returns the schema version found (0 for an absent or empty file when allowed).
+Result<int> ProbeLibraryFile(const std::filesystem::path& path, bool allow_unversioned);
+
 struct InitReport {
   std::string path;
   bool created = false;       // the file did not exist before

@@ -1,22 +1,31 @@
 #include "simulation/virtual_machine.h"
 
-#include <algorithm>
 #include <cmath>
-
-#include <pcl/kdtree/kdtree_flann.h>
-#include <pcl/point_types.h>
 
 #include "core/random.h"
 
 namespace formloop::sim {
 namespace {
 
-// Distance from p to the segment [a, b].
-double SegmentDistance(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
-  const Eigen::Vector3d ab = b - a;
-  const double len2 = ab.squaredNorm();
-  const double t = len2 > 0 ? std::clamp((p - a).dot(ab) / len2, 0.0, 1.0) : 0.0;
-  return (a + t * ab - p).norm();
+// The centre the probe reports when it touches a surface displaced by δ_s (mm) along n at p, for the
+// probe model `probe` and an extra effective-radius change ΔR (mm, the model's measurement effects).
+Eigen::Vector3d ReportedCentre(const PointContext& c, double surface_mm, double delta_r_eff_mm,
+                               const metrology::ProbeModel& probe) {
+  const Eigen::Vector3d& a = c.approach;
+  const double ca = std::max(1e-6, -a.dot(c.normal));
+  const double t_touch = -surface_mm / ca;
+  const double pretravel = probe.Pretravel(a) - delta_r_eff_mm;
+  return c.point + probe.ball_radius_mm * c.normal + (t_touch + pretravel) * a;
+}
+
+double MeasurementEffectsMm(const PointContext& c, const Model& model) {
+  // The model's measurement effects are written as δ = ΔR·c_a; the probe needs ΔR itself.
+  const double ca = std::max(1e-6, -c.approach.dot(c.normal));
+  double sum_um = 0;
+  for (const auto& e : model.effects) {
+    if (e.effect->kind() == EffectKind::kMeasurement) sum_um += e.effect->DeviationUm(c, e.values);
+  }
+  return 1e-3 * sum_um / ca;
 }
 
 }  // namespace
@@ -39,6 +48,15 @@ nlohmann::json MachineEffects::ToJson() const {
           {"noise", {{"surface_sigma_um", surface_noise_um}, {"probe_sigma_um", probe_noise_um}}}};
 }
 
+Model MachineEffects::ToModel() const {
+  Model m;
+  if (tool_radius_error_um != 0) (void)m.Set("tool_radius", {tool_radius_error_um});
+  if (deflection_um != 0) (void)m.Set("tool_deflection", {deflection_um});
+  if (thermal_amplitude_um != 0) (void)m.Set("thermal_drift_z", {thermal_amplitude_um, thermal_tau_s});
+  if (surface_noise_um != 0 || probe_noise_um != 0) (void)m.Set("noise", {surface_noise_um, probe_noise_um});
+  return m;
+}
+
 Status VirtualMachineOptions::Validate() const {
   if (!(tool_radius_mm > 0)) return Status::BadInput(Where{.field = "tool.radius_mm"}, "must be > 0");
   FL_RETURN_IF_ERROR(effects.Validate());
@@ -49,96 +67,92 @@ Status VirtualMachineOptions::Validate() const {
   return Status::Ok();
 }
 
-Result<VirtualMachineResult> MachineAndProbe(const recon::BSplineSurface& surface,
+std::vector<MeasuredPoint> MeasuredPointsOf(const metrology::ProbingPlan& plan,
+                                            const std::vector<Eigen::Vector3d>& approaches) {
+  std::vector<MeasuredPoint> out;
+  out.reserve(plan.points.size());
+  for (std::size_t i = 0; i < plan.points.size(); ++i) {
+    const auto& p = plan.points[i];
+    out.push_back({p.id, p.point, p.normal, approaches.empty() ? Eigen::Vector3d(-p.normal) : approaches[i]});
+  }
+  return out;
+}
+
+Result<VirtualMachineResult> MachineAndProbe(const recon::BSplineSurface&,
                                              const std::vector<CutterLocation>& cutter_locations,
                                              const metrology::ProbingPlan& plan, const VirtualMachineOptions& options) {
   FL_RETURN_IF_ERROR(options.Validate());
-  if (cutter_locations.empty()) return Status::BadInput("the program commands no cutting moves");
-  const double r = options.tool_radius_mm;
-  // Kd-tree over ball centres (float coordinates relative to their centroid: FLANN works in float;
-  // candidates are re-ranked in double below).
-  Eigen::Vector3d origin = Eigen::Vector3d::Zero();
-  for (const auto& cl : cutter_locations) origin += cl.centre;
-  origin /= static_cast<double>(cutter_locations.size());
-  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
-  cloud->reserve(cutter_locations.size());
-  for (const auto& cl : cutter_locations) {
-    const Eigen::Vector3d p = cl.centre - origin;
-    cloud->push_back(pcl::PointXYZ(static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z())));
+  if (!options.approaches.empty() && options.approaches.size() != plan.points.size()) {
+    return Status::BadInput("approach directions: " + std::to_string(options.approaches.size()) + " for " +
+                            std::to_string(plan.points.size()) + " plan points");
   }
-  pcl::KdTreeFLANN<pcl::PointXYZ> tree;
-  tree.setInputCloud(cloud);
-
-  Rng rng(options.seed);
+  for (std::size_t i = 0; i < options.approaches.size(); ++i) {
+    const Eigen::Vector3d& a = options.approaches[i];
+    if (std::abs(a.norm() - 1.0) > 1e-6 || -a.dot(plan.points[i].normal) < 0.2) {
+      return Status::BadInput("approach of plan point " + std::to_string(plan.points[i].id) +
+                              " must be a unit vector into the surface within 78 degrees of -n");
+    }
+  }
   VirtualMachineResult result;
-  const MachineEffects& e = options.effects;
+  result.model = options.model;
+  for (const auto& e : options.effects.ToModel().effects) {
+    if (!result.model.Has(e.effect->name())) result.model.effects.push_back(e);
+  }
+  FL_ASSIGN_OR_RETURN(result.contexts, AssociateWithToolpath(cutter_locations, options.tool_radius_mm,
+                                                             MeasuredPointsOf(plan, options.approaches)));
+  const Model& model = result.model;
+  Rng rng(options.seed);
   double t_probe = 0;
-  constexpr int kCandidates = 48;
-  pcl::Indices found;
-  std::vector<float> distances;
-  for (const metrology::ProbePoint& pp : plan.points) {
-    const Eigen::Vector3d n = pp.normal;
-    // The ball that cut here sits about r above the point along n.
-    const Eigen::Vector3d query = pp.point + r * n - origin;
-    tree.nearestKSearch(pcl::PointXYZ(static_cast<float>(query.x()), static_cast<float>(query.y()),
-                                      static_cast<float>(query.z())),
-                        kCandidates, found, distances);
-    double envelope = 1e300;
-    std::size_t nearest = 0;
-    double nearest_d2 = 1e300;
-    for (const auto idx : found) {
-      const std::size_t k = static_cast<std::size_t>(idx);
-      const CutterLocation& cl = cutter_locations[k];
-      envelope = std::min(envelope, (cl.centre - pp.point).norm() - r);
-      // The ball sweeps the feed segments on either side of this location.
-      for (std::size_t other : {k - 1, k + 1}) {
-        if (k == 0 && other == k - 1) continue;
-        if (other >= cutter_locations.size()) continue;
-        const std::size_t later = std::max(k, other);
-        if (!cutter_locations[later].fed_from_previous) continue;
-        envelope = std::min(envelope, SegmentDistance(pp.point, cl.centre, cutter_locations[other].centre) - r);
-      }
-      const double d2 = (cl.centre - (pp.point + r * n)).squaredNorm();
-      if (d2 < nearest_d2) {
-        nearest_d2 = d2;
-        nearest = static_cast<std::size_t>(idx);
-      }
-    }
-    if (std::sqrt(nearest_d2) > 5.0 * r) {
-      return Status::BadInput("probe point " + std::to_string(pp.id) +
-                              " lies outside the machined area (nearest cutter location " +
-                              std::to_string(std::sqrt(nearest_d2)) + " mm away). Fix: probe inside the tool path");
-    }
-    const CutterLocation& cut = cutter_locations[nearest];
+  for (const PointContext& c : result.contexts) {
     InjectedTruth truth;
-    truth.id = pp.id;
-    truth.scallop_um = 1e3 * envelope;
-    truth.tool_radius_um = e.tool_radius_error_um;
-    truth.deflection_um = e.deflection_um * (1.0 - n.z() * n.z());
-    truth.thermal_um = -e.thermal_amplitude_um * (1.0 - std::exp(-cut.time_s / e.thermal_tau_s)) * n.z();
-    truth.roughness_um = e.surface_noise_um * rng.Normal();
-    truth.probe_noise_um = e.probe_noise_um * rng.Normal();
-    const Eigen::Vector3d machined = pp.point + 1e-3 * truth.total_um() * n;
+    truth.id = c.id;
+    truth.scallop_um = c.scallop_um;
+    truth.surface_um = model.SurfaceDeviationUm(c);
+    for (const auto& e : model.effects) truth.effect_um.push_back(e.effect->DeviationUm(c, e.values));
+    truth.measurement_um = model.DeviationUm(c) - truth.surface_um;
+    // Draws in a fixed order per point, so a run is repeatable.
+    truth.roughness_um = model.surface_sigma_um() * rng.Normal();
+    truth.probe_noise_um = model.probe_sigma_um() * rng.Normal();
     metrology::ProbeRecord record;
-    record.id = pp.id;
-    record.approach = -n;
-    // The ball touches the machined surface; the trigger reports its centre R_eff back along a,
-    // with the probe's repeatability along the approach.
-    record.centre = machined - options.true_probe.EffectiveRadius(record.approach) * record.approach +
-                    1e-3 * truth.probe_noise_um * record.approach;
+    record.id = c.id;
+    record.approach = c.approach;
+    record.centre = ReportedCentre(c, 1e-3 * truth.total_um(), MeasurementEffectsMm(c, model), options.true_probe) +
+                    1e-3 * truth.probe_noise_um * c.approach;
     t_probe += options.probe_seconds_per_point;
     record.t_s = t_probe;
     result.log.records.push_back(record);
-    result.truth.push_back(truth);
+    result.truth.push_back(std::move(truth));
   }
   return result;
+}
+
+metrology::ProbeLog PredictProbeLog(const std::vector<PointContext>& contexts, const Model& model,
+                                    const metrology::ProbeModel& probe, double extra_surface_um,
+                                    double extra_radius_um) {
+  metrology::ProbeLog log;
+  for (const PointContext& c : contexts) {
+    metrology::ProbeRecord record;
+    record.id = c.id;
+    record.approach = c.approach;
+    record.centre = ReportedCentre(c, 1e-3 * (model.SurfaceDeviationUm(c) + extra_surface_um),
+                                   MeasurementEffectsMm(c, model) + 1e-3 * extra_radius_um, probe);
+    log.records.push_back(record);
+  }
+  return log;
+}
+
+double VirtualMachineResult::EffectUm(std::size_t point, std::string_view effect) const {
+  for (std::size_t k = 0; k < model.effects.size(); ++k) {
+    if (model.effects[k].effect->name() == effect) return truth[point].effect_um[k];
+  }
+  return 0.0;
 }
 
 nlohmann::json VirtualMachineResult::ReportJson() const {
   auto stats = [&](auto getter) {
     double mn = 1e300, mx = -1e300, sum = 0;
-    for (const auto& t : truth) {
-      const double x = getter(t);
+    for (std::size_t i = 0; i < truth.size(); ++i) {
+      const double x = getter(i);
       mn = std::min(mn, x);
       mx = std::max(mx, x);
       sum += x;
@@ -146,15 +160,15 @@ nlohmann::json VirtualMachineResult::ReportJson() const {
     const double mean = truth.empty() ? 0 : sum / static_cast<double>(truth.size());
     return nlohmann::json{{"min", mn}, {"max", mx}, {"mean", mean}};
   };
-  return {{"probed_points", truth.size()},
-          {"injected_um",
-           {{"scallop", stats([](const InjectedTruth& t) { return t.scallop_um; })},
-            {"tool_radius", stats([](const InjectedTruth& t) { return t.tool_radius_um; })},
-            {"tool_deflection", stats([](const InjectedTruth& t) { return t.deflection_um; })},
-            {"thermal_drift_z", stats([](const InjectedTruth& t) { return t.thermal_um; })},
-            {"roughness", stats([](const InjectedTruth& t) { return t.roughness_um; })},
-            {"probe_noise", stats([](const InjectedTruth& t) { return t.probe_noise_um; })},
-            {"total_surface", stats([](const InjectedTruth& t) { return t.total_um(); })}}}};
+  nlohmann::json injected = {{"scallop", stats([&](std::size_t i) { return truth[i].scallop_um; })}};
+  for (std::size_t k = 0; k < model.effects.size(); ++k) {
+    if (model.effects[k].effect->kind() == EffectKind::kNoise) continue;
+    injected[std::string(model.effects[k].effect->name())] = stats([&](std::size_t i) { return truth[i].effect_um[k]; });
+  }
+  injected["roughness"] = stats([&](std::size_t i) { return truth[i].roughness_um; });
+  injected["probe_noise"] = stats([&](std::size_t i) { return truth[i].probe_noise_um; });
+  injected["total_surface"] = stats([&](std::size_t i) { return truth[i].total_um(); });
+  return {{"probed_points", truth.size()}, {"model", model.ToJson()}, {"injected_um", injected}};
 }
 
 }  // namespace formloop::sim

@@ -80,9 +80,12 @@ TEST(VirtualMachineTest, EffectsAddUpAndTheProbeModelInvertsTheLog) {
   for (std::size_t i = 0; i < dev->size(); ++i) {
     const InjectedTruth& t = r->truth[i];
     const Eigen::Vector3d n = s.plan.points[i].normal;
-    EXPECT_NEAR(t.deflection_um, 20 * (1 - n.z() * n.z()), 1e-9);
-    EXPECT_LE(t.thermal_um, 0.0);
-    EXPECT_GE(t.thermal_um, -6.0);
+    const double engagement = r->contexts[i].engagement;
+    EXPECT_GT(engagement, 0.0);
+    EXPECT_NEAR(r->EffectUm(i, "tool_deflection"), 20 * (1 - n.z() * n.z()) * engagement / 0.1, 1e-9);
+    EXPECT_EQ(r->EffectUm(i, "tool_radius"), 8.0);
+    EXPECT_LE(r->EffectUm(i, "thermal_drift_z"), 0.0);
+    EXPECT_GE(r->EffectUm(i, "thermal_drift_z"), -6.0);
     // Without noise the measured deviation is the injected total (the surface is locally flat over
     // microns, the B-spline fit of the saddle is exact).
     EXPECT_NEAR((*dev)[i].deviation_mm * 1e3, t.total_um(), 1e-3) << "point " << i;
@@ -119,7 +122,7 @@ TEST(VirtualMachineTest, ProbingOutsideTheMachinedAreaIsAnError) {
   s.plan.points[3].point += Eigen::Vector3d(0, 500, 0);
   const auto r = MachineAndProbe(s.q, s.cls, s.plan, {});
   EXPECT_EQ(r.status().code(), StatusCode::kBadInput);
-  EXPECT_NE(r.status().message().find("probe point 4"), std::string::npos) << r.status().message();
+  EXPECT_NE(r.status().message().find("point 4 "), std::string::npos) << r.status().message();
 }
 
 }  // namespace

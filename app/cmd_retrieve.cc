@@ -1,0 +1,154 @@
+// `formloop retrieve --library PATH --part PART.json [--top K] [--breadth B] [--max-scored N] [--data DIR]`: the most similar cases
+// of a case library for a part, with A, the per-facet similarities and common nodes, and the route
+// (retrieval/retrieve.h). `formloop retrieve --library PATH --calibrate` prints the leave-one-out report instead
+// (same as `formloop kb calibrate PATH`).
+//
+// The query file (JSON object), the fields of the part description (retrieval::PartDescriptionFromJson):
+//   {
+//     "name": "door-handle die",          optional, carried
+//     "shape_family": "sphere_cap",       node or alias of data/taxonomies/shape.txt
+//     "material": "H13",                  node or alias of material.txt
+//     "tolerance_mm": 0.01,               form tolerance (> 0)
+//     "finish_ra_um": 0.4,                (or "ra_um")
+//     "batch_size": 5,                    optional (1)
+//     "machine_class": "3-axis",          "3-axis" or "5-axis"
+//     "tool_radius_mm": 3,                (or "tool": {"radius_mm": 3}, app/part.h style)
+//     and the surface, one of:
+//     "surface": {"kind": "sphere_cap", "params": {"size_mm": 80, "radius_ratio": 1.3}}   a starter kind
+//                                                    (retrieval/starter.h), fitted from 21 × 21 samples
+//     "surface": {"reference": "saddle"}  or  "surface_reference": "saddle"   an analytic reference surface
+//                                                    (app/part.h style), fitted from 50 × 50 samples
+//     "descriptor": [24 numbers]                      the descriptor itself
+//   }
+// A case file (`formloop kb show` output: "part" object with these fields, "descriptor") is accepted too.
+
+#include <iostream>
+#include <memory>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "app/command.h"
+#include "core/json_io.h"
+#include "core/log.h"
+#include "kb/library.h"
+#include "reconstruction/analytic_surface.h"
+#include "reconstruction/bspline_surface.h"
+#include "retrieval/retrieve.h"
+#include "retrieval/starter.h"
+
+namespace formloop::app {
+namespace {
+
+struct RetrieveArgs {
+  std::string library;
+  std::string part;
+  std::string data;
+  int top = 5;
+  int breadth = 1;
+  int max_scored = 0;
+  bool calibrate = false;
+};
+
+Result<retrieval::PartFeatures> QueryFeatures(const nlohmann::json& file, const std::string& source,
+                                              const retrieval::FeatureOptions& options) {
+  const nlohmann::json& part = file.contains("part") && file["part"].is_object() ? file["part"] : file;
+  FL_ASSIGN_OR_RETURN(retrieval::PartDescription desc, retrieval::PartDescriptionFromJson(part, source));
+  if (file.contains("descriptor")) {
+    FL_ASSIGN_OR_RETURN(retrieval::PartFeatures f, retrieval::ClassifyPart(desc, *options.taxonomies));
+    const auto values = file["descriptor"];
+    if (!values.is_array() || values.size() != static_cast<size_t>(retrieval::kDescriptorCount)) {
+      return Status::BadInput(Where{.file = source, .field = "descriptor"},
+                              "expected " + std::to_string(retrieval::kDescriptorCount) + " numbers");
+    }
+    f.descriptors.resize(retrieval::kDescriptorCount);
+    for (int k = 0; k < retrieval::kDescriptorCount; ++k) {
+      if (!values[static_cast<size_t>(k)].is_number()) {
+        return Status::BadInput(Where{.file = source, .field = "descriptor[" + std::to_string(k) + "]"},
+                                "must be a number");
+      }
+      f.descriptors(k) = values[static_cast<size_t>(k)].get<double>();
+    }
+    return f;
+  }
+  const nlohmann::json surface = part.value("surface", nlohmann::json::object());
+  recon::BSplineSurface q;
+  if (surface.contains("kind")) {
+    std::map<std::string, double> params;
+    const nlohmann::json params_json = surface.value("params", nlohmann::json::object());
+    for (const auto& [k, v] : params_json.items()) {
+      if (!v.is_number()) return Status::BadInput(Where{.file = source, .field = "surface.params." + k}, "not a number");
+      params[k] = v.get<double>();
+    }
+    FL_ASSIGN_OR_RETURN(q, retrieval::BuildStarterSurface(surface["kind"].get<std::string>(), params,
+                                                          surface.value("samples", 21)));
+  } else {
+    const std::string reference = surface.contains("reference") ? surface["reference"].get<std::string>()
+                                                                : part.value("surface_reference", "");
+    if (reference.empty()) {
+      return Status::BadInput(Where{.file = source, .field = "surface"}, "no surface",
+                              "give surface.kind + surface.params, surface.reference, or descriptor");
+    }
+    FL_ASSIGN_OR_RETURN(std::unique_ptr<recon::AnalyticSurface> analytic, recon::MakeReferenceSurface(reference));
+    recon::FitReport report;
+    FL_ASSIGN_OR_RETURN(q, recon::FitAnalytic(*analytic, 50, 50, recon::GridFitOptions{}, 0, 1, &report));
+  }
+  return retrieval::ExtractFeatures(desc, q, options);
+}
+
+}  // namespace
+
+void AddRetrieveCommand(CLI::App& root, CommandAction* action) {
+  auto args = std::make_shared<RetrieveArgs>();
+  CLI::App* cmd = root.add_subcommand(
+      "retrieve",
+      "Retrieve the most similar cases of a case library for a part: A, per-facet similarities and common nodes, and "
+      "the route (direct / simulate / default) from the rule-base thresholds. JSON on stdout.");
+  cmd->add_option("--library", args->library, "case library file (trained: formloop kb train)")->required();
+  cmd->add_option("--part", args->part, "query part JSON (format in app/cmd_retrieve.cc)");
+  cmd->add_option("--top", args->top, "number of ranked cases printed")->capture_default_str();
+  cmd->add_option("--breadth", args->breadth, "candidates: 0 leaf, 1 + grid neighbours, 2 + the leaf's map, ...")
+      ->capture_default_str();
+  cmd->add_option("--max-scored", args->max_scored,
+                  "score only the N candidates nearest in the GHSOM input space (0: all; for big libraries)")
+      ->capture_default_str();
+  cmd->add_option("--data", args->data, "data folder with taxonomies/ (default: the source tree's data/)");
+  cmd->add_flag("--calibrate", args->calibrate, "print the leave-one-out calibration report instead");
+  cmd->callback([args, action] {
+    *action = [args]() -> Status {
+      const std::filesystem::path data =
+          args->data.empty() ? retrieval::DefaultDataDir() : std::filesystem::path(args->data);
+      FL_ASSIGN_OR_RETURN(retrieval::FacetTaxonomies tax, retrieval::FacetTaxonomies::Load(data / "taxonomies"));
+      retrieval::FeatureOptions options;
+      options.taxonomies = std::make_shared<const retrieval::FacetTaxonomies>(std::move(tax));
+      FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->library));
+      FL_ASSIGN_OR_RETURN(kb::GhsomStatus status, library->Ghsom());
+      if (status.stale) log::Warn("the GHSOM of {} is stale; run `formloop kb train {}`", args->library, args->library);
+      FL_ASSIGN_OR_RETURN(retrieval::RetrievalModel model,
+                          retrieval::RetrievalModel::Load(*library, *options.taxonomies));
+      retrieval::RetrieveOptions ro;
+      ro.breadth = args->breadth;
+      ro.top = args->top;
+      ro.max_scored = args->max_scored;
+      if (args->calibrate) {
+        FL_ASSIGN_OR_RETURN(nlohmann::json report, model.LeaveOneOut(ro));
+        std::cout << report.dump(2) << std::endl;
+        return Status::Ok();
+      }
+      if (args->part.empty()) return Status::BadInput("retrieve: give --part PART.json (or --calibrate)");
+      FL_ASSIGN_OR_RETURN(Json file, ReadJsonFile(args->part));
+      FL_ASSIGN_OR_RETURN(retrieval::PartFeatures features, QueryFeatures(file, args->part, options));
+      FL_ASSIGN_OR_RETURN(retrieval::RetrievalResult result, model.Retrieve(features, ro));
+      nlohmann::json out = result.ToJson();
+      out["query"]["part"] = args->part;
+      out["query"]["concepts"] = features.Concepts();
+      out["library"] = {{"path", args->library}, {"ghsom_id", status.id}, {"stale", status.stale},
+                        {"cases_not_in_ghsom", model.untrained().size()}};
+      log::Info("retrieve: best A = {:.4f} -> route {}", result.best_similarity, result.route);
+      std::cout << out.dump(2) << std::endl;
+      return Status::Ok();
+    };
+  });
+}
+
+}  // namespace formloop::app

@@ -1,0 +1,56 @@
+// `formloop simulate` and `formloop diagnose`: thin CLI over app/model_jobs.h.
+
+#include <iostream>
+#include <memory>
+
+#include "app/command.h"
+#include "app/model_jobs.h"
+
+namespace formloop::app {
+
+void AddSimulateCommand(CLI::App& root, CommandAction* action) {
+  auto args = std::make_shared<SimulateArgs>();
+  CLI::App* cmd = root.add_subcommand(
+      "simulate",
+      "Machine a run's tool path on the virtual machine with a model of effects and write the probe log it would "
+      "report, to rehearse a job or hide effects for a test.");
+  cmd->add_option("--run", args->run, "a `formloop run` folder (Q, tool path, part)")->required();
+  cmd->add_option("--model", args->model, "MODEL.json: effects and parameters (simulation/model.h)")->required();
+  cmd->add_option("--probe-plan", args->probe_plan,
+                  "PLAN.json or PLAN.csv (id,u,v,x,y,z,nx,ny,nz[,ax,ay,az]); default: the run's plan");
+  cmd->add_option("--out", args->out, "probe log to write (CSV: id,x,y,z,ax,ay,az,t)")->required();
+  cmd->add_option("--truth", args->truth, "also write what was injected at each point (JSON)");
+  cmd->add_option("--seed", args->seed, "noise seed")->default_val(1);
+  cmd->callback([args, action] { *action = [args] { return RunSimulate(*args); }; });
+}
+
+void AddDiagnoseCommand(CLI::App& root, CommandAction* action) {
+  auto args = std::make_shared<DiagnoseArgs>();
+  CLI::App* cmd = root.add_subcommand(
+      "diagnose",
+      "Compare measurement with the baseline simulation: residuals and their Moran's I, screening of every "
+      "catalogue effect, the named cause(s) with parameters and standard errors, confounded effects, an unexplained "
+      "systematic residual when nothing explains it, the extended model and its gain on held-out data. Writes "
+      "DIR/diagnosis.json, DIR/model.json, DIR/residuals.csv and DIR/inputs/; prints diagnosis.json on stdout.");
+  cmd->add_option("--measured", args->measured, "measured probe log LOG.csv");
+  cmd->add_option("--features", args->features, "feature positions F.csv: id,x_nom,y_nom,[z_nom,]x,y,[z] (mm)");
+  cmd->add_option("--run", args->run, "the `formloop run` folder that made the part (with --measured)");
+  cmd->add_option("--plan", args->plan,
+                  "its probing plan (.json/.csv); default: the run's. Without --run: plan-only diagnosis of the "
+                  "effects that do not need the tool path");
+  cmd->add_option("--probe-profile", args->probe_profile, "without --run: the probe profile the log was measured with");
+  cmd->add_option("--baseline", args->baseline, "MODEL.json the simulation used; default: no effects");
+  cmd->add_option("--out", args->out, "output folder")->required();
+  cmd->add_option("--validate", args->validate, "probe log of a second part to measure the gain on");
+  cmd->add_option("--validate-run", args->validate_run, "the run folder of that second part");
+  cmd->add_option("--validate-plan", args->validate_plan, "its plan; default: that run's");
+  cmd->callback([args, action] {
+    *action = [args]() -> Status {
+      FL_ASSIGN_OR_RETURN(const nlohmann::json out, RunDiagnose(*args));
+      std::cout << out.dump(2) << std::endl;
+      return Status::Ok();
+    };
+  });
+}
+
+}  // namespace formloop::app

@@ -1,0 +1,186 @@
+#include "app/model_jobs.h"
+
+#include <filesystem>
+
+#include "app/run_folder.h"
+#include "core/atomic_file.h"
+#include "core/json_io.h"
+#include "core/log.h"
+#include "core/point_io.h"
+#include "simulation/diagnose.h"
+#include "simulation/virtual_machine.h"
+
+namespace formloop::app {
+namespace fs = std::filesystem;
+namespace {
+
+Status MakeDir(const fs::path& dir) {
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec) return Status::IoError("cannot create folder '" + dir.string() + "': " + ec.message());
+  return Status::Ok();
+}
+
+Status CopyInto(const std::string& from, const fs::path& to) {
+  FL_ASSIGN_OR_RETURN(const std::string content, ReadFile(from));
+  return WriteFileAtomic(to, content, true);
+}
+
+Result<PlanWithApproaches> PlanFor(const RunFolder& run, const std::string& plan_path) {
+  if (plan_path.empty()) return PlanWithApproaches{run.plan, {}};
+  return ReadPlanFile(plan_path);
+}
+
+// What diagnose needs of a part: its Q, tool path, tool, plan, measured log and assumed probe.
+sim::ProbeDataInput ProbeInputOf(const RunFolder& run, const PlanWithApproaches& plan, const metrology::ProbeLog& log) {
+  sim::ProbeDataInput in;
+  in.surface = &run.q;
+  in.cutter_locations = &run.cutter_locations;
+  in.tool_radius_mm = run.part.toolpath.tool.radius_mm;
+  in.plan = &plan.plan;
+  in.measured = &log;
+  in.probe = run.part.probe;
+  return in;
+}
+
+}  // namespace
+
+Status RunSimulate(const SimulateArgs& args) {
+  if (args.run.empty()) return Status::BadInput(Where{.field = "--run"}, "is required", "give a `formloop run` folder");
+  if (args.model.empty()) return Status::BadInput(Where{.field = "--model"}, "is required", "give a MODEL.json");
+  if (args.out.empty()) return Status::BadInput(Where{.field = "--out"}, "is required", "give the probe log to write");
+  FL_ASSIGN_OR_RETURN(const RunFolder run, ReadRunFolder(args.run));
+  FL_ASSIGN_OR_RETURN(const sim::Model model, sim::ReadModel(args.model));
+  FL_ASSIGN_OR_RETURN(const PlanWithApproaches plan, PlanFor(run, args.probe_plan));
+  sim::VirtualMachineOptions vm;
+  vm.tool_radius_mm = run.part.toolpath.tool.radius_mm;
+  vm.model = model;
+  vm.true_probe = run.part.true_probe;
+  vm.approaches = plan.approaches;
+  vm.seed = args.seed;
+  FL_ASSIGN_OR_RETURN(const sim::VirtualMachineResult result,
+                      sim::MachineAndProbe(run.q, run.cutter_locations, plan.plan, vm));
+  // Truth first into a temporary name, then the log: a failure leaves neither.
+  if (!args.truth.empty()) {
+    nlohmann::json truth = result.ReportJson();
+    nlohmann::json points = nlohmann::json::array();
+    for (std::size_t i = 0; i < result.truth.size(); ++i) {
+      nlohmann::json effects = nlohmann::json::object();
+      for (std::size_t k = 0; k < result.model.effects.size(); ++k) {
+        effects[std::string(result.model.effects[k].effect->name())] = result.truth[i].effect_um[k];
+      }
+      points.push_back({{"id", result.truth[i].id},
+                        {"scallop_um", result.truth[i].scallop_um},
+                        {"effects_um", effects},
+                        {"roughness_um", result.truth[i].roughness_um},
+                        {"probe_noise_um", result.truth[i].probe_noise_um}});
+    }
+    truth["points"] = points;
+    truth["seed"] = args.seed;
+    FL_RETURN_IF_ERROR(WriteJsonFile(args.truth, truth));
+  }
+  const Status written = metrology::WriteProbeLog(args.out, result.log);
+  if (!written.ok() && !args.truth.empty()) {
+    std::error_code ec;
+    fs::remove(args.truth, ec);
+  }
+  FL_RETURN_IF_ERROR(written);
+  log::Info("simulate: {} probe points on {} cutter locations with {} effect(s); log {}", result.log.records.size(),
+            run.cutter_locations.size(), result.model.effects.size(), args.out);
+  return Status::Ok();
+}
+
+Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
+  if (args.out.empty()) return Status::BadInput(Where{.field = "--out"}, "is required", "give a folder for the diagnosis");
+  if (args.measured.empty() == args.features.empty()) {
+    return Status::BadInput(Where{.field = "--measured/--features"}, "give exactly one of them");
+  }
+  if (!args.validate.empty() && args.validate_run.empty()) {
+    return Status::BadInput(Where{.field = "--validate-run"}, "is required with --validate",
+                            "give the run folder of the second part");
+  }
+  sim::Model baseline;
+  if (!args.baseline.empty()) {
+    FL_ASSIGN_OR_RETURN(baseline, sim::ReadModel(args.baseline));
+  }
+  sim::DiagnoseOptions options;
+  sim::Diagnosis diagnosis;
+  nlohmann::json second_part = nullptr;
+  PointSet residuals;
+  if (!args.features.empty()) {
+    FL_ASSIGN_OR_RETURN(const auto features, sim::ReadFeatures(args.features));
+    FL_ASSIGN_OR_RETURN(diagnosis, sim::DiagnoseFeatures(features, baseline, options));
+  } else if (args.run.empty()) {
+    // Plan and log alone: no Q, no tool path.
+    if (args.plan.empty()) {
+      return Status::BadInput(Where{.field = "--run/--plan"}, "give the run folder, or at least the probing plan",
+                              "--run RUN_DIR screens every effect; --plan PLAN.json --probe-profile P.json screens "
+                              "those that do not need the tool path");
+    }
+    if (args.probe_profile.empty()) {
+      return Status::BadInput(Where{.field = "--probe-profile"}, "is required with --plan and no --run",
+                              "give the probe profile the log was measured with (`formloop calibrate sphere`)");
+    }
+    FL_ASSIGN_OR_RETURN(const PlanWithApproaches plan, ReadPlanFile(args.plan));
+    FL_ASSIGN_OR_RETURN(const metrology::ProbeLog log, metrology::ReadProbeLog(args.measured));
+    FL_ASSIGN_OR_RETURN(const metrology::ProbeModel probe, metrology::ReadProbeProfile(args.probe_profile));
+    FL_ASSIGN_OR_RETURN(diagnosis, sim::DiagnosePlanOnly(plan.plan, log, probe, baseline, options));
+  } else {
+    FL_ASSIGN_OR_RETURN(const RunFolder run, ReadRunFolder(args.run));
+    FL_ASSIGN_OR_RETURN(const PlanWithApproaches plan, PlanFor(run, args.plan));
+    FL_ASSIGN_OR_RETURN(const metrology::ProbeLog log, metrology::ReadProbeLog(args.measured));
+    const sim::ProbeDataInput in = ProbeInputOf(run, plan, log);
+    FL_ASSIGN_OR_RETURN(const sim::ProbeResidualData data, sim::ProbeResiduals(in, baseline));
+    FL_ASSIGN_OR_RETURN(diagnosis,
+                        sim::DiagnoseResiduals(data.contexts, data.residual_um, baseline, options, &data.sensitivity));
+    for (std::size_t i = 0; i < data.contexts.size(); ++i) {
+      residuals.points.push_back(data.contexts[i].point);
+      residuals.normals.push_back(data.contexts[i].normal);
+      residuals.ids.push_back(data.contexts[i].id);
+    }
+    residuals.SetScalar("residual_um", diagnosis.residual_um);
+    residuals.SetScalar("residual_after_um", diagnosis.residual_after_um);
+    if (!args.validate.empty()) {
+      FL_ASSIGN_OR_RETURN(const RunFolder run2, ReadRunFolder(args.validate_run));
+      FL_ASSIGN_OR_RETURN(const PlanWithApproaches plan2, PlanFor(run2, args.validate_plan));
+      FL_ASSIGN_OR_RETURN(const metrology::ProbeLog log2, metrology::ReadProbeLog(args.validate));
+      const sim::ProbeDataInput in2 = ProbeInputOf(run2, plan2, log2);
+      FL_ASSIGN_OR_RETURN(const double before, sim::PredictionRms(in2, baseline));
+      FL_ASSIGN_OR_RETURN(const double after, sim::PredictionRms(in2, diagnosis.extended));
+      second_part = {{"log", args.validate}, {"run", args.validate_run}, {"rms_before_um", before}, {"rms_after_um", after}};
+    }
+  }
+  nlohmann::json out = diagnosis.ToJson();
+  out["gain"]["second_part"] = second_part;
+  // Everything into a staging folder, renamed into place at the end: the folder is whole or absent.
+  const fs::path dir(args.out);
+  const fs::path staging = dir.string() + ".partial";
+  std::error_code ec;
+  fs::remove_all(staging, ec);
+  FL_RETURN_IF_ERROR(MakeDir(staging / "inputs"));
+  for (const auto& [from, name] : std::vector<std::pair<std::string, std::string>>{
+           {args.measured, "measured.csv"}, {args.features, "features.csv"}, {args.baseline, "baseline.json"},
+           {args.plan, "plan" + fs::path(args.plan).extension().string()}, {args.validate, "validate.csv"},
+           {args.probe_profile, "probe_profile.json"}}) {
+    if (!from.empty()) FL_RETURN_IF_ERROR(CopyInto(from, staging / "inputs" / name));
+  }
+  nlohmann::json args_json = {{"measured", args.measured}, {"features", args.features}, {"run", args.run},
+                              {"plan", args.plan}, {"probe_profile", args.probe_profile}, {"baseline", args.baseline},
+                              {"validate", args.validate},
+                              {"validate_run", args.validate_run}};
+  FL_RETURN_IF_ERROR(WriteJsonFile(staging / "inputs" / "arguments.json", args_json));
+  FL_RETURN_IF_ERROR(WriteJsonFile(staging / "diagnosis.json", out));
+  FL_RETURN_IF_ERROR(sim::WriteModel(staging / "model.json", diagnosis.extended));
+  if (!residuals.points.empty()) FL_RETURN_IF_ERROR(WritePoints(staging / "residuals.csv", residuals, {.precision = 6}));
+  fs::remove_all(dir, ec);
+  fs::rename(staging, dir, ec);
+  if (ec) return Status::IoError("cannot move '" + staging.string() + "' to '" + dir.string() + "': " + ec.message());
+  log::Info("{}", diagnosis.Summary());
+  if (!second_part.is_null()) {
+    log::Info("second part: prediction rms {:.2f} um (baseline) -> {:.2f} um (extended model)",
+              second_part["rms_before_um"].get<double>(), second_part["rms_after_um"].get<double>());
+  }
+  return out;
+}
+
+}  // namespace formloop::app

@@ -1,0 +1,39 @@
+#pragma once
+// `formloop simulate` and `formloop diagnose` as library functions (spec/simulation.md §2, §5).
+
+#include <cstdint>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "core/status.h"
+
+namespace formloop::app {
+
+struct SimulateArgs {
+  std::string run;         // a `formloop run` folder: Q, tool path, part (tool, true probe)
+  std::string model;       // MODEL.json: what the machine does
+  std::string probe_plan;  // PLAN.json|.csv (default: the run's plan)
+  std::string out;         // LOG.csv
+  std::string truth;       // optional: what was injected, per point, JSON
+  std::uint64_t seed = 1;
+};
+// Writes the probe log the machine would report (and the truth file when asked), both or neither.
+Status RunSimulate(const SimulateArgs& args);
+
+struct DiagnoseArgs {
+  std::string measured;       // LOG.csv (probe data) ...
+  std::string features;       // ... or F.csv (feature positions)
+  std::string run;            // the run that made the part (probe data)
+  std::string plan;           // its probing plan (default: the run's); without --run: plan-only diagnosis
+  std::string probe_profile;  // without --run: the probe the log was measured with (else the run's)
+  std::string baseline;       // MODEL.json (default: no effects)
+  std::string out;            // folder: diagnosis.json, model.json, residuals.csv, inputs/
+  std::string validate;       // optional second part: LOG2.csv ...
+  std::string validate_run;   // ... and its run folder
+  std::string validate_plan;  // ... and plan (default: that run's)
+};
+// Returns diagnosis.json's content; the summary goes to the log (stderr).
+Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args);
+
+}  // namespace formloop::app

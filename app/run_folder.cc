@@ -1,0 +1,184 @@
+#include "app/run_folder.h"
+
+#include <cmath>
+#include <set>
+#include <string>
+
+#include "core/json_io.h"
+#include "core/point_io.h"
+#include "nc-gen/toolpath_io.h"
+#include "reconstruction/cad_io.h"
+
+namespace formloop::app {
+namespace fs = std::filesystem;
+
+std::vector<sim::CutterLocation> CutterLocationsOf(const nc::Toolpath& toolpath) {
+  std::vector<sim::CutterLocation> out;
+  out.reserve(toolpath.points.size());
+  for (std::size_t k = 0; k < toolpath.points.size(); ++k) {
+    const nc::ClPoint& p = toolpath.points[k];
+    sim::CutterLocation cl;
+    cl.centre = p.centre;
+    cl.path_length_mm = p.path_length_mm;
+    cl.time_s = p.time_s;
+    cl.pass = p.pass;
+    cl.fed_from_previous = k > 0 && toolpath.points[k - 1].pass == p.pass;
+    out.push_back(cl);
+  }
+  return out;
+}
+
+namespace {
+
+Status ReadVector3(const nlohmann::json& object, const std::string& source, const std::string& prefix,
+                   const std::string& key, Eigen::Vector3d* out) {
+  const auto it = object.find(key);
+  if (it == object.end() || !it->is_array() || it->size() != 3) {
+    return Status::BadInput(Where{.file = source, .field = prefix + key}, "must be an array of 3 numbers",
+                            "write it as [x, y, z]");
+  }
+  for (int a = 0; a < 3; ++a) {
+    const nlohmann::json& c = (*it)[static_cast<std::size_t>(a)];
+    if (!c.is_number() || !std::isfinite(c.get<double>())) {
+      return Status::BadInput(Where{.file = source, .field = prefix + key + "[" + std::to_string(a) + "]"},
+                              "is not a finite number", "write a decimal number");
+    }
+    (*out)[a] = c.get<double>();
+  }
+  return Status::Ok();
+}
+
+// A probing plan as written by ProbingPlan::ToJson ({"count": n, "points": [{"id", "u", "v", "point",
+// "normal"}, ...]}), e.g. toolpath/probing_plan.json of `formloop run`.
+Result<metrology::ProbingPlan> ReadPlanJsonFile(const std::string& path) {
+  FL_ASSIGN_OR_RETURN(const Json json, ReadJsonFile(path));
+  if (!json.is_object() || !json.contains("points") || !json["points"].is_array() || json["points"].empty()) {
+    return Status::BadInput(Where{.file = path, .field = "points"}, "a probing plan needs a non-empty array 'points'",
+                            "use a plan written by formloop (e.g. toolpath/probing_plan.json of `formloop run`)");
+  }
+  JsonFields top(json, path);
+  FL_RETURN_IF_ERROR(top.CheckKnown({"count", "points"}));
+  metrology::ProbingPlan plan;
+  std::set<std::int64_t> ids;
+  const nlohmann::json& points = json["points"];
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const std::string prefix = "points[" + std::to_string(i) + "].";
+    if (!points[i].is_object()) {
+      return Status::BadInput(Where{.file = path, .field = "points[" + std::to_string(i) + "]"}, "is not an object",
+                              "write {\"id\": .., \"u\": .., \"v\": .., \"point\": [..], \"normal\": [..]}");
+    }
+    JsonFields f(points[i], path, prefix);
+    FL_RETURN_IF_ERROR(f.CheckKnown({"id", "u", "v", "point", "normal"}));
+    metrology::ProbePoint p;
+    long long id = 0;
+    FL_RETURN_IF_ERROR(f.Integer("id", &id));
+    p.id = id;
+    FL_RETURN_IF_ERROR(f.Number("u", &p.u));
+    FL_RETURN_IF_ERROR(f.Number("v", &p.v));
+    FL_RETURN_IF_ERROR(ReadVector3(points[i], path, prefix, "point", &p.point));
+    FL_RETURN_IF_ERROR(ReadVector3(points[i], path, prefix, "normal", &p.normal));
+    const double length = p.normal.norm();
+    if (!(length > 0.5 && length < 1.5)) {
+      return Status::BadInput(Where{.file = path, .field = prefix + "normal"}, "is not a unit vector",
+                              "write the unit outward normal of Q at the point");
+    }
+    p.normal /= length;
+    if (!ids.insert(p.id).second) {
+      return Status::BadInput(Where{.file = path, .field = prefix + "id"}, "id " + std::to_string(p.id) + " is repeated",
+                              "give every planned point its own id");
+    }
+    plan.points.push_back(p);
+  }
+  if (json.contains("count") && (!json["count"].is_number_integer() || json["count"].get<long long>() !=
+                                                                            static_cast<long long>(plan.points.size()))) {
+    return Status::BadInput(Where{.file = path, .field = "count"},
+                            "does not match the " + std::to_string(plan.points.size()) + " points",
+                            "write the number of points, or leave 'count' out");
+  }
+  return plan;
+}
+
+Result<PlanWithApproaches> ReadPlanJson(const fs::path& path) {
+  FL_ASSIGN_OR_RETURN(metrology::ProbingPlan plan, ReadPlanJsonFile(path.string()));
+  return PlanWithApproaches{std::move(plan), {}};
+}
+
+Result<PlanWithApproaches> ReadPlanCsv(const fs::path& path) {
+  FL_ASSIGN_OR_RETURN(const PointSet set, ReadCsv(path));
+  const std::string source = path.string();
+  const std::vector<double>* u = set.FindScalar("u");
+  const std::vector<double>* v = set.FindScalar("v");
+  if (u == nullptr || v == nullptr || !set.has_ids() || set.normals.empty()) {
+    return Status::BadInput(Where{.file = source, .line = 1}, "a probing plan CSV needs the columns id, u, v, x, y, z, nx, ny, nz",
+                            "add the missing columns (ax, ay, az are optional)");
+  }
+  const std::vector<double>* ax = set.FindScalar("ax");
+  const std::vector<double>* ay = set.FindScalar("ay");
+  const std::vector<double>* az = set.FindScalar("az");
+  const bool approaches = ax != nullptr || ay != nullptr || az != nullptr;
+  if (approaches && (ax == nullptr || ay == nullptr || az == nullptr)) {
+    return Status::BadInput(Where{.file = source, .line = 1, .field = "ax,ay,az"}, "give all three approach columns or none");
+  }
+  PlanWithApproaches out;
+  std::set<std::int64_t> ids;
+  for (std::size_t i = 0; i < set.points.size(); ++i) {
+    const long line = static_cast<long>(i) + 2;  // after the header
+    metrology::ProbePoint p;
+    p.id = set.ids[i];
+    p.u = (*u)[i];
+    p.v = (*v)[i];
+    p.point = set.points[i];
+    p.normal = set.normals[i];
+    if (std::abs(p.normal.norm() - 1.0) > 1e-5) {
+      return Status::BadInput(Where{.file = source, .line = line, .field = "nx,ny,nz"}, "the normal is not a unit vector");
+    }
+    if (!ids.insert(p.id).second) {
+      return Status::BadInput(Where{.file = source, .line = line, .field = "id"}, "duplicated id " + std::to_string(p.id));
+    }
+    out.plan.points.push_back(p);
+    if (approaches) {
+      const Eigen::Vector3d a((*ax)[i], (*ay)[i], (*az)[i]);
+      if (std::abs(a.norm() - 1.0) > 1e-5) {
+        return Status::BadInput(Where{.file = source, .line = line, .field = "ax,ay,az"}, "the approach is not a unit vector");
+      }
+      if (-a.dot(p.normal) < 0.2) {
+        return Status::BadInput(Where{.file = source, .line = line, .field = "ax,ay,az"},
+                                "the approach must point into the surface, within 78 degrees of -n");
+      }
+      out.approaches.push_back(a);
+    }
+  }
+  if (out.plan.points.empty()) return Status::BadInput(Where{.file = source}, "the plan has no points");
+  return out;
+}
+
+}  // namespace
+
+Result<PlanWithApproaches> ReadPlanFile(const fs::path& path) {
+  if (path.extension() == ".csv") return ReadPlanCsv(path);
+  return ReadPlanJson(path);
+}
+
+Result<RunFolder> ReadRunFolder(const fs::path& dir) {
+  if (!fs::is_directory(dir)) {
+    return Status::NotFound("run folder '" + dir.string() + "' does not exist. Fix: give the --out folder of `formloop run`");
+  }
+  RunFolder run;
+  run.dir = dir;
+  for (const char* file : {"inputs/part.json", "surface/Q.step", "toolpath/toolpath.csv", "toolpath/probing_plan.json"}) {
+    if (!fs::exists(dir / file)) {
+      return Status::NotFound("run folder '" + dir.string() + "' has no " + file +
+                              ". Fix: give a folder written by `formloop run`");
+    }
+  }
+  FL_ASSIGN_OR_RETURN(run.part, ReadPart(dir / "inputs" / "part.json"));
+  FL_ASSIGN_OR_RETURN(const recon::CadFace face, recon::ReadCadFace(dir / "surface" / "Q.step", {}));
+  run.q = face.surface;
+  FL_ASSIGN_OR_RETURN(run.toolpath, nc::ReadToolpathFile(dir / "toolpath" / "toolpath.csv"));
+  run.cutter_locations = CutterLocationsOf(run.toolpath);
+  FL_ASSIGN_OR_RETURN(const PlanWithApproaches plan, ReadPlanJson(dir / "toolpath" / "probing_plan.json"));
+  run.plan = plan.plan;
+  return run;
+}
+
+}  // namespace formloop::app

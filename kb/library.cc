@@ -1,0 +1,1081 @@
+#include "kb/library.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <set>
+#include <sstream>
+
+#include "core/atomic_file.h"
+#include "core/json_io.h"
+
+namespace formloop::kb {
+namespace {
+
+using nlohmann::json;
+
+Status FieldError(const Where& source, const std::string& field, const std::string& what,
+                  const std::string& fix = "") {
+  Where where = source;
+  where.field = field;
+  return Status::BadInput(where, what, fix);
+}
+
+bool ValidUid(const std::string& uid) {
+  if (uid.empty() || uid.size() > 128) return false;
+  return std::all_of(uid.begin(), uid.end(), [](char c) {
+    return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '.' || c == '_' ||
+           c == ':' || c == '-';
+  });
+}
+
+bool ValidFacet(const std::string& facet) {
+  if (facet.empty() || facet.size() > 64) return false;
+  return std::all_of(facet.begin(), facet.end(), [](char c) { return (c >= 'a' && c <= 'z') || c == '_'; });
+}
+
+Status NonEmptyString(const json& j, const std::string& key, const Where& source, std::string* out) {
+  if (!j.contains(key)) return FieldError(source, key, "missing", "add \"" + key + "\": \"...\"");
+  if (!j[key].is_string() || j[key].get<std::string>().empty()) {
+    return FieldError(source, key, "must be a non-empty string");
+  }
+  *out = j[key].get<std::string>();
+  return Status::Ok();
+}
+
+Status RequireObject(const json& j, const std::string& key, const Where& source, json* out) {
+  if (!j.contains(key)) return FieldError(source, key, "missing", "add \"" + key + "\": {...} (may be empty)");
+  if (!j[key].is_object()) return FieldError(source, key, "must be a JSON object");
+  *out = j[key];
+  return Status::Ok();
+}
+
+Status OptionalPositive(const json& obj, const std::string& key, const std::string& path, const Where& source) {
+  if (!obj.contains(key)) return Status::Ok();
+  const json& v = obj[key];
+  if (!v.is_number() || !std::isfinite(v.get<double>()) || v.get<double>() <= 0) {
+    return FieldError(source, path + "." + key, "must be a positive number");
+  }
+  return Status::Ok();
+}
+
+Status OptionalType(const json& obj, const std::string& key, const std::string& path, const Where& source,
+                    json::value_t type, const char* type_name) {
+  if (!obj.contains(key)) return Status::Ok();
+  if (obj[key].type() != type) return FieldError(source, path + "." + key, std::string("must be a JSON ") + type_name);
+  return Status::Ok();
+}
+
+Status ValidatePart(const json& part, const Where& source) {
+  FL_RETURN_IF_ERROR(OptionalPositive(part, "tolerance_mm", "part", source));
+  FL_RETURN_IF_ERROR(OptionalPositive(part, "finish_ra_um", "part", source));
+  if (part.contains("batch_size") && (!part["batch_size"].is_number_integer() || part["batch_size"].get<long long>() < 1)) {
+    return FieldError(source, "part.batch_size", "must be an integer of at least 1");
+  }
+  FL_RETURN_IF_ERROR(OptionalType(part, "material", "part", source, json::value_t::string, "string"));
+  return Status::Ok();
+}
+
+Status ValidateSimulation(const json& sim, const Where& source) {
+  if (!sim.contains("effect_models")) return Status::Ok();
+  if (!sim["effect_models"].is_array()) return FieldError(source, "simulation.effect_models", "must be a JSON array");
+  for (std::size_t m = 0; m < sim["effect_models"].size(); ++m) {
+    const json& model = sim["effect_models"][m];
+    const std::string mpath = "simulation.effect_models[" + std::to_string(m) + "]";
+    if (!model.is_object()) return FieldError(source, mpath, "must be a JSON object");
+    if (!model.contains("effects")) continue;
+    if (!model["effects"].is_array()) return FieldError(source, mpath + ".effects", "must be a JSON array");
+    for (std::size_t e = 0; e < model["effects"].size(); ++e) {
+      const json& effect = model["effects"][e];
+      const std::string epath = mpath + ".effects[" + std::to_string(e) + "]";
+      if (!effect.is_object()) return FieldError(source, epath, "must be a JSON object");
+      if (!effect.contains("name") || !effect["name"].is_string() || effect["name"].get<std::string>().empty()) {
+        return FieldError(source, epath + ".name", "must be a non-empty string");
+      }
+      if (!effect.contains("estimate") || !effect["estimate"].is_number()) {
+        return FieldError(source, epath + ".estimate", "must be a number");
+      }
+      if (!effect.contains("standard_error") || !effect["standard_error"].is_number() ||
+          !(effect["standard_error"].get<double>() >= 0)) {
+        return FieldError(source, epath + ".standard_error", "must be a number >= 0",
+                          "give the coefficient's standard error from the fit");
+      }
+    }
+  }
+  return Status::Ok();
+}
+
+Status ValidateManufacturing(const json& mfg, const Where& source) {
+  if (mfg.contains("tools")) {
+    if (!mfg["tools"].is_array()) return FieldError(source, "manufacturing.tools", "must be a JSON array");
+    for (std::size_t t = 0; t < mfg["tools"].size(); ++t) {
+      const std::string tpath = "manufacturing.tools[" + std::to_string(t) + "]";
+      if (!mfg["tools"][t].is_object()) return FieldError(source, tpath, "must be a JSON object");
+      FL_RETURN_IF_ERROR(OptionalPositive(mfg["tools"][t], "radius_mm", tpath, source));
+    }
+  }
+  for (const char* key : {"strategy", "reconstruction", "compensation"}) {
+    FL_RETURN_IF_ERROR(OptionalType(mfg, key, "manufacturing", source, json::value_t::object, "object"));
+  }
+  if (mfg.contains("compensation") && mfg["compensation"].contains("loops")) {
+    const json& loops = mfg["compensation"]["loops"];
+    if (!loops.is_array()) return FieldError(source, "manufacturing.compensation.loops", "must be a JSON array");
+    for (std::size_t i = 0; i < loops.size(); ++i) {
+      if (!loops[i].is_object()) {
+        return FieldError(source, "manufacturing.compensation.loops[" + std::to_string(i) + "]",
+                          "must be a JSON object");
+      }
+    }
+  }
+  return Status::Ok();
+}
+
+Result<json> ParseJsonColumn(const std::string& text, const std::string& what) {
+  json j = json::parse(text, nullptr, /*allow_exceptions=*/false);
+  if (j.is_discarded()) return Status::Internal("case library: column " + what + " is not valid JSON");
+  return j;
+}
+
+}  // namespace
+
+const std::vector<std::string>& KnownFacets() {
+  static const std::vector<std::string> kFacets = {"shape", "material", "tolerance", "finish", "machine_tool"};
+  return kFacets;
+}
+
+std::string UtcNow() {
+  const auto now = std::chrono::system_clock::now();
+  const std::time_t seconds = std::chrono::system_clock::to_time_t(now);
+  const long long ms =
+      std::chrono::duration_cast<std::chrono::milliseconds>(now.time_since_epoch()).count() % 1000;
+  std::tm tm{};
+  gmtime_r(&seconds, &tm);
+  char buffer[64];
+  std::snprintf(buffer, sizeof buffer, "%04d-%02d-%02dT%02d:%02d:%02d.%03lldZ", tm.tm_year + 1900, tm.tm_mon + 1,
+                tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec, ms);
+  return buffer;
+}
+
+// ---------------------------------------------------------------------------------------------- CaseRecord
+
+json CaseRecord::ToJson() const {
+  json j = {{"uid", uid},           {"name", name},
+            {"family", family},     {"part", part},
+            {"simulation", simulation}, {"manufacturing", manufacturing}};
+  if (descriptor) j["descriptor"] = *descriptor;
+  if (!concepts.empty()) j["concepts"] = concepts;
+  if (!created_at.empty()) j["created_at"] = created_at;
+  if (!updated_at.empty()) j["updated_at"] = updated_at;
+  return j;
+}
+
+Result<CaseRecord> CaseRecord::FromJson(const json& j, const Where& source) {
+  if (!j.is_object()) return Status::BadInput(source, "a case must be a JSON object", "see kb/library.h");
+  static const std::set<std::string> kKeys = {"uid",        "name",          "family",     "part",
+                                              "simulation", "manufacturing", "descriptor", "concepts",
+                                              "created_at", "updated_at"};
+  for (const auto& [key, value] : j.items()) {
+    if (kKeys.count(key) == 0) {
+      return FieldError(source, key, "unknown field",
+                        "use uid, name, family, part, simulation, manufacturing, descriptor, concepts");
+    }
+  }
+  CaseRecord r;
+  FL_RETURN_IF_ERROR(NonEmptyString(j, "uid", source, &r.uid));
+  if (!ValidUid(r.uid)) {
+    return FieldError(source, "uid", "'" + r.uid + "' is not a valid uid",
+                      "use 1-128 characters from A-Z a-z 0-9 . _ : -");
+  }
+  FL_RETURN_IF_ERROR(NonEmptyString(j, "name", source, &r.name));
+  FL_RETURN_IF_ERROR(NonEmptyString(j, "family", source, &r.family));
+  FL_RETURN_IF_ERROR(RequireObject(j, "part", source, &r.part));
+  FL_RETURN_IF_ERROR(RequireObject(j, "simulation", source, &r.simulation));
+  FL_RETURN_IF_ERROR(RequireObject(j, "manufacturing", source, &r.manufacturing));
+  FL_RETURN_IF_ERROR(ValidatePart(r.part, source));
+  FL_RETURN_IF_ERROR(ValidateSimulation(r.simulation, source));
+  FL_RETURN_IF_ERROR(ValidateManufacturing(r.manufacturing, source));
+  if (j.contains("descriptor") && !j["descriptor"].is_null()) {
+    const json& d = j["descriptor"];
+    if (!d.is_array() || d.empty()) return FieldError(source, "descriptor", "must be a non-empty array of numbers");
+    std::vector<double> values;
+    values.reserve(d.size());
+    for (std::size_t i = 0; i < d.size(); ++i) {
+      if (!d[i].is_number() || !std::isfinite(d[i].get<double>())) {
+        return FieldError(source, "descriptor[" + std::to_string(i) + "]", "must be a finite number");
+      }
+      values.push_back(d[i].get<double>());
+    }
+    r.descriptor = std::move(values);
+  }
+  if (j.contains("concepts")) {
+    if (!j["concepts"].is_object()) return FieldError(source, "concepts", "must be a JSON object facet -> concept");
+    for (const auto& [facet, concept_value] : j["concepts"].items()) {
+      if (!ValidFacet(facet)) {
+        return FieldError(source, "concepts." + facet, "facet names are lowercase letters and '_'",
+                          "known facets: shape, material, tolerance, finish, machine_tool");
+      }
+      if (!concept_value.is_string() || concept_value.get<std::string>().empty()) {
+        return FieldError(source, "concepts." + facet, "must be a non-empty string");
+      }
+      r.concepts[facet] = concept_value.get<std::string>();
+    }
+  }
+  for (const char* key : {"created_at", "updated_at"}) {
+    if (!j.contains(key)) continue;
+    if (!j[key].is_string()) return FieldError(source, key, "must be an ISO 8601 UTC string");
+    (std::string(key) == "created_at" ? r.created_at : r.updated_at) = j[key].get<std::string>();
+  }
+  return r;
+}
+
+Result<CaseRecord> ReadCaseFile(const std::filesystem::path& path) {
+  FL_ASSIGN_OR_RETURN(json j, ReadJsonFile(path));
+  return CaseRecord::FromJson(j, Where{.file = path.string()});
+}
+
+// ---------------------------------------------------------------------------------------------- rules
+
+json Rule::ToJson() const {
+  return {{"version", version}, {"name", name}, {"condition", condition}, {"choice", choice}, {"active", active}};
+}
+
+json RuleSet::ToJson() const {
+  json rules_json = json::array();
+  for (const Rule& r : rules) rules_json.push_back({{"name", r.name}, {"condition", r.condition}, {"choice", r.choice}});
+  return {{"version", version}, {"rules", rules_json}};
+}
+
+const Rule* RuleSet::Find(const std::string& name) const {
+  for (const Rule& r : rules) {
+    if (r.name == name) return &r;
+  }
+  return nullptr;
+}
+
+namespace {
+
+const Rule* FindRule(const std::vector<Rule>& rules, const std::string& name) {
+  for (const Rule& r : rules) {
+    if (r.name == name) return &r;
+  }
+  return nullptr;
+}
+
+std::optional<double> Bound(const Rule* rule, const char* op) {
+  if (rule == nullptr || !rule->condition.contains("similarity")) return std::nullopt;
+  const json& s = rule->condition["similarity"];
+  if (!s.is_object() || !s.contains(op) || !s[op].is_number()) return std::nullopt;
+  return s[op].get<double>();
+}
+
+}  // namespace
+
+std::vector<std::string> RuleSetProblems(const std::vector<Rule>& rules) {
+  std::vector<std::string> problems;
+  const Rule* direct = FindRule(rules, "route.direct");
+  const Rule* simulate = FindRule(rules, "route.simulate");
+  const Rule* fallback = FindRule(rules, "route.default");
+  if (direct == nullptr) problems.push_back("rule 'route.direct' is missing");
+  if (simulate == nullptr) problems.push_back("rule 'route.simulate' is missing");
+  if (fallback == nullptr) problems.push_back("rule 'route.default' is missing");
+  const auto high = Bound(direct, "gt");
+  const auto low = Bound(simulate, "ge");
+  const auto sim_high = Bound(simulate, "le");
+  const auto default_low = Bound(fallback, "lt");
+  if (direct != nullptr && !high) problems.push_back("rule 'route.direct' needs condition {\"similarity\": {\"gt\": high}}");
+  if (simulate != nullptr && (!low || !sim_high)) {
+    problems.push_back("rule 'route.simulate' needs condition {\"similarity\": {\"ge\": low, \"le\": high}}");
+  }
+  if (fallback != nullptr && !default_low) {
+    problems.push_back("rule 'route.default' needs condition {\"similarity\": {\"lt\": low}}");
+  }
+  if (high && low) {
+    if (!(*low > 0 && *low < *high && *high <= 1)) {
+      std::ostringstream out;
+      out << "route thresholds must satisfy 0 < low < high <= 1 (low " << *low << ", high " << *high << ")";
+      problems.push_back(out.str());
+    }
+    if (sim_high && *sim_high != *high) problems.push_back("route.simulate 'le' differs from route.direct 'gt'");
+    if (default_low && *default_low != *low) problems.push_back("route.default 'lt' differs from route.simulate 'ge'");
+  }
+  const Rule* weights = FindRule(rules, "facet.weights");
+  if (weights == nullptr) {
+    problems.push_back("rule 'facet.weights' is missing");
+  } else {
+    double sum = 0;
+    for (const auto& [facet, w] : weights->choice.items()) {
+      if (!w.is_number() || !(w.get<double>() >= 0) || !std::isfinite(w.get<double>())) {
+        problems.push_back("facet weight '" + facet + "' must be a number >= 0");
+      } else {
+        sum += w.get<double>();
+      }
+    }
+    if (!(sum > 0)) problems.push_back("facet weights must have a positive sum");
+  }
+  return problems;
+}
+
+Result<RouteThresholds> ThresholdsOf(const std::vector<Rule>& rules) {
+  const auto problems = RuleSetProblems(rules);
+  if (!problems.empty()) return Status::BadInput("rule base: " + problems.front());
+  RouteThresholds t;
+  t.high = *Bound(FindRule(rules, "route.direct"), "gt");
+  t.low = *Bound(FindRule(rules, "route.simulate"), "ge");
+  return t;
+}
+
+// ---------------------------------------------------------------------------------------------- reports
+
+json GhsomStatus::ToJson() const {
+  json j = {{"present", present}};
+  if (present) {
+    j["id"] = id;
+    j["created_at"] = created_at;
+    j["case_count"] = case_count;
+    j["trained_at_changes"] = trained_at_changes;
+    j["current_changes"] = current_changes;
+    j["stale"] = stale;
+  }
+  return j;
+}
+
+json LibraryStats::ToJson() const {
+  return {{"schema_version", schema_version},
+          {"cases", cases},
+          {"cases_with_descriptor", cases_with_descriptor},
+          {"per_family", per_family},
+          {"per_facet_concept", per_facet_concept},
+          {"rules_version", rules_version},
+          {"case_changes", case_changes},
+          {"ghsom", ghsom.ToJson()}};
+}
+
+json CheckReport::ToJson() const {
+  return {{"clean", clean()},
+          {"integrity", integrity},
+          {"foreign_key_violations", foreign_key_violations},
+          {"orphan_concepts", orphan_concepts},
+          {"cases_missing_descriptor", cases_missing_descriptor},
+          {"rule_problems", rule_problems},
+          {"ghsom", ghsom.ToJson()},
+          {"problems", problems},
+          {"warnings", warnings}};
+}
+
+json ImportReport::ToJson() const {
+  return {{"cases_added", cases_added},
+          {"cases_replaced", cases_replaced},
+          {"rules", rules},
+          {"taxonomy_nodes", taxonomy_nodes}};
+}
+
+// ---------------------------------------------------------------------------------------------- Library
+
+Result<std::unique_ptr<Library>> Library::Open(const std::filesystem::path& path) {
+  FL_ASSIGN_OR_RETURN(int version, ProbeLibraryFile(path, /*allow_unversioned=*/false));
+  if (version < LatestSchemaVersion()) {
+    return Status::BadInput("case library '" + path.string() + "' has schema version " + std::to_string(version) +
+                            ", older than this formloop's " + std::to_string(LatestSchemaVersion()) +
+                            ". Fix: run `formloop kb migrate " + path.string() + "`");
+  }
+  FL_ASSIGN_OR_RETURN(std::unique_ptr<Database> db, Database::Open(path, Database::Mode::kOpenExisting));
+  // The probe read without locks; confirm on the real connection.
+  FL_ASSIGN_OR_RETURN(long long actual, db->QueryInt("PRAGMA user_version;"));
+  if (actual != LatestSchemaVersion()) {
+    return Status::BadInput("case library '" + path.string() + "' changed to schema version " +
+                            std::to_string(actual) + " while being opened; this formloop uses " +
+                            std::to_string(LatestSchemaVersion()));
+  }
+  return std::unique_ptr<Library>(new Library(std::move(db)));
+}
+
+Status Library::AuditRow(const std::string& action, const std::string& uid, const std::string& detail) {
+  FL_ASSIGN_OR_RETURN(Statement stmt,
+                      db_->Prepare("INSERT INTO audit(at, action, case_uid, detail) VALUES (?1, ?2, ?3, ?4);"));
+  FL_RETURN_IF_ERROR(stmt.Bind(1, UtcNow()));
+  FL_RETURN_IF_ERROR(stmt.Bind(2, action));
+  FL_RETURN_IF_ERROR(uid.empty() ? stmt.BindNull(3) : stmt.Bind(3, uid));
+  FL_RETURN_IF_ERROR(stmt.Bind(4, detail));
+  return stmt.Step().status();
+}
+
+Status Library::BumpChanges() {
+  return db_->Execute(
+      "UPDATE library_info SET value = CAST(CAST(value AS INTEGER) + 1 AS TEXT) WHERE key = 'case_changes';");
+}
+
+Result<long long> Library::ChangeCounter() {
+  return db_->QueryInt(
+      "SELECT coalesce((SELECT CAST(value AS INTEGER) FROM library_info WHERE key = 'case_changes'), 0);");
+}
+
+Status Library::WriteCase(const CaseRecord& record, bool replace, const std::string& action, bool keep_timestamps,
+                          bool* replaced) {
+  *replaced = false;
+  FL_ASSIGN_OR_RETURN(Statement find, db_->Prepare("SELECT id, created_at FROM cases WHERE uid = ?1;"));
+  FL_RETURN_IF_ERROR(find.Bind(1, record.uid));
+  FL_ASSIGN_OR_RETURN(bool exists, find.Step());
+  const std::string now = UtcNow();
+  std::string created = keep_timestamps && !record.created_at.empty() ? record.created_at : now;
+  const std::string updated = keep_timestamps && !record.updated_at.empty() ? record.updated_at : now;
+  long long id = 0;
+  if (exists) {
+    if (!replace) {
+      return Status::BadInput("case library '" + db_->path().string() + "': a case with uid '" + record.uid +
+                              "' exists. Fix: give another uid, or --replace to overwrite it");
+    }
+    id = find.ColumnInt(0);
+    if (!keep_timestamps || record.created_at.empty()) created = find.ColumnText(1);
+    *replaced = true;
+  }
+  FL_RETURN_IF_ERROR(find.Reset());
+  const std::string descriptor = record.descriptor ? json(*record.descriptor).dump() : "";
+  if (exists) {
+    FL_ASSIGN_OR_RETURN(Statement up, db_->Prepare(
+                                          "UPDATE cases SET name = ?2, family = ?3, created_at = ?4, updated_at = ?5, "
+                                          "part_json = ?6, simulation_json = ?7, manufacturing_json = ?8, "
+                                          "descriptor_json = ?9 WHERE id = ?1;"));
+    FL_RETURN_IF_ERROR(up.Bind(1, id));
+    FL_RETURN_IF_ERROR(up.Bind(2, record.name));
+    FL_RETURN_IF_ERROR(up.Bind(3, record.family));
+    FL_RETURN_IF_ERROR(up.Bind(4, created));
+    FL_RETURN_IF_ERROR(up.Bind(5, updated));
+    FL_RETURN_IF_ERROR(up.Bind(6, record.part.dump()));
+    FL_RETURN_IF_ERROR(up.Bind(7, record.simulation.dump()));
+    FL_RETURN_IF_ERROR(up.Bind(8, record.manufacturing.dump()));
+    FL_RETURN_IF_ERROR(descriptor.empty() ? up.BindNull(9) : up.Bind(9, descriptor));
+    FL_RETURN_IF_ERROR(up.Step().status());
+    FL_ASSIGN_OR_RETURN(Statement del, db_->Prepare("DELETE FROM case_concepts WHERE case_id = ?1;"));
+    FL_RETURN_IF_ERROR(del.Bind(1, id));
+    FL_RETURN_IF_ERROR(del.Step().status());
+  } else {
+    FL_ASSIGN_OR_RETURN(Statement ins,
+                        db_->Prepare("INSERT INTO cases(uid, name, family, created_at, updated_at, part_json, "
+                                     "simulation_json, manufacturing_json, descriptor_json) "
+                                     "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9);"));
+    FL_RETURN_IF_ERROR(ins.Bind(1, record.uid));
+    FL_RETURN_IF_ERROR(ins.Bind(2, record.name));
+    FL_RETURN_IF_ERROR(ins.Bind(3, record.family));
+    FL_RETURN_IF_ERROR(ins.Bind(4, created));
+    FL_RETURN_IF_ERROR(ins.Bind(5, updated));
+    FL_RETURN_IF_ERROR(ins.Bind(6, record.part.dump()));
+    FL_RETURN_IF_ERROR(ins.Bind(7, record.simulation.dump()));
+    FL_RETURN_IF_ERROR(ins.Bind(8, record.manufacturing.dump()));
+    FL_RETURN_IF_ERROR(descriptor.empty() ? ins.BindNull(9) : ins.Bind(9, descriptor));
+    FL_RETURN_IF_ERROR(ins.Step().status());
+    id = db_->LastInsertRowId();
+  }
+  if (!record.concepts.empty()) {
+    FL_ASSIGN_OR_RETURN(Statement con,
+                        db_->Prepare("INSERT INTO case_concepts(case_id, facet, concept) VALUES (?1, ?2, ?3);"));
+    for (const auto& [facet, concept_name] : record.concepts) {
+      FL_RETURN_IF_ERROR(con.Reset());
+      FL_RETURN_IF_ERROR(con.Bind(1, id));
+      FL_RETURN_IF_ERROR(con.Bind(2, facet));
+      FL_RETURN_IF_ERROR(con.Bind(3, concept_name));
+      FL_RETURN_IF_ERROR(con.Step().status());
+    }
+  }
+  FL_RETURN_IF_ERROR(BumpChanges());
+  return AuditRow(exists ? action + ".replace" : action, record.uid, "family=" + record.family);
+}
+
+Status Library::AddCase(const CaseRecord& record, bool replace) {
+  FL_RETURN_IF_ERROR(CaseRecord::FromJson(record.ToJson(), Where{.file = record.uid}).status());
+  Transaction transaction(db_.get());
+  FL_RETURN_IF_ERROR(transaction.begin_status());
+  bool replaced = false;
+  FL_RETURN_IF_ERROR(WriteCase(record, replace, "add", /*keep_timestamps=*/false, &replaced));
+  return transaction.Commit();
+}
+
+namespace {
+
+Result<CaseRecord> RowToCase(const Statement& stmt) {
+  // Columns: id, uid, name, family, created_at, updated_at, part, simulation, manufacturing, descriptor
+  CaseRecord r;
+  r.uid = stmt.ColumnText(1);
+  r.name = stmt.ColumnText(2);
+  r.family = stmt.ColumnText(3);
+  r.created_at = stmt.ColumnText(4);
+  r.updated_at = stmt.ColumnText(5);
+  FL_ASSIGN_OR_RETURN(r.part, ParseJsonColumn(stmt.ColumnText(6), "part_json of " + r.uid));
+  FL_ASSIGN_OR_RETURN(r.simulation, ParseJsonColumn(stmt.ColumnText(7), "simulation_json of " + r.uid));
+  FL_ASSIGN_OR_RETURN(r.manufacturing, ParseJsonColumn(stmt.ColumnText(8), "manufacturing_json of " + r.uid));
+  if (!stmt.ColumnIsNull(9)) {
+    FL_ASSIGN_OR_RETURN(json d, ParseJsonColumn(stmt.ColumnText(9), "descriptor_json of " + r.uid));
+    std::vector<double> values;
+    for (const json& v : d) {
+      if (!v.is_number()) return Status::Internal("case library: descriptor of " + r.uid + " holds a non-number");
+      values.push_back(v.get<double>());
+    }
+    r.descriptor = std::move(values);
+  }
+  return r;
+}
+
+constexpr const char* kCaseColumns =
+    "SELECT id, uid, name, family, created_at, updated_at, part_json, simulation_json, manufacturing_json, "
+    "descriptor_json FROM cases ";
+
+}  // namespace
+
+Result<CaseRecord> Library::GetCase(const std::string& uid) {
+  FL_ASSIGN_OR_RETURN(Statement stmt, db_->Prepare(std::string(kCaseColumns) + "WHERE uid = ?1;"));
+  FL_RETURN_IF_ERROR(stmt.Bind(1, uid));
+  FL_ASSIGN_OR_RETURN(bool row, stmt.Step());
+  if (!row) {
+    return Status::NotFound("case library '" + db_->path().string() + "' has no case with uid '" + uid +
+                            "'. Fix: `formloop kb list " + db_->path().string() + "` shows the uids");
+  }
+  const long long id = stmt.ColumnInt(0);
+  FL_ASSIGN_OR_RETURN(CaseRecord record, RowToCase(stmt));
+  FL_ASSIGN_OR_RETURN(Statement con, db_->Prepare("SELECT facet, concept FROM case_concepts WHERE case_id = ?1;"));
+  FL_RETURN_IF_ERROR(con.Bind(1, id));
+  while (true) {
+    FL_ASSIGN_OR_RETURN(bool more, con.Step());
+    if (!more) break;
+    record.concepts[con.ColumnText(0)] = con.ColumnText(1);
+  }
+  return record;
+}
+
+Result<std::vector<CaseRecord>> Library::ListCases(const std::string& family) {
+  FL_ASSIGN_OR_RETURN(Statement stmt, db_->Prepare(std::string(kCaseColumns) +
+                                                   "WHERE ?1 = '' OR family = ?1 ORDER BY uid;"));
+  FL_RETURN_IF_ERROR(stmt.Bind(1, family));
+  std::vector<CaseRecord> cases;
+  std::map<long long, std::size_t> by_id;
+  while (true) {
+    FL_ASSIGN_OR_RETURN(bool row, stmt.Step());
+    if (!row) break;
+    by_id[stmt.ColumnInt(0)] = cases.size();
+    FL_ASSIGN_OR_RETURN(CaseRecord record, RowToCase(stmt));
+    cases.push_back(std::move(record));
+  }
+  FL_ASSIGN_OR_RETURN(Statement con, db_->Prepare("SELECT case_id, facet, concept FROM case_concepts;"));
+  while (true) {
+    FL_ASSIGN_OR_RETURN(bool more, con.Step());
+    if (!more) break;
+    auto it = by_id.find(con.ColumnInt(0));
+    if (it != by_id.end()) cases[it->second].concepts[con.ColumnText(1)] = con.ColumnText(2);
+  }
+  return cases;
+}
+
+Status Library::RemoveCase(const std::string& uid) {
+  Transaction transaction(db_.get());
+  FL_RETURN_IF_ERROR(transaction.begin_status());
+  FL_ASSIGN_OR_RETURN(Statement del, db_->Prepare("DELETE FROM cases WHERE uid = ?1;"));
+  FL_RETURN_IF_ERROR(del.Bind(1, uid));
+  FL_RETURN_IF_ERROR(del.Step().status());
+  if (db_->Changes() == 0) {
+    return Status::NotFound("case library '" + db_->path().string() + "' has no case with uid '" + uid + "'");
+  }
+  FL_RETURN_IF_ERROR(BumpChanges());
+  FL_RETURN_IF_ERROR(AuditRow("remove", uid, ""));
+  return transaction.Commit();
+}
+
+Result<GhsomStatus> Library::Ghsom() {
+  GhsomStatus status;
+  FL_ASSIGN_OR_RETURN(status.current_changes, ChangeCounter());
+  FL_ASSIGN_OR_RETURN(Statement stmt, db_->Prepare("SELECT id, created_at, case_count, change_counter FROM ghsom "
+                                                   "ORDER BY id DESC LIMIT 1;"));
+  FL_ASSIGN_OR_RETURN(bool row, stmt.Step());
+  if (!row) return status;
+  status.present = true;
+  status.id = stmt.ColumnInt(0);
+  status.created_at = stmt.ColumnText(1);
+  status.case_count = stmt.ColumnInt(2);
+  status.trained_at_changes = stmt.ColumnInt(3);
+  status.stale = status.trained_at_changes != status.current_changes;
+  return status;
+}
+
+Result<LibraryStats> Library::Stats() {
+  LibraryStats stats;
+  FL_ASSIGN_OR_RETURN(long long version, db_->QueryInt("PRAGMA user_version;"));
+  stats.schema_version = static_cast<int>(version);
+  FL_ASSIGN_OR_RETURN(stats.cases, db_->QueryInt("SELECT COUNT(*) FROM cases;"));
+  FL_ASSIGN_OR_RETURN(stats.cases_with_descriptor,
+                      db_->QueryInt("SELECT COUNT(*) FROM cases WHERE descriptor_json IS NOT NULL;"));
+  {
+    FL_ASSIGN_OR_RETURN(Statement s, db_->Prepare("SELECT family, COUNT(*) FROM cases GROUP BY family;"));
+    while (true) {
+      FL_ASSIGN_OR_RETURN(bool row, s.Step());
+      if (!row) break;
+      stats.per_family[s.ColumnText(0)] = s.ColumnInt(1);
+    }
+  }
+  {
+    FL_ASSIGN_OR_RETURN(Statement s,
+                        db_->Prepare("SELECT facet, concept, COUNT(*) FROM case_concepts GROUP BY facet, concept;"));
+    while (true) {
+      FL_ASSIGN_OR_RETURN(bool row, s.Step());
+      if (!row) break;
+      stats.per_facet_concept[s.ColumnText(0)][s.ColumnText(1)] = s.ColumnInt(2);
+    }
+  }
+  FL_ASSIGN_OR_RETURN(long long rv, db_->QueryInt("SELECT coalesce(MAX(version), 0) FROM rules WHERE active = 1;"));
+  stats.rules_version = static_cast<int>(rv);
+  FL_ASSIGN_OR_RETURN(stats.case_changes, ChangeCounter());
+  FL_ASSIGN_OR_RETURN(stats.ghsom, Ghsom());
+  return stats;
+}
+
+Result<CheckReport> Library::Check() {
+  CheckReport report;
+  {
+    FL_ASSIGN_OR_RETURN(Statement s, db_->Prepare("PRAGMA integrity_check;"));
+    std::vector<std::string> lines;
+    while (true) {
+      FL_ASSIGN_OR_RETURN(bool row, s.Step());
+      if (!row) break;
+      lines.push_back(s.ColumnText(0));
+    }
+    report.integrity.clear();
+    for (std::size_t i = 0; i < lines.size(); ++i) report.integrity += (i > 0 ? "; " : "") + lines[i];
+    if (report.integrity != "ok") report.problems.push_back("integrity_check: " + report.integrity);
+  }
+  {
+    FL_ASSIGN_OR_RETURN(Statement s, db_->Prepare("PRAGMA foreign_key_check;"));
+    while (true) {
+      FL_ASSIGN_OR_RETURN(bool row, s.Step());
+      if (!row) break;
+      report.foreign_key_violations.push_back(s.ColumnText(0) + " rowid " + s.ColumnText(1) + " -> " +
+                                              s.ColumnText(2));
+    }
+    if (!report.foreign_key_violations.empty()) {
+      report.problems.push_back(std::to_string(report.foreign_key_violations.size()) +
+                                " foreign-key violation(s), first: " + report.foreign_key_violations.front());
+    }
+  }
+  FL_ASSIGN_OR_RETURN(report.orphan_concepts,
+                      db_->QueryInt("SELECT COUNT(*) FROM case_concepts WHERE case_id NOT IN (SELECT id FROM cases);"));
+  if (report.orphan_concepts > 0) {
+    report.problems.push_back(std::to_string(report.orphan_concepts) + " concept row(s) belong to no case");
+  }
+  {
+    FL_ASSIGN_OR_RETURN(Statement s, db_->Prepare("SELECT uid FROM cases WHERE descriptor_json IS NULL ORDER BY uid;"));
+    while (true) {
+      FL_ASSIGN_OR_RETURN(bool row, s.Step());
+      if (!row) break;
+      report.cases_missing_descriptor.push_back(s.ColumnText(0));
+    }
+    if (!report.cases_missing_descriptor.empty()) {
+      report.warnings.push_back(std::to_string(report.cases_missing_descriptor.size()) +
+                                " case(s) have no geometric descriptor; the GHSOM cannot place them");
+    }
+    FL_ASSIGN_OR_RETURN(long long lengths,
+                        db_->QueryInt("SELECT COUNT(DISTINCT json_array_length(descriptor_json)) FROM cases "
+                                      "WHERE descriptor_json IS NOT NULL;"));
+    if (lengths > 1) report.problems.push_back("descriptors have " + std::to_string(lengths) + " different lengths");
+  }
+  {
+    FL_ASSIGN_OR_RETURN(RuleSet rules, GetRules());
+    report.rule_problems = RuleSetProblems(rules.rules);
+    for (const std::string& p : report.rule_problems) report.problems.push_back("rule base: " + p);
+    FL_ASSIGN_OR_RETURN(long long versions, db_->QueryInt("SELECT COUNT(DISTINCT version) FROM rules WHERE active = 1;"));
+    if (versions > 1) report.problems.push_back("rule base: more than one version is active");
+  }
+  FL_ASSIGN_OR_RETURN(report.ghsom, Ghsom());
+  if (!report.ghsom.present) {
+    report.warnings.push_back("no GHSOM trained yet (`formloop kb train`)");
+  } else if (report.ghsom.stale) {
+    report.problems.push_back("GHSOM " + std::to_string(report.ghsom.id) + " is stale: trained at change " +
+                              std::to_string(report.ghsom.trained_at_changes) + ", library now at change " +
+                              std::to_string(report.ghsom.current_changes) + ". Fix: retrain (`formloop kb train`)");
+  }
+  return report;
+}
+
+// ---------------------------------------------------------------------------------------------- rules API
+
+namespace {
+// A rule from a row (version, name, condition_json, choice_json, ...).
+Result<Rule> RuleFromRow(const Statement& s, bool active) {
+  Rule r;
+  r.version = static_cast<int>(s.ColumnInt(0));
+  r.name = s.ColumnText(1);
+  FL_ASSIGN_OR_RETURN(r.condition, ParseJsonColumn(s.ColumnText(2), "rules.condition_json"));
+  FL_ASSIGN_OR_RETURN(r.choice, ParseJsonColumn(s.ColumnText(3), "rules.choice_json"));
+  r.active = active;
+  return r;
+}
+
+}  // namespace
+
+
+Result<RuleSet> Library::GetRules() {
+  RuleSet set;
+  FL_ASSIGN_OR_RETURN(Statement s, db_->Prepare("SELECT version, name, condition_json, choice_json FROM rules "
+                                                "WHERE active = 1 ORDER BY name;"));
+  while (true) {
+    FL_ASSIGN_OR_RETURN(bool row, s.Step());
+    if (!row) break;
+    FL_ASSIGN_OR_RETURN(Rule r, RuleFromRow(s, true));
+    set.version = std::max(set.version, r.version);
+    set.rules.push_back(std::move(r));
+  }
+  return set;
+}
+
+namespace {
+
+Result<std::vector<Rule>> ParseRules(const json& input, const std::string& source) {
+  const json* list = &input;
+  if (input.is_object()) {
+    if (!input.contains("rules")) return Status::BadInput(Where{.file = source, .field = "rules"}, "missing");
+    list = &input["rules"];
+  }
+  if (!list->is_array()) return Status::BadInput(Where{.file = source, .field = "rules"}, "must be a JSON array");
+  std::vector<Rule> rules;
+  std::set<std::string> names;
+  for (std::size_t i = 0; i < list->size(); ++i) {
+    const json& r = (*list)[i];
+    const std::string path = "rules[" + std::to_string(i) + "]";
+    if (!r.is_object()) return Status::BadInput(Where{.file = source, .field = path}, "must be a JSON object");
+    Rule rule;
+    if (!r.contains("name") || !r["name"].is_string() || r["name"].get<std::string>().empty()) {
+      return Status::BadInput(Where{.file = source, .field = path + ".name"}, "must be a non-empty string");
+    }
+    rule.name = r["name"].get<std::string>();
+    if (!names.insert(rule.name).second) {
+      return Status::BadInput(Where{.file = source, .field = path + ".name"}, "'" + rule.name + "' appears twice");
+    }
+    for (const char* key : {"condition", "choice"}) {
+      if (!r.contains(key) || !r[key].is_object()) {
+        return Status::BadInput(Where{.file = source, .field = path + "." + key}, "must be a JSON object");
+      }
+    }
+    rule.condition = r["condition"];
+    rule.choice = r["choice"];
+    rule.active = true;
+    rules.push_back(std::move(rule));
+  }
+  return rules;
+}
+
+}  // namespace
+
+Result<int> Library::SetRules(const json& input, const std::string& source) {
+  FL_ASSIGN_OR_RETURN(std::vector<Rule> rules, ParseRules(input, source));
+  const auto problems = RuleSetProblems(rules);
+  if (!problems.empty()) {
+    std::string all;
+    for (const auto& p : problems) all += (all.empty() ? "" : "; ") + p;
+    return Status::BadInput(Where{.file = source}, "rule set refused: " + all, "fix the rules; nothing was changed");
+  }
+  Transaction transaction(db_.get());
+  FL_RETURN_IF_ERROR(transaction.begin_status());
+  FL_ASSIGN_OR_RETURN(long long latest, db_->QueryInt("SELECT coalesce(MAX(version), 0) FROM rules;"));
+  const int version = static_cast<int>(latest) + 1;
+  FL_RETURN_IF_ERROR(db_->Execute("UPDATE rules SET active = 0 WHERE active = 1;"));
+  FL_ASSIGN_OR_RETURN(Statement ins, db_->Prepare("INSERT INTO rules(version, name, condition_json, choice_json, "
+                                                  "active) VALUES (?1, ?2, ?3, ?4, 1);"));
+  for (const Rule& r : rules) {
+    FL_RETURN_IF_ERROR(ins.Reset());
+    FL_RETURN_IF_ERROR(ins.Bind(1, static_cast<long long>(version)));
+    FL_RETURN_IF_ERROR(ins.Bind(2, r.name));
+    FL_RETURN_IF_ERROR(ins.Bind(3, r.condition.dump()));
+    FL_RETURN_IF_ERROR(ins.Bind(4, r.choice.dump()));
+    FL_RETURN_IF_ERROR(ins.Step().status());
+  }
+  FL_RETURN_IF_ERROR(AuditRow("rules.set", "", "version=" + std::to_string(version) + " from " + source));
+  FL_RETURN_IF_ERROR(transaction.Commit());
+  return version;
+}
+
+// ---------------------------------------------------------------------------------------------- taxonomies
+
+Result<std::vector<TaxonomyNode>> Library::GetTaxonomy(const std::string& taxonomy) {
+  FL_ASSIGN_OR_RETURN(Statement s,
+                      db_->Prepare("SELECT node, parent FROM taxonomy_nodes WHERE taxonomy = ?1 ORDER BY node;"));
+  FL_RETURN_IF_ERROR(s.Bind(1, taxonomy));
+  std::vector<TaxonomyNode> nodes;
+  while (true) {
+    FL_ASSIGN_OR_RETURN(bool row, s.Step());
+    if (!row) break;
+    TaxonomyNode n{taxonomy, s.ColumnText(0), std::nullopt};
+    if (!s.ColumnIsNull(1)) n.parent = s.ColumnText(1);
+    nodes.push_back(std::move(n));
+  }
+  return nodes;
+}
+
+namespace {
+
+Status InsertTaxonomyNode(Database* db, const TaxonomyNode& n) {
+  FL_ASSIGN_OR_RETURN(Statement ins,
+                      db->Prepare("INSERT INTO taxonomy_nodes(taxonomy, node, parent) VALUES (?1, ?2, ?3);"));
+  FL_RETURN_IF_ERROR(ins.Bind(1, n.taxonomy));
+  FL_RETURN_IF_ERROR(ins.Bind(2, n.node));
+  FL_RETURN_IF_ERROR(n.parent ? ins.Bind(3, *n.parent) : ins.BindNull(3));
+  return ins.Step().status();
+}
+
+Status DeleteTaxonomy(Database* db, const std::string& taxonomy) {
+  FL_ASSIGN_OR_RETURN(Statement del, db->Prepare("DELETE FROM taxonomy_nodes WHERE taxonomy = ?1;"));
+  FL_RETURN_IF_ERROR(del.Bind(1, taxonomy));
+  return del.Step().status();
+}
+
+}  // namespace
+
+Status Library::SetTaxonomy(const std::string& taxonomy, const std::vector<TaxonomyNode>& nodes) {
+  Transaction transaction(db_.get());
+  FL_RETURN_IF_ERROR(transaction.begin_status());
+  // Nodes may come in any order; the parent references are checked at COMMIT.
+  FL_RETURN_IF_ERROR(db_->Execute("PRAGMA defer_foreign_keys = ON;"));
+  FL_RETURN_IF_ERROR(DeleteTaxonomy(db_.get(), taxonomy));
+  for (TaxonomyNode n : nodes) {
+    n.taxonomy = taxonomy;
+    FL_RETURN_IF_ERROR(InsertTaxonomyNode(db_.get(), n));
+  }
+  FL_RETURN_IF_ERROR(AuditRow("taxonomy.set", "", taxonomy + ": " + std::to_string(nodes.size()) + " nodes"));
+  return transaction.Commit();
+}
+
+// ---------------------------------------------------------------------------------------------- GHSOM
+
+Result<long long> Library::StoreGhsom(GhsomRecord record) {
+  Transaction transaction(db_.get());
+  FL_RETURN_IF_ERROR(transaction.begin_status());
+  if (record.change_counter < 0) {
+    FL_ASSIGN_OR_RETURN(record.change_counter, ChangeCounter());
+  }
+  if (record.case_count < 0) {
+    FL_ASSIGN_OR_RETURN(record.case_count, db_->QueryInt("SELECT COUNT(*) FROM cases;"));
+  }
+  record.created_at = UtcNow();
+  FL_ASSIGN_OR_RETURN(Statement ins, db_->Prepare("INSERT INTO ghsom(created_at, seed, parameters_json, quality_json, "
+                                                  "map_json, case_count, change_counter) "
+                                                  "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7);"));
+  FL_RETURN_IF_ERROR(ins.Bind(1, record.created_at));
+  FL_RETURN_IF_ERROR(ins.Bind(2, record.seed));
+  FL_RETURN_IF_ERROR(ins.Bind(3, record.parameters.dump()));
+  FL_RETURN_IF_ERROR(ins.Bind(4, record.quality.dump()));
+  FL_RETURN_IF_ERROR(ins.Bind(5, record.map.dump()));
+  FL_RETURN_IF_ERROR(ins.Bind(6, record.case_count));
+  FL_RETURN_IF_ERROR(ins.Bind(7, record.change_counter));
+  FL_RETURN_IF_ERROR(ins.Step().status());
+  const long long id = db_->LastInsertRowId();
+  FL_RETURN_IF_ERROR(AuditRow("ghsom.store", "",
+                              "id=" + std::to_string(id) + " cases=" + std::to_string(record.case_count) +
+                                  " seed=" + std::to_string(record.seed)));
+  FL_RETURN_IF_ERROR(transaction.Commit());
+  return id;
+}
+
+Result<std::optional<GhsomRecord>> Library::LoadGhsom() {
+  FL_ASSIGN_OR_RETURN(Statement s, db_->Prepare("SELECT id, created_at, seed, parameters_json, quality_json, map_json, "
+                                                "case_count, change_counter FROM ghsom ORDER BY id DESC LIMIT 1;"));
+  FL_ASSIGN_OR_RETURN(bool row, s.Step());
+  if (!row) return std::optional<GhsomRecord>();
+  GhsomRecord r;
+  r.id = s.ColumnInt(0);
+  r.created_at = s.ColumnText(1);
+  r.seed = s.ColumnInt(2);
+  FL_ASSIGN_OR_RETURN(r.parameters, ParseJsonColumn(s.ColumnText(3), "ghsom.parameters_json"));
+  FL_ASSIGN_OR_RETURN(r.quality, ParseJsonColumn(s.ColumnText(4), "ghsom.quality_json"));
+  FL_ASSIGN_OR_RETURN(r.map, ParseJsonColumn(s.ColumnText(5), "ghsom.map_json"));
+  r.case_count = s.ColumnInt(6);
+  r.change_counter = s.ColumnInt(7);
+  return std::optional<GhsomRecord>(std::move(r));
+}
+
+// ---------------------------------------------------------------------------------------------- audit
+
+Result<std::vector<AuditEntry>> Library::Audit(const std::string& uid, int limit) {
+  FL_ASSIGN_OR_RETURN(Statement s, db_->Prepare("SELECT id, at, action, coalesce(case_uid, ''), detail FROM audit "
+                                                "WHERE ?1 = '' OR case_uid = ?1 ORDER BY id DESC LIMIT ?2;"));
+  FL_RETURN_IF_ERROR(s.Bind(1, uid));
+  FL_RETURN_IF_ERROR(s.Bind(2, static_cast<long long>(limit)));
+  std::vector<AuditEntry> entries;
+  while (true) {
+    FL_ASSIGN_OR_RETURN(bool row, s.Step());
+    if (!row) break;
+    entries.push_back({s.ColumnInt(0), s.ColumnText(1), s.ColumnText(2), s.ColumnText(3), s.ColumnText(4)});
+  }
+  return entries;
+}
+
+// ---------------------------------------------------------------------------------------------- export / import
+
+Result<std::string> Library::ExportText() {
+  // One read transaction so the snapshot is consistent while other processes write.
+  FL_RETURN_IF_ERROR(db_->Execute("BEGIN;"));
+  struct EndRead {
+    Database* db;
+    ~EndRead() { (void)db->Execute("COMMIT;"); }
+  } end_read{db_.get()};
+  FL_ASSIGN_OR_RETURN(std::vector<CaseRecord> cases, ListCases());
+  std::string out;
+  const json header = {{"format", kExportFormatName},
+                       {"format_version", kExportFormatVersion},
+                       {"schema_version", LatestSchemaVersion()},
+                       {"cases", cases.size()}};
+  out += header.dump() + "\n";
+  for (const CaseRecord& c : cases) out += json{{"type", "case"}, {"case", c.ToJson()}}.dump() + "\n";
+  {
+    FL_ASSIGN_OR_RETURN(Statement s, db_->Prepare("SELECT version, name, condition_json, choice_json, active FROM "
+                                                  "rules ORDER BY version, name;"));
+    while (true) {
+      FL_ASSIGN_OR_RETURN(bool row, s.Step());
+      if (!row) break;
+      FL_ASSIGN_OR_RETURN(Rule r, RuleFromRow(s, s.ColumnInt(4) == 1));
+      json line = r.ToJson();
+      line["type"] = "rule";
+      out += line.dump() + "\n";
+    }
+  }
+  {
+    FL_ASSIGN_OR_RETURN(Statement s,
+                        db_->Prepare("SELECT taxonomy, node, parent FROM taxonomy_nodes ORDER BY taxonomy, node;"));
+    while (true) {
+      FL_ASSIGN_OR_RETURN(bool row, s.Step());
+      if (!row) break;
+      json line = {{"type", "taxonomy"}, {"taxonomy", s.ColumnText(0)}, {"node", s.ColumnText(1)}};
+      line["parent"] = s.ColumnIsNull(2) ? json(nullptr) : json(s.ColumnText(2));
+      out += line.dump() + "\n";
+    }
+  }
+  return out;
+}
+
+Status Library::ExportToFile(const std::filesystem::path& path) {
+  FL_ASSIGN_OR_RETURN(std::string text, ExportText());
+  return WriteFileAtomic(path, text);
+}
+
+Result<ImportReport> Library::ImportText(const std::string& text, const std::string& source,
+                                         const ImportOptions& options) {
+  // Parse and validate everything before the transaction starts.
+  std::vector<std::pair<long, CaseRecord>> cases;
+  std::vector<Rule> rules;
+  std::vector<TaxonomyNode> nodes;
+  std::istringstream in(text);
+  std::string line;
+  long line_no = 0;
+  bool have_header = false;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (line.empty()) continue;
+    const Where where{.file = source, .line = line_no};
+    json j = json::parse(line, nullptr, /*allow_exceptions=*/false);
+    if (j.is_discarded() || !j.is_object()) return Status::BadInput(where, "is not a JSON object");
+    if (!have_header) {
+      if (!j.contains("format") || j["format"] != kExportFormatName) {
+        return Status::BadInput(where, std::string("the first line is not a ") + kExportFormatName + " header",
+                                "give a file written by `formloop kb export`");
+      }
+      if (!j.contains("format_version") || !j["format_version"].is_number_integer()) {
+        return Status::BadInput(Where{.file = source, .line = line_no, .field = "format_version"}, "missing");
+      }
+      const int format_version = j["format_version"].get<int>();
+      if (format_version > kExportFormatVersion) {
+        return Status::BadInput(where, "format version " + std::to_string(format_version) +
+                                           " is newer than this formloop reads (" +
+                                           std::to_string(kExportFormatVersion) + ")",
+                                "upgrade formloop; nothing was imported");
+      }
+      const int schema_version = j.value("schema_version", 0);
+      if (schema_version > LatestSchemaVersion()) {
+        return Status::BadInput(where, "written by a library at schema version " + std::to_string(schema_version) +
+                                           ", newer than this formloop's " + std::to_string(LatestSchemaVersion()),
+                                "upgrade formloop; nothing was imported");
+      }
+      have_header = true;
+      continue;
+    }
+    const std::string type = j.value("type", "");
+    if (type == "case") {
+      if (!j.contains("case")) return Status::BadInput(Where{.file = source, .line = line_no, .field = "case"}, "missing");
+      FL_ASSIGN_OR_RETURN(CaseRecord record, CaseRecord::FromJson(j["case"], where));
+      cases.emplace_back(line_no, std::move(record));
+    } else if (type == "rule") {
+      Rule r;
+      if (!j.contains("version") || !j["version"].is_number_integer() || j["version"].get<int>() < 1 ||
+          !j.contains("name") || !j["name"].is_string() || !j.contains("condition") || !j["condition"].is_object() ||
+          !j.contains("choice") || !j["choice"].is_object() || !j.contains("active") || !j["active"].is_boolean()) {
+        return Status::BadInput(where, "a rule line needs version (>= 1), name, condition {}, choice {}, active");
+      }
+      r.version = j["version"].get<int>();
+      r.name = j["name"].get<std::string>();
+      r.condition = j["condition"];
+      r.choice = j["choice"];
+      r.active = j["active"].get<bool>();
+      rules.push_back(std::move(r));
+    } else if (type == "taxonomy") {
+      if (!j.contains("taxonomy") || !j["taxonomy"].is_string() || !j.contains("node") || !j["node"].is_string() ||
+          (j.contains("parent") && !j["parent"].is_null() && !j["parent"].is_string())) {
+        return Status::BadInput(where, "a taxonomy line needs taxonomy, node (strings) and parent (string or null)");
+      }
+      TaxonomyNode n{j["taxonomy"].get<std::string>(), j["node"].get<std::string>(), std::nullopt};
+      if (j.contains("parent") && j["parent"].is_string()) n.parent = j["parent"].get<std::string>();
+      nodes.push_back(std::move(n));
+    } else {
+      return Status::BadInput(Where{.file = source, .line = line_no, .field = "type"},
+                              "unknown line type '" + type + "'", "expected case, rule or taxonomy");
+    }
+  }
+  if (!have_header) return Status::BadInput(Where{.file = source}, "is empty", "give a `formloop kb export` file");
+  if (!rules.empty()) {
+    std::vector<Rule> active;
+    for (const Rule& r : rules) {
+      if (r.active) active.push_back(r);
+    }
+    const auto problems = RuleSetProblems(active);
+    if (!problems.empty()) {
+      return Status::BadInput(Where{.file = source}, "the active rules are not sane: " + problems.front(),
+                              "nothing was imported");
+    }
+  }
+
+  ImportReport report;
+  Transaction transaction(db_.get());
+  FL_RETURN_IF_ERROR(transaction.begin_status());
+  FL_RETURN_IF_ERROR(db_->Execute("PRAGMA defer_foreign_keys = ON;"));
+  for (const auto& [case_line, record] : cases) {
+    bool replaced = false;
+    FL_RETURN_IF_ERROR(WriteCase(record, options.replace, "import", /*keep_timestamps=*/true, &replaced)
+                           .WithContext(source + ":" + std::to_string(case_line)));
+    (replaced ? report.cases_replaced : report.cases_added) += 1;
+    if (options.on_case) options.on_case(report.cases_added + report.cases_replaced);
+  }
+  if (!rules.empty()) {
+    FL_RETURN_IF_ERROR(db_->Execute("DELETE FROM rules;"));
+    FL_ASSIGN_OR_RETURN(Statement ins, db_->Prepare("INSERT INTO rules(version, name, condition_json, choice_json, "
+                                                    "active) VALUES (?1, ?2, ?3, ?4, ?5);"));
+    for (const Rule& r : rules) {
+      FL_RETURN_IF_ERROR(ins.Reset());
+      FL_RETURN_IF_ERROR(ins.Bind(1, static_cast<long long>(r.version)));
+      FL_RETURN_IF_ERROR(ins.Bind(2, r.name));
+      FL_RETURN_IF_ERROR(ins.Bind(3, r.condition.dump()));
+      FL_RETURN_IF_ERROR(ins.Bind(4, r.choice.dump()));
+      FL_RETURN_IF_ERROR(ins.Bind(5, static_cast<long long>(r.active ? 1 : 0)));
+      FL_RETURN_IF_ERROR(ins.Step().status().WithContext(source + ": rule " + r.name));
+    }
+    report.rules = rules.size();
+  }
+  std::set<std::string> taxonomies;
+  for (const TaxonomyNode& n : nodes) taxonomies.insert(n.taxonomy);
+  for (const std::string& t : taxonomies) FL_RETURN_IF_ERROR(DeleteTaxonomy(db_.get(), t));
+  for (const TaxonomyNode& n : nodes) {
+    FL_RETURN_IF_ERROR(InsertTaxonomyNode(db_.get(), n).WithContext(source + ": taxonomy " + n.taxonomy));
+  }
+  report.taxonomy_nodes = nodes.size();
+  FL_RETURN_IF_ERROR(AuditRow("import", "", source + ": " + report.ToJson().dump()));
+  FL_RETURN_IF_ERROR(transaction.Commit().WithContext("import of " + source));
+  return report;
+}
+
+Result<ImportReport> Library::ImportFile(const std::filesystem::path& path, const ImportOptions& options) {
+  FL_ASSIGN_OR_RETURN(std::string text, ReadFile(path));
+  return ImportText(text, path.string(), options);
+}
+
+}  // namespace formloop::kb

@@ -1,0 +1,354 @@
+#include "retrieval/starter.h"
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <functional>
+#include <limits>
+#include <fstream>
+#include <numbers>
+#include <sstream>
+
+namespace formloop::retrieval {
+namespace {
+
+using nlohmann::json;
+
+#ifndef FORMLOOP_STARTER_DATA_DIR
+#define FORMLOOP_STARTER_DATA_DIR "data"
+#endif
+
+Result<StarterRange> ReadRange(const json& j, const std::string& source, const std::string& field) {
+  if (!j.is_array() || j.size() != 2 || !j[0].is_number() || !j[1].is_number()) {
+    return Status::BadInput(Where{.file = source, .field = field}, "expected [lo, hi] numbers");
+  }
+  StarterRange r{j[0].get<double>(), j[1].get<double>()};
+  if (!(r.lo <= r.hi) || !std::isfinite(r.lo) || !std::isfinite(r.hi)) {
+    return Status::BadInput(Where{.file = source, .field = field}, "expected finite lo <= hi");
+  }
+  return r;
+}
+
+double Draw(Rng& rng, const StarterRange& r) { return r.lo + (r.hi - r.lo) * rng.Uniform(); }
+
+double Param(const std::map<std::string, double>& p, const std::string& name) {
+  auto it = p.find(name);
+  return it == p.end() ? std::numeric_limits<double>::quiet_NaN() : it->second;
+}
+
+double Franke(double x, double y) {
+  return 0.75 * std::exp(-(std::pow(9 * x - 2, 2) + std::pow(9 * y - 2, 2)) / 4) +
+         0.75 * std::exp(-std::pow(9 * x + 1, 2) / 49 - (9 * y + 1) / 10) +
+         0.5 * std::exp(-(std::pow(9 * x - 7, 2) + std::pow(9 * y - 3, 2)) / 4) -
+         0.2 * std::exp(-std::pow(9 * x - 4, 2) - std::pow(9 * y - 7, 2));
+}
+
+// Rough material properties for the simulation knowledge (E GPa, hardness HV, specific cutting force N/mm²).
+json MaterialProperties(const std::string& material) {
+  struct Props {
+    const char* name;
+    double e_gpa, hv, kc;
+  };
+  static const Props kTable[] = {
+      {"H13", 210, 520, 2600},          {"H11", 210, 500, 2550},         {"P20", 205, 300, 2100},
+      {"P20+Ni", 205, 340, 2200},       {"1.2738", 205, 340, 2200},      {"D2", 210, 600, 2900},
+      {"420", 200, 480, 2400},          {"C45", 205, 200, 1800},         {"S355", 205, 170, 1700},
+      {"6061", 69, 107, 700},           {"7075", 72, 175, 800},          {"5083", 71, 95, 650},
+      {"Ti-6Al-4V", 114, 340, 1600},    {"Inconel 718", 200, 400, 3100}, {"POM", 3, 20, 150},
+      {"epoxy tooling board", 2, 10, 80}};
+  for (const Props& p : kTable) {
+    if (material == p.name) {
+      return {{"youngs_modulus_gpa", p.e_gpa}, {"hardness_hv", p.hv}, {"specific_cutting_force_n_per_mm2", p.kc}};
+    }
+  }
+  return {{"youngs_modulus_gpa", nullptr}, {"hardness_hv", nullptr}, {"specific_cutting_force_n_per_mm2", nullptr}};
+}
+
+std::string Round(double x, int digits) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*g", digits, x);
+  return buf;
+}
+double R6(double x) { return std::strtod(Round(x, 6).c_str(), nullptr); }
+
+}  // namespace
+
+std::filesystem::path DefaultDataDir() {
+  if (const char* env = std::getenv("FORMLOOP_DATA_DIR"); env != nullptr && *env != '\0') return env;
+  return FORMLOOP_STARTER_DATA_DIR;
+}
+
+Result<StarterSpec> StarterSpec::FromJson(const json& j, const std::string& source) {
+  const Where where{.file = source};
+  if (!j.is_object() || j.value("format", "") != "formloop-starter-families") {
+    return Status::BadInput(where, "not a starter families file (\"format\": \"formloop-starter-families\")");
+  }
+  StarterSpec spec;
+  try {
+    spec.seed = j.at("seed").get<std::uint64_t>();
+    spec.cases_per_family = j.at("cases_per_family").get<int>();
+    spec.fit_samples = j.value("fit_samples", 21);
+    for (const json& f : j.at("families")) {
+      StarterFamily fam;
+      fam.name = f.at("name").get<std::string>();
+      fam.shape = f.at("shape").get<std::string>();
+      fam.kind = f.at("kind").get<std::string>();
+      const std::string at = "families." + fam.name;
+      for (const auto& [k, v] : f.at("params").items()) {
+        FL_ASSIGN_OR_RETURN(fam.params[k], ReadRange(v, source, at + ".params." + k));
+      }
+      fam.materials = f.at("materials").get<std::vector<std::string>>();
+      FL_ASSIGN_OR_RETURN(fam.tolerance_mm, ReadRange(f.at("tolerance_mm"), source, at + ".tolerance_mm"));
+      FL_ASSIGN_OR_RETURN(fam.ra_um, ReadRange(f.at("ra_um"), source, at + ".ra_um"));
+      FL_ASSIGN_OR_RETURN(fam.batch, ReadRange(f.at("batch"), source, at + ".batch"));
+      FL_ASSIGN_OR_RETURN(fam.tool_radius_mm, ReadRange(f.at("tool_radius_mm"), source, at + ".tool_radius_mm"));
+      FL_ASSIGN_OR_RETURN(fam.scallop_um, ReadRange(f.at("scallop_um"), source, at + ".scallop_um"));
+      fam.machine = f.at("machine").get<std::string>();
+      fam.strategy = f.at("strategy").get<std::string>();
+      for (const auto& [k, v] : f.at("effects").items()) {
+        FL_ASSIGN_OR_RETURN(fam.effects[k], ReadRange(v, source, at + ".effects." + k));
+      }
+      if (fam.materials.empty()) return Status::BadInput(Where{.file = source, .field = at}, "no materials");
+      spec.families.push_back(std::move(fam));
+    }
+  } catch (const json::exception& e) {
+    return Status::BadInput(where, std::string("malformed starter families file: ") + e.what());
+  }
+  if (spec.cases_per_family < 1 || spec.families.empty() || spec.fit_samples < 4 ||
+      spec.fit_samples > recon::kMaxInterpolationSamples) {
+    return Status::BadInput(where, "need cases_per_family >= 1, at least one family and 4 <= fit_samples <= 72");
+  }
+  return spec;
+}
+
+Result<StarterSpec> StarterSpec::Load(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in) return Status::NotFound("cannot open starter families file '" + path.string() + "'");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  json j = json::parse(ss.str(), nullptr, /*allow_exceptions=*/false);
+  if (j.is_discarded()) return Status::BadInput(Where{.file = path.string()}, "not valid JSON");
+  return FromJson(j, path.string());
+}
+
+const StarterFamily* StarterSpec::Find(const std::string& family) const {
+  for (const auto& f : families) {
+    if (f.name == family) return &f;
+  }
+  return nullptr;
+}
+
+Result<recon::BSplineSurface> BuildStarterSurface(const std::string& kind, const std::map<std::string, double>& p,
+                                                  int samples) {
+  const Where where{.field = "surface." + kind};
+  double sx = 0, sy = 0;
+  std::function<double(double, double)> f;
+  if (kind == "sphere_cap") {
+    const double s = Param(p, "size_mm"), r = Param(p, "radius_ratio") * s;
+    sx = sy = s;
+    f = [r](double x, double y) { return std::sqrt(r * r - x * x - y * y); };
+  } else if (kind == "ellipsoid_cap") {
+    const double s = Param(p, "size_mm"), aspect = Param(p, "aspect");
+    const double a = 0.75 * s, b = 0.75 * aspect * s, c = Param(p, "height_ratio") * s;
+    sx = s;
+    sy = aspect * s;
+    f = [a, b, c](double x, double y) { return c * std::sqrt(1 - (x / a) * (x / a) - (y / b) * (y / b)); };
+  } else if (kind == "paraboloid") {
+    const double s = Param(p, "size_mm"), r = Param(p, "radius_ratio") * s, t = Param(p, "tilt");
+    sx = sy = s;
+    f = [r, t](double x, double y) { return (x * x + y * y) / (2 * r) + t * x; };
+  } else if (kind == "gaussian_pocket") {
+    const double s = Param(p, "size_mm"), d = Param(p, "depth_ratio") * s, w = Param(p, "width_ratio") * s;
+    sx = sy = s;
+    f = [d, w](double x, double y) { return -d * std::exp(-(x * x + y * y) / (w * w)); };
+  } else if (kind == "saddle") {
+    const double s = Param(p, "size_mm"), cx = Param(p, "curvature_x"), cy = cx * Param(p, "curvature_ratio");
+    sx = sy = s;
+    f = [cx, cy](double x, double y) { return 0.5 * (cx * x * x - cy * y * y); };
+  } else if (kind == "egg_box") {
+    const double s = Param(p, "size_mm"), a = Param(p, "amplitude_ratio") * s, l = Param(p, "wavelength_ratio") * s;
+    sx = sy = s;
+    f = [a, l](double x, double y) {
+      return a * std::sin(2 * std::numbers::pi * x / l) * std::sin(2 * std::numbers::pi * y / l);
+    };
+  } else if (kind == "franke") {
+    const double s = Param(p, "size_mm"), a = Param(p, "amplitude_ratio") * s;
+    sx = sy = s;
+    f = [s, a](double x, double y) { return a * Franke(x / s + 0.5, y / s + 0.5); };
+  } else if (kind == "cylinder") {
+    const double s = Param(p, "size_mm"), r = Param(p, "radius_ratio") * s;
+    sx = s;
+    sy = Param(p, "length_ratio") * s;
+    f = [r](double x, double) { return std::sqrt(r * r - x * x); };
+  } else if (kind == "twisted_ruled") {
+    const double c = Param(p, "chord_mm"), span = Param(p, "span_ratio") * c;
+    const double twist = Param(p, "twist_deg") * std::numbers::pi / 180;
+    sx = c;
+    sy = span;
+    f = [span, twist](double x, double y) { return x * std::tan(twist * (y / span)); };
+  } else {
+    return Status::BadInput(where, "unknown surface kind",
+                            "use sphere_cap, ellipsoid_cap, paraboloid, gaussian_pocket, saddle, egg_box, franke, "
+                            "cylinder or twisted_ruled");
+  }
+  if (!(sx > 0) || !(sy > 0) || !std::isfinite(sx) || !std::isfinite(sy)) {
+    return Status::BadInput(where, "missing or non-positive size parameter");
+  }
+  recon::GridSamples g;
+  g.nu = g.nv = samples;
+  g.domain = {-sx / 2, sx / 2, -sy / 2, sy / 2};
+  g.points.reserve(static_cast<size_t>(samples * samples));
+  for (int j = 0; j < samples; ++j) {
+    for (int i = 0; i < samples; ++i) {
+      const double x = g.domain.u_min + sx * i / (samples - 1), y = g.domain.v_min + sy * j / (samples - 1);
+      const double z = f(x, y);
+      if (!std::isfinite(z)) {
+        return Status::BadInput(where, "the parameters give no surface at (" + Round(x, 4) + ", " + Round(y, 4) +
+                                           ") (e.g. a radius smaller than the footprint)");
+      }
+      g.points.emplace_back(x, y, z);
+    }
+  }
+  recon::GridFitOptions options;
+  options.tolerance_mm = 1e-3;
+  recon::FitReport report;
+  return recon::FitGrid(g, options, &report);
+}
+
+std::vector<StarterPart> DrawStarterParts(const StarterSpec& spec) {
+  Rng rng(spec.seed);
+  std::vector<StarterPart> parts;
+  for (const StarterFamily& fam : spec.families) {
+    for (int k = 0; k < spec.cases_per_family; ++k) {
+      StarterPart part;
+      char uid[160];
+      std::snprintf(uid, sizeof uid, "%s-%03d", fam.name.c_str(), k);
+      part.uid = uid;
+      part.family = fam.name;
+      part.kind = fam.kind;
+      for (const auto& [name, range] : fam.params) part.params[name] = R6(Draw(rng, range));
+      PartDescription& d = part.description;
+      d.family_tag = fam.name;
+      d.shape_family = fam.shape;
+      d.material = fam.materials[rng.UniformIndex(fam.materials.size())];
+      d.form_tolerance_mm = R6(Draw(rng, fam.tolerance_mm));
+      d.ra_um = R6(Draw(rng, fam.ra_um));
+      d.batch_size = static_cast<int>(std::lround(Draw(rng, fam.batch)));
+      d.machine_class = fam.machine;
+      d.tool_radius_mm = R6(Draw(rng, fam.tool_radius_mm));
+      d.strategy = fam.strategy;
+      d.raster_angle_deg = R6(std::floor(Draw(rng, {0, 180}) / 15) * 15);
+      const double scallop = R6(Draw(rng, fam.scallop_um));
+      json effects = json::array();
+      for (const auto& [name, range] : fam.effects) {
+        const double est = R6(Draw(rng, range));
+        effects.push_back({{"name", name}, {"estimate", est}, {"standard_error", R6(0.05 * est + 0.1 * rng.Uniform())}});
+      }
+      part.simulation = {
+          {"model_format", "bspline-grid-fit"},
+          {"material", d.material},
+          {"material_properties", MaterialProperties(d.material)},
+          {"size_mm", {{"x", nullptr}, {"y", nullptr}}},
+          {"effect_models",
+           json::array({{{"machine", d.machine_class},
+                         {"tool", "ball r" + Round(d.tool_radius_mm, 4)},
+                         {"material", d.material},
+                         {"effects", effects},
+                         {"confidence", 0.95}}})}};
+      const double before = R6(d.form_tolerance_mm * 1e3 * (2.0 + 3.0 * rng.Uniform()));
+      const int loops = 1 + static_cast<int>(rng.UniformIndex(3));
+      json loop_rows = json::array();
+      double err = before;
+      for (int l = 0; l < loops; ++l) {
+        const double after = R6(err * (0.25 + 0.2 * rng.Uniform()));
+        loop_rows.push_back({{"loop", l + 1}, {"form_error_before_um", err}, {"form_error_after_um", after}});
+        err = after;
+      }
+      const int flutes = 2 + static_cast<int>(rng.UniformIndex(3));
+      part.manufacturing = {
+          {"machine", d.machine_class + " machining centre"},
+          {"tools", json::array({{{"type", "ball-end"},
+                                  {"radius_mm", d.tool_radius_mm},
+                                  {"flutes", flutes},
+                                  {"stick_out_mm", R6(4 * d.tool_radius_mm + 10)}}})},
+          {"strategy",
+           {{"pattern", d.strategy}, {"raster_angle_deg", d.raster_angle_deg}, {"scallop_um", scallop},
+            {"direction", "climb"}}},
+          {"feeds", {{"feed_mm_per_min", R6(800 + 1200 * rng.Uniform())}, {"spindle_rpm", R6(8000 + 16000 * rng.Uniform())}}},
+          {"compensation", {{"method", "mirror-systematic"}, {"loops", loop_rows}}},
+          {"probing", {{"grid", {20, 20}}, {"inset_fraction", 0.05}}},
+          {"reconstruction", {{"algorithm", "B-spline"}, {"degree", 3}, {"control_net", {8, 8}}, {"smoothing", 1e-4}}}};
+      parts.push_back(std::move(part));
+    }
+  }
+  return parts;
+}
+
+StarterPart PerturbStarterPart(const StarterPart& base, double delta, Rng& rng, const std::string& suffix) {
+  StarterPart p = base;
+  p.uid = base.uid + suffix;
+  for (auto& [name, value] : p.params) value *= 1.0 + (rng.Uniform() < 0.5 ? -delta : delta);
+  return p;
+}
+
+nlohmann::json PartDescriptionToJson(const PartDescription& d) {
+  return {{"family_tag", d.family_tag},         {"shape_family", d.shape_family},   {"material", d.material},
+          {"tolerance_mm", d.form_tolerance_mm}, {"finish_ra_um", d.ra_um},         {"batch_size", d.batch_size},
+          {"machine_class", d.machine_class},   {"tool_radius_mm", d.tool_radius_mm}, {"strategy", d.strategy},
+          {"raster_angle_deg", d.raster_angle_deg}};
+}
+
+Result<PartDescription> PartDescriptionFromJson(const nlohmann::json& j, const std::string& source) {
+  PartDescription d;
+  if (!j.is_object()) return Status::BadInput(Where{.file = source}, "the part description must be a JSON object");
+  try {
+    d.family_tag = j.value("family_tag", j.value("name", ""));
+    d.shape_family = j.at("shape_family").get<std::string>();
+    d.material = j.at("material").get<std::string>();
+    d.form_tolerance_mm = j.at("tolerance_mm").get<double>();
+    d.ra_um = j.contains("finish_ra_um") ? j.at("finish_ra_um").get<double>() : j.at("ra_um").get<double>();
+    d.batch_size = j.value("batch_size", 1);
+    d.machine_class = j.at("machine_class").get<std::string>();
+    if (j.contains("tool_radius_mm")) {
+      d.tool_radius_mm = j.at("tool_radius_mm").get<double>();
+    } else if (j.contains("tool") && j["tool"].contains("radius_mm")) {
+      d.tool_radius_mm = j["tool"]["radius_mm"].get<double>();
+    }
+    d.strategy = j.value("strategy", "");
+    d.raster_angle_deg = j.value("raster_angle_deg", 0.0);
+  } catch (const json::exception& e) {
+    return Status::BadInput(Where{.file = source},
+                            std::string("part description: ") + e.what(),
+                            "give shape_family, material, tolerance_mm, finish_ra_um, machine_class, tool_radius_mm");
+  }
+  return d;
+}
+
+Result<kb::CaseRecord> MakeStarterCase(const StarterPart& part, int fit_samples, const FeatureOptions& options) {
+  FL_ASSIGN_OR_RETURN(recon::BSplineSurface surface, BuildStarterSurface(part.kind, part.params, fit_samples));
+  FL_ASSIGN_OR_RETURN(PartFeatures features, ExtractFeatures(part.description, surface, options));
+  kb::CaseRecord r;
+  r.uid = part.uid;
+  r.name = part.family + " " + part.uid.substr(part.uid.rfind('-') + 1) + " (starter)";
+  r.family = part.family;
+  r.part = PartDescriptionToJson(part.description);
+  r.part["surface"] = {{"kind", part.kind}, {"params", part.params}};
+  r.part["size_mm"] = features.size_mm;
+  r.simulation = part.simulation;
+  r.manufacturing = part.manufacturing;
+  r.descriptor = std::vector<double>(features.descriptors.data(),
+                                     features.descriptors.data() + features.descriptors.size());
+  r.concepts = features.Concepts();
+  return r;
+}
+
+Result<std::vector<kb::CaseRecord>> GenerateStarterCases(const StarterSpec& spec, const FeatureOptions& options) {
+  std::vector<kb::CaseRecord> cases;
+  for (const StarterPart& part : DrawStarterParts(spec)) {
+    FL_ASSIGN_OR_RETURN(kb::CaseRecord r, MakeStarterCase(part, spec.fit_samples, options));
+    cases.push_back(std::move(r));
+  }
+  return cases;
+}
+
+}  // namespace formloop::retrieval

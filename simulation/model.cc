@@ -1,0 +1,157 @@
+#include "simulation/model.h"
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include "core/atomic_file.h"
+
+namespace formloop::sim {
+namespace {
+constexpr const char* kFormat = "formloop-model";
+constexpr int kVersion = 1;
+}  // namespace
+
+const EffectInstance* Model::Find(std::string_view name) const {
+  for (const auto& e : effects) {
+    if (e.effect->name() == name) return &e;
+  }
+  return nullptr;
+}
+
+Status Model::Set(std::string_view name, std::vector<double> values, std::vector<double> std_errors) {
+  const Effect* effect = FindEffect(name);
+  if (effect == nullptr) {
+    return Status::BadInput("unknown effect '" + std::string(name) + "'. Fix: use one of " + EffectNames());
+  }
+  if (static_cast<int>(values.size()) != effect->parameter_count()) {
+    return Status::BadInput("effect '" + std::string(name) + "' takes " +
+                            std::to_string(effect->parameter_count()) + " parameter(s), got " +
+                            std::to_string(values.size()));
+  }
+  if (std_errors.empty()) std_errors.assign(values.size(), 0.0);
+  if (std_errors.size() != values.size()) return Status::Internal("std_errors size mismatch for " + std::string(name));
+  for (auto& e : effects) {
+    if (e.effect == effect) {
+      e.values = std::move(values);
+      e.std_errors = std::move(std_errors);
+      return Status::Ok();
+    }
+  }
+  effects.push_back({effect, std::move(values), std::move(std_errors)});
+  return Status::Ok();
+}
+
+double Model::SurfaceDeviationUm(const PointContext& c) const {
+  double sum = c.scallop_um;
+  for (const auto& e : effects) {
+    if (e.effect->kind() == EffectKind::kSurface) sum += e.effect->DeviationUm(c, e.values);
+  }
+  return sum;
+}
+
+double Model::DeviationUm(const PointContext& c) const {
+  double sum = SurfaceDeviationUm(c);
+  for (const auto& e : effects) {
+    if (e.effect->kind() == EffectKind::kMeasurement) sum += e.effect->DeviationUm(c, e.values);
+  }
+  return sum;
+}
+
+double Model::surface_sigma_um() const {
+  const EffectInstance* n = Find("noise");
+  return n == nullptr ? 0.0 : n->values[0];
+}
+double Model::probe_sigma_um() const {
+  const EffectInstance* n = Find("noise");
+  return n == nullptr ? 0.0 : n->values[1];
+}
+
+nlohmann::json Model::ToJson() const {
+  nlohmann::json list = nlohmann::json::array();
+  for (const auto& e : effects) {
+    nlohmann::json params = nlohmann::json::object(), errors = nlohmann::json::object();
+    const auto& spec = e.effect->parameters();
+    for (std::size_t k = 0; k < spec.size(); ++k) {
+      params[spec[k].name] = e.values[k];
+      errors[spec[k].name] = e.std_errors[k];
+    }
+    list.push_back({{"name", std::string(e.effect->name())}, {"parameters", params}, {"std_errors", errors}});
+  }
+  return {{"format", kFormat}, {"version", kVersion}, {"effects", list}, {"provenance", provenance}};
+}
+
+Result<Model> Model::FromJson(const nlohmann::json& json, const std::string& source) {
+  auto bad = [&](const std::string& field, const std::string& what, const std::string& fix = "") {
+    return Status::BadInput(Where{.file = source, .field = field}, what, fix);
+  };
+  if (!json.is_object()) return bad("", "a model must be a JSON object", "see simulation/model.h for the format");
+  if (json.value("format", std::string()) != kFormat) {
+    return bad("format", "expected \"formloop-model\"", "write models with formloop or add \"format\": \"formloop-model\"");
+  }
+  if (!json.contains("version") || !json["version"].is_number_integer()) return bad("version", "missing or not an integer");
+  if (json["version"].get<int>() > kVersion) {
+    return bad("version", "model format version " + std::to_string(json["version"].get<int>()) +
+                              " is newer than this formloop reads (" + std::to_string(kVersion) + ")",
+               "upgrade formloop");
+  }
+  if (!json.contains("effects") || !json["effects"].is_array()) return bad("effects", "missing or not an array");
+  Model model;
+  for (std::size_t i = 0; i < json["effects"].size(); ++i) {
+    const auto& item = json["effects"][i];
+    const std::string field = "effects[" + std::to_string(i) + "]";
+    if (!item.is_object() || !item.contains("name") || !item["name"].is_string()) {
+      return bad(field + ".name", "missing or not a string");
+    }
+    const std::string name = item["name"].get<std::string>();
+    const Effect* effect = FindEffect(name);
+    if (effect == nullptr) return bad(field + ".name", "unknown effect '" + name + "'", "use one of " + EffectNames());
+    if (model.Has(name)) return bad(field + ".name", "effect '" + name + "' is listed twice");
+    const nlohmann::json params = item.value("parameters", nlohmann::json::object());
+    const nlohmann::json errors = item.value("std_errors", nlohmann::json::object());
+    if (!params.is_object() || !errors.is_object()) return bad(field, "parameters and std_errors must be objects");
+    std::vector<double> values, ses;
+    for (const auto& p : effect->parameters()) {
+      if (!params.contains(p.name)) {
+        return bad(field + ".parameters." + p.name, "missing", "effect '" + name + "' needs it (" + p.doc + ")");
+      }
+      if (!params[p.name].is_number() || !std::isfinite(params[p.name].get<double>())) {
+        return bad(field + ".parameters." + p.name, "must be a finite number");
+      }
+      values.push_back(params[p.name].get<double>());
+      const double se = errors.contains(p.name) && errors[p.name].is_number() ? errors[p.name].get<double>() : 0.0;
+      if (!(se >= 0) || !std::isfinite(se)) return bad(field + ".std_errors." + p.name, "must be a finite number >= 0");
+      ses.push_back(se);
+    }
+    for (const auto& [key, value] : params.items()) {
+      bool known = false;
+      for (const auto& p : effect->parameters()) known = known || p.name == key;
+      if (!known) return bad(field + ".parameters." + key, "effect '" + name + "' has no such parameter");
+    }
+    if (name == "noise" && (values[0] < 0 || values[1] < 0)) return bad(field + ".parameters", "sigmas must be >= 0");
+    if (name == "thermal_drift_z" && !(values[1] > 0)) return bad(field + ".parameters.tau_s", "must be > 0");
+    model.effects.push_back({effect, std::move(values), std::move(ses)});
+  }
+  model.provenance = json.value("provenance", nlohmann::json::object());
+  return model;
+}
+
+Result<Model> ReadModel(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in) return Status::NotFound("cannot open model '" + path.string() + "'");
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  nlohmann::json json;
+  try {
+    json = nlohmann::json::parse(buffer.str());
+  } catch (const nlohmann::json::parse_error& e) {
+    return Status::BadInput(Where{.file = path.string()}, std::string("not valid JSON: ") + e.what());
+  }
+  return Model::FromJson(json, path.string());
+}
+
+Status WriteModel(const std::filesystem::path& path, const Model& model) {
+  return WriteFileAtomic(path, model.ToJson().dump(2) + "\n");
+}
+
+}  // namespace formloop::sim

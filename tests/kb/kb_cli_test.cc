@@ -1,0 +1,107 @@
+// `formloop kb ...` through the binary: JSON on stdout, exit codes, refusals, export/import identity.
+// Needs the formloop binary (FORMLOOP_BINARY); skipped when it has not been built.
+
+#include <filesystem>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "tests/kb/kb_fixtures.h"
+#include "tests/support/run_binary.h"
+
+namespace formloop::kb {
+namespace {
+
+using testing::KbLibraryTest;
+using testing::ReadBytes;
+using testing::SyntheticCase;
+using testing::WriteBytes;
+namespace fs = std::filesystem;
+
+class KbCliTest : public KbLibraryTest {
+ protected:
+  void SetUp() override {
+    if (!fs::exists(FORMLOOP_BINARY)) GTEST_SKIP() << "formloop binary not built: " << FORMLOOP_BINARY;
+    KbLibraryTest::SetUp();
+  }
+  std::string P(const std::string& name) const { return (dir_ / name).string(); }
+  int Run(const std::string& args) { return formloop::testing::RunFormloop(args, &out_, &err_); }
+  nlohmann::json Out() const { return nlohmann::json::parse(out_); }
+  std::string out_, err_;
+};
+
+TEST_F(KbCliTest, InitAddListShowExportImportCheckRemove) {
+  ASSERT_EQ(Run("kb init " + P("a.db")), 0) << err_;
+  EXPECT_EQ(Out()["schema_version"], 2);
+  // The starter library (252 cases, GHSOM trained) is tested in kb_train_cli_test.cc.
+  for (int i = 0; i < 4; ++i) {
+    WriteBytes(dir_ / "case.json", SyntheticCase(i).ToJson().dump(2));
+    ASSERT_EQ(Run("kb add " + P("a.db") + " " + P("case.json")), 0) << err_;
+  }
+  EXPECT_EQ(Run("kb add " + P("a.db") + " " + P("case.json")), 2);  // duplicate uid
+  EXPECT_NE(err_.find("exists"), std::string::npos) << err_;
+  EXPECT_EQ(Run("kb add " + P("a.db") + " " + P("case.json") + " --replace"), 0) << err_;
+
+  ASSERT_EQ(Run("kb list " + P("a.db") + " --json --family freeform"), 0) << err_;
+  ASSERT_EQ(Out().size(), 2u);
+  EXPECT_EQ(Out()[0]["uid"], "case-00000");
+  ASSERT_EQ(Run("kb show " + P("a.db") + " case-00002"), 0) << err_;
+  EXPECT_EQ(Out()["family"], "mould_cavity");
+  EXPECT_EQ(Run("kb show " + P("a.db") + " nope"), 2);
+
+  ASSERT_EQ(Run("kb export " + P("a.db") + " --out " + P("a.jsonl")), 0) << err_;
+  ASSERT_EQ(Run("kb init " + P("b.db")), 0) << err_;
+  ASSERT_EQ(Run("kb import " + P("b.db") + " " + P("a.jsonl")), 0) << err_;
+  EXPECT_EQ(Out()["cases_added"], 4);
+  ASSERT_EQ(Run("kb export " + P("b.db") + " --out " + P("b.jsonl")), 0) << err_;
+  EXPECT_EQ(ReadBytes(dir_ / "a.jsonl"), ReadBytes(dir_ / "b.jsonl"));
+
+  ASSERT_EQ(Run("kb check " + P("b.db")), 0) << out_ << err_;
+  EXPECT_EQ(Out()["clean"], true);
+  ASSERT_EQ(Run("kb stats " + P("b.db")), 0) << err_;
+  EXPECT_EQ(Out()["cases"], 4);
+  ASSERT_EQ(Run("kb remove " + P("b.db") + " case-00001"), 0) << err_;
+  EXPECT_EQ(Run("kb remove " + P("b.db") + " case-00001"), 2);
+
+  ASSERT_EQ(Run("kb rules " + P("b.db")), 0) << err_;
+  nlohmann::json rules = Out();
+  EXPECT_EQ(rules["version"], 1);
+  for (auto& r : rules["rules"]) {
+    if (r["name"] == "route.simulate") r["condition"]["similarity"]["ge"] = 0.99;
+  }
+  WriteBytes(dir_ / "rules.json", rules.dump());
+  EXPECT_EQ(Run("kb rules " + P("b.db") + " --set " + P("rules.json")), 2);
+  EXPECT_NE(err_.find("0 < low < high <= 1"), std::string::npos) << err_;
+}
+
+TEST_F(KbCliTest, RefusalsExitNonZeroAndLeaveFilesAlone) {
+  WriteBytes(dir_ / "notes.txt", "just some text, not a case library at all\n");
+  const std::string before = ReadBytes(dir_ / "notes.txt");
+  EXPECT_EQ(Run("kb list " + P("notes.txt")), 2);
+  EXPECT_NE(err_.find("not a formloop case library"), std::string::npos) << err_;
+  EXPECT_EQ(Run("kb init " + P("notes.txt")), 2);
+  EXPECT_EQ(ReadBytes(dir_ / "notes.txt"), before);
+
+  // A bad case file names the field.
+  ASSERT_EQ(Run("kb init " + P("a.db")), 0) << err_;
+  nlohmann::json bad = SyntheticCase(0).ToJson();
+  bad["part"]["tolerance_mm"] = 0;
+  WriteBytes(dir_ / "bad.json", bad.dump());
+  EXPECT_EQ(Run("kb add " + P("a.db") + " " + P("bad.json")), 2);
+  EXPECT_NE(err_.find("field 'part.tolerance_mm'"), std::string::npos) << err_;
+
+  // check exits 1 and reports JSON when the library is not clean.
+  ASSERT_TRUE(Library::Open(dir_ / "a.db").ok());
+  {
+    auto lib = Library::Open(dir_ / "a.db");
+    ASSERT_TRUE((*lib)->StoreGhsom(GhsomRecord{}).ok());
+    ASSERT_TRUE((*lib)->AddCase(SyntheticCase(1)).ok());
+  }
+  EXPECT_EQ(Run("kb check " + P("a.db")), 1);
+  EXPECT_EQ(Out()["clean"], false);
+  EXPECT_EQ(Out()["ghsom"]["stale"], true);
+}
+
+}  // namespace
+}  // namespace formloop::kb
