@@ -1,8 +1,14 @@
 // `formloop kb init --starter` → `kb train` → `formloop retrieve` → `kb add` (incremental GHSOM insertion) →
 // `kb check` / `kb calibrate`, through the binary. Skipped when the binary has not been built.
 
+#include <csignal>
+#include <cstdio>
 #include <filesystem>
 #include <string>
+
+#include <fcntl.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -90,9 +96,9 @@ TEST_F(KbTrainCliTest, StarterTrainRetrieveAddCheck) {
   ASSERT_EQ(Run("retrieve --library " + db + " --part " + P("new.json") + " --top 2"), 0) << err_;
   EXPECT_EQ(Out()["library"]["cases_not_in_ghsom"], 0);
 
-  // A removal makes the GHSOM stale: check reports it (exit 1) until kb train.
+  // A removal makes the GHSOM stale: check reports it (a warning, ghsom.stale) until kb train.
   ASSERT_EQ(Run("kb remove " + db + " pocket-new"), 0) << err_;
-  EXPECT_EQ(Run("kb check " + db), 1);
+  EXPECT_EQ(Run("kb check " + db), 0);
   EXPECT_TRUE(Out()["ghsom"]["stale"].get<bool>());
   ASSERT_EQ(Run("kb train " + db), 0) << err_;
   EXPECT_EQ(Run("kb check " + db), 0) << out_;
@@ -112,6 +118,41 @@ TEST_F(KbTrainCliTest, RetrieveRefusesUntrainedLibrary) {
   EXPECT_EQ(Run("retrieve --library " + db + " --part " + P("q.json")), 1);
   EXPECT_NE(err_.find("kb train"), std::string::npos) << err_;
   EXPECT_EQ(Run("kb train " + db), 2);  // no cases
+}
+
+// `kb train` SIGKILLed at increasing moments of its run (from the first milliseconds to after it has
+// finished): every time the library opens, `kb check` is clean, no case is lost and a GHSOM loads.
+TEST_F(KbTrainCliTest, TrainKilledAtAnyMomentLeavesACleanLibrary) {
+  const std::string db = P("killed.db");
+  ASSERT_EQ(Run("kb init " + db + " --starter"), 0) << err_;
+  const int cases = Out()["starter"]["cases"].get<int>();
+  int killed_while_running = 0;
+  for (int delay_ms : {5, 20, 50, 100, 200, 400, 800}) {
+    const pid_t child = ::fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+      const int null = ::open("/dev/null", O_WRONLY);
+      ::dup2(null, 1);
+      ::dup2(null, 2);
+      ::execl(FORMLOOP_BINARY, FORMLOOP_BINARY, "kb", "train", db.c_str(), "--seed",
+              std::to_string(1000 + delay_ms).c_str(), static_cast<char*>(nullptr));
+      ::_exit(127);
+    }
+    ::usleep(static_cast<useconds_t>(delay_ms) * 1000);
+    int status = 0;
+    if (::waitpid(child, &status, WNOHANG) == 0) {
+      ASSERT_EQ(::kill(child, SIGKILL), 0);
+      ++killed_while_running;
+    }
+    ::waitpid(child, &status, 0);
+    ASSERT_EQ(Run("kb check " + db), 0) << "after " << delay_ms << " ms: " << out_;
+    EXPECT_TRUE(Out()["clean"].get<bool>());
+    EXPECT_TRUE(Out()["ghsom"]["present"].get<bool>()) << out_;
+    ASSERT_EQ(Run("kb stats " + db), 0) << err_;
+    EXPECT_EQ(Out()["cases"].get<int>(), cases) << out_;
+  }
+  std::printf("kb train killed while running in %d of 7 tries\n", killed_while_running);
+  EXPECT_GE(killed_while_running, 1);
 }
 
 }  // namespace
