@@ -44,6 +44,10 @@ void AddDiagnoseCommand(CLI::App& root, CommandAction* action) {
   cmd->add_option("--validate", args->validate, "probe log of a second part to measure the gain on");
   cmd->add_option("--validate-run", args->validate_run, "the run folder of that second part");
   cmd->add_option("--validate-plan", args->validate_plan, "its plan; default: that run's");
+  cmd->add_option("--library", args->library, "case library: store the extended model in the case given by --case");
+  cmd->add_option("--case", args->case_uid, "uid of the case the part belongs to");
+  cmd->add_option("--machine", args->machine, "machine name for the learned model's key (machine/tool/material)")
+      ->default_val("unspecified");
   cmd->callback([args, action] {
     *action = [args]() -> Status {
       FL_ASSIGN_OR_RETURN(const nlohmann::json out, RunDiagnose(*args));

@@ -1,12 +1,16 @@
 #include "app/model_jobs.h"
 
 #include <filesystem>
+#include <optional>
+
+#include <fmt/format.h>
 
 #include "app/run_folder.h"
 #include "core/atomic_file.h"
 #include "core/json_io.h"
 #include "core/log.h"
 #include "core/point_io.h"
+#include "kb/library.h"
 #include "simulation/diagnose.h"
 #include "simulation/virtual_machine.h"
 
@@ -41,6 +45,48 @@ sim::ProbeDataInput ProbeInputOf(const RunFolder& run, const PlanWithApproaches&
   in.measured = &log;
   in.probe = run.part.probe;
   return in;
+}
+
+// The case's simulation knowledge keeps one learned model per machine/tool/material
+// (simulation.effect_models): the extended model in formloop's format, each parameter as an
+// {name, estimate, standard_error} row the library validates, and where it came from.
+Status StoreLearnedModel(const DiagnoseArgs& args, const RunFolder& run, const sim::Diagnosis& diagnosis) {
+  FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args.library));
+  FL_ASSIGN_OR_RETURN(kb::CaseRecord record, library->GetCase(args.case_uid));
+  const std::string tool = "ball r" + fmt::format("{:g}", run.part.toolpath.tool.radius_mm);
+  nlohmann::json rows = nlohmann::json::array();
+  for (const auto& e : diagnosis.extended.effects) {
+    const auto& spec = e.effect->parameters();
+    for (std::size_t k = 0; k < spec.size(); ++k) {
+      rows.push_back({{"name", std::string(e.effect->name()) + "." + spec[k].name},
+                      {"estimate", e.values[k]},
+                      {"standard_error", e.std_errors[k]}});
+    }
+  }
+  nlohmann::json entry = {{"machine", args.machine},
+                          {"tool", tool},
+                          {"material", run.part.material},
+                          {"effects", rows},
+                          {"model", diagnosis.extended.ToJson()},
+                          {"provenance",
+                           {{"measured", args.measured}, {"run", args.run}, {"baseline", args.baseline},
+                            {"points", diagnosis.n}, {"heldout_rms_before_um", diagnosis.heldout_rms_before_um},
+                            {"heldout_rms_after_um", diagnosis.heldout_rms_after_um}}}};
+  nlohmann::json& models = record.simulation["effect_models"];
+  if (!models.is_array()) models = nlohmann::json::array();
+  bool replaced = false;
+  for (auto& m : models) {
+    if (m.value("machine", "") == args.machine && m.value("tool", "") == tool &&
+        m.value("material", "") == run.part.material) {
+      m = entry;
+      replaced = true;
+    }
+  }
+  if (!replaced) models.push_back(entry);
+  FL_RETURN_IF_ERROR(library->AddCase(record, /*replace=*/true));
+  log::Info("learned model stored in case {} of {} ({} / {} / {}{})", args.case_uid, args.library, args.machine, tool,
+            run.part.material, replaced ? ", replacing the previous one" : "");
+  return Status::Ok();
 }
 
 }  // namespace
@@ -95,6 +141,10 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
   if (args.measured.empty() == args.features.empty()) {
     return Status::BadInput(Where{.field = "--measured/--features"}, "give exactly one of them");
   }
+  if (!args.library.empty() && (args.case_uid.empty() || args.run.empty() || args.measured.empty())) {
+    return Status::BadInput(Where{.field = "--library"}, "needs --case, --run and --measured",
+                            "give the case the part belongs to and the run that made it");
+  }
   if (!args.validate.empty() && args.validate_run.empty()) {
     return Status::BadInput(Where{.field = "--validate-run"}, "is required with --validate",
                             "give the run folder of the second part");
@@ -107,6 +157,7 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
   sim::Diagnosis diagnosis;
   nlohmann::json second_part = nullptr;
   PointSet residuals;
+  std::optional<RunFolder> stored_run;  // kept when the model goes into the case library
   if (!args.features.empty()) {
     FL_ASSIGN_OR_RETURN(const auto features, sim::ReadFeatures(args.features));
     FL_ASSIGN_OR_RETURN(diagnosis, sim::DiagnoseFeatures(features, baseline, options));
@@ -133,6 +184,7 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
     FL_ASSIGN_OR_RETURN(const sim::ProbeResidualData data, sim::ProbeResiduals(in, baseline));
     FL_ASSIGN_OR_RETURN(diagnosis,
                         sim::DiagnoseResiduals(data.contexts, data.residual_um, baseline, options, &data.sensitivity));
+    if (!args.library.empty()) stored_run = run;
     for (std::size_t i = 0; i < data.contexts.size(); ++i) {
       residuals.points.push_back(data.contexts[i].point);
       residuals.normals.push_back(data.contexts[i].normal);
@@ -176,6 +228,14 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
   fs::rename(staging, dir, ec);
   if (ec) return Status::IoError("cannot move '" + staging.string() + "' to '" + dir.string() + "': " + ec.message());
   log::Info("{}", diagnosis.Summary());
+  if (stored_run.has_value()) {
+    const Status stored = StoreLearnedModel(args, *stored_run, diagnosis);
+    if (!stored.ok()) {
+      return Status(stored.code(), "the diagnosis is in '" + dir.string() + "', but storing the learned model failed: " +
+                                       stored.message());
+    }
+    out["stored_in_library"] = {{"library", args.library}, {"case", args.case_uid}};
+  }
   if (!second_part.is_null()) {
     log::Info("second part: prediction rms {:.2f} um (baseline) -> {:.2f} um (extended model)",
               second_part["rms_before_um"].get<double>(), second_part["rms_after_um"].get<double>());

@@ -32,6 +32,9 @@ struct DiagnoseArgs {
   std::string validate;       // optional second part: LOG2.csv ...
   std::string validate_run;   // ... and its run folder
   std::string validate_plan;  // ... and plan (default: that run's)
+  std::string library;        // optional case library: store the extended model in case `case_uid`
+  std::string case_uid;       // ... as its learned model for this machine/tool/material (replacing one with that key)
+  std::string machine = "unspecified";  // the machine the part was cut on (the key's machine)
 };
 // Returns diagnosis.json's content; the summary goes to the log (stderr).
 Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args);

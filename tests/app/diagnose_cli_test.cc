@@ -112,6 +112,31 @@ TEST_F(DiagnoseCliTest, SimulateThenDiagnoseNamesTheHiddenEffectAndMeasuresTheGa
   const auto model = sim::ReadModel(out_dir / "model.json");
   ASSERT_TRUE(model.ok()) << model.status().message();
   EXPECT_TRUE(model->Has("tool_wear"));
+  // The learned model goes into a case of the library, keyed by machine/tool/material, with provenance.
+  const std::string db = (dir_ / "cases.db").string();
+  ASSERT_EQ(RunFormloop("kb init " + db, &out, &err), 0) << err;
+  ASSERT_EQ(RunFormloop("kb add " + db + " " + (fs::path(FORMLOOP_SOURCE_DIR) / "data" / "kb" / "example_case.json").string(),
+                        &out, &err),
+            0)
+      << err;
+  ASSERT_EQ(RunFormloop("diagnose --measured " + (dir_ / "log1.csv").string() + " --run " + run1.string() +
+                            " --baseline " + baseline.string() + " --out " + (dir_ / "stored").string() +
+                            " --library " + db + " --case example-blade-001 --machine virtual-3axis",
+                        &out, &err),
+            0)
+      << err;
+  ASSERT_EQ(RunFormloop("kb show " + db + " example-blade-001", &out, &err), 0) << err;
+  const auto shown = ParseJson(out, "kb show");
+  ASSERT_TRUE(shown.ok()) << out;
+  bool found = false;
+  for (const auto& m : (*shown)["simulation"]["effect_models"]) {
+    if (m.value("machine", "") != "virtual-3axis") continue;
+    found = true;
+    EXPECT_EQ(m["tool"], "ball r3");
+    EXPECT_NE(m["model"].dump().find("tool_wear"), std::string::npos) << m.dump();
+    EXPECT_EQ(m["provenance"]["measured"], (dir_ / "log1.csv").string());
+  }
+  EXPECT_TRUE(found) << out;
   // Same inputs, same seed: the same log.
   ASSERT_EQ(RunFormloop("simulate --run " + run1.string() + " --model " + machine.string() + " --out " +
                             (dir_ / "again.csv").string() + " --seed 7",
