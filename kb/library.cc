@@ -866,6 +866,11 @@ Result<long long> Library::StoreGhsom(GhsomRecord record) {
   FL_RETURN_IF_ERROR(ins.Bind(7, record.change_counter));
   FL_RETURN_IF_ERROR(ins.Step().status());
   const long long id = db_->LastInsertRowId();
+  // Only the newest map is ever used: older rows would pile up with every incremental `kb add` (each
+  // holds the whole map), so they go in the same transaction. The audit trail keeps the history.
+  FL_ASSIGN_OR_RETURN(Statement prune, db_->Prepare("DELETE FROM ghsom WHERE id <> ?1;"));
+  FL_RETURN_IF_ERROR(prune.Bind(1, id));
+  FL_RETURN_IF_ERROR(prune.Step().status());
   FL_RETURN_IF_ERROR(AuditRow("ghsom.store", "",
                               "id=" + std::to_string(id) + " cases=" + std::to_string(record.case_count) +
                                   " seed=" + std::to_string(record.seed)));

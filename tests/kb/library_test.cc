@@ -343,6 +343,8 @@ TEST_F(KbLibraryTest, CheckFindsOrphansAndStaleGhsom) {
   EXPECT_EQ(stale->ghsom.current_changes, 6);
   ASSERT_TRUE(lib->StoreGhsom(g).ok());
   EXPECT_TRUE(lib->Check()->clean());
+  // Storing a map replaces the previous one (only the newest is used; rows do not pile up).
+  EXPECT_EQ(*lib->db()->QueryInt("SELECT COUNT(*) FROM ghsom;"), 1);
 
   // An orphan concept row, written with foreign keys off by another program.
   ASSERT_TRUE(lib->db()->Execute("PRAGMA foreign_keys = OFF; INSERT INTO case_concepts(case_id, facet, concept) "
