@@ -18,13 +18,6 @@ namespace formloop::app {
 namespace fs = std::filesystem;
 namespace {
 
-Status MakeDir(const fs::path& dir) {
-  std::error_code ec;
-  fs::create_directories(dir, ec);
-  if (ec) return Status::IoError("cannot create folder '" + dir.string() + "': " + ec.message());
-  return Status::Ok();
-}
-
 Status CopyInto(const std::string& from, const fs::path& to) {
   FL_ASSIGN_OR_RETURN(const std::string content, ReadFile(from));
   return WriteFileAtomic(to, content, true);
@@ -105,7 +98,7 @@ Status RunSimulate(const SimulateArgs& args) {
   vm.approaches = plan.approaches;
   vm.seed = args.seed;
   FL_ASSIGN_OR_RETURN(const sim::VirtualMachineResult result,
-                      sim::MachineAndProbe(run.q, run.cutter_locations, plan.plan, vm));
+                      sim::MachineAndProbe(run.cutter_locations, plan.plan, vm));
   // Truth first into a temporary name, then the log: a failure leaves neither.
   if (!args.truth.empty()) {
     nlohmann::json truth = result.ReportJson();
@@ -209,7 +202,7 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
   const fs::path staging = dir.string() + ".partial";
   std::error_code ec;
   fs::remove_all(staging, ec);
-  FL_RETURN_IF_ERROR(MakeDir(staging / "inputs"));
+  FL_RETURN_IF_ERROR(MakeDirectories(staging / "inputs"));
   for (const auto& [from, name] : std::vector<std::pair<std::string, std::string>>{
            {args.measured, "measured.csv"}, {args.features, "features.csv"}, {args.baseline, "baseline.json"},
            {args.plan, "plan" + fs::path(args.plan).extension().string()}, {args.validate, "validate.csv"},

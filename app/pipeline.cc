@@ -17,13 +17,6 @@ namespace {
 
 constexpr const char* kVersion = "0.1.0";
 
-Status MakeDir(const fs::path& dir) {
-  std::error_code ec;
-  fs::create_directories(dir, ec);
-  if (ec) return Status::IoError("cannot create folder '" + dir.string() + "': " + ec.message());
-  return Status::Ok();
-}
-
 // Cutter locations as the program commands them: every feed move, ball centre = tip + r ẑ, path
 // length and time accumulated over feed moves.
 std::vector<sim::CutterLocation> CutterLocationsFromProgram(const std::vector<nc::ProgramMove>& moves,
@@ -64,7 +57,7 @@ Status RunStages(const PartSpec& part, const fs::path& dir, RunSummary* summary)
   summary->part = part.name;
   summary->surface = part.surface_reference;
   summary->tolerance_um = part.tolerance_mm * 1e3;
-  FL_RETURN_IF_ERROR(MakeDir(dir / "inputs"));
+  FL_RETURN_IF_ERROR(MakeDirectories(dir / "inputs"));
   FL_RETURN_IF_ERROR(WriteJsonFile(dir / "inputs" / "part.json", part.ToJson()));
   Rng seeds(part.seed);
   const std::uint64_t fit_seed = seeds.Fork();
@@ -75,7 +68,7 @@ Status RunStages(const PartSpec& part, const fs::path& dir, RunSummary* summary)
             part.fit_samples_v);
   FL_ASSIGN_OR_RETURN(std::unique_ptr<recon::AnalyticSurface> reference,
                       recon::MakeReferenceSurface(part.surface_reference));
-  FL_RETURN_IF_ERROR(MakeDir(dir / "surface"));
+  FL_RETURN_IF_ERROR(MakeDirectories(dir / "surface"));
   FL_RETURN_IF_ERROR(
       WritePoints(dir / "surface" / "samples.csv", recon::SampleGridPoints(*reference, part.fit_samples_u, part.fit_samples_v)));
   recon::FitReport fit_report;
@@ -108,7 +101,7 @@ Status RunStages(const PartSpec& part, const fs::path& dir, RunSummary* summary)
   // Program files carry the dialect's extension (.ngc LinuxCNC, .nc Fanuc, .h Heidenhain, .mpf Sinumerik).
   const std::string extension(nc::FindPost(part.dialect)->FileExtension());
   const fs::path nominal_program_path = dir / "toolpath" / ("program" + extension);
-  FL_RETURN_IF_ERROR(MakeDir(dir / "toolpath"));
+  FL_RETURN_IF_ERROR(MakeDirectories(dir / "toolpath"));
   FL_RETURN_IF_ERROR(WriteFileAtomic(nominal_program_path, program));
   FL_RETURN_IF_ERROR(nc::WriteToolpathFile(dir / "toolpath" / "toolpath.csv", nominal));
   FL_RETURN_IF_ERROR(WriteJsonFile(dir / "toolpath" / "toolpath.json", nominal.ReportJson()));
@@ -130,7 +123,7 @@ Status RunStages(const PartSpec& part, const fs::path& dir, RunSummary* summary)
   fs::path current_program_path = nominal_program_path;
   for (int loop = 0; loop < part.max_loops; ++loop) {
     const fs::path loop_dir = dir / ("loop-" + std::to_string(loop));
-    FL_RETURN_IF_ERROR(MakeDir(loop_dir));
+    FL_RETURN_IF_ERROR(MakeDirectories(loop_dir));
     log::Info("[3/4] loop {}: virtual machining of {}", loop, fs::relative(current_program_path, dir).string());
     FL_ASSIGN_OR_RETURN(std::vector<nc::ProgramMove> moves,
                         nc::ReadProgram(current_program, part.dialect, current_program_path.string()));
@@ -140,7 +133,7 @@ Status RunStages(const PartSpec& part, const fs::path& dir, RunSummary* summary)
     vm.effects = part.effects;
     vm.true_probe = part.true_probe;
     vm.seed = machine_seed + static_cast<std::uint64_t>(loop);
-    FL_ASSIGN_OR_RETURN(sim::VirtualMachineResult machined, sim::MachineAndProbe(q, cls, plan, vm));
+    FL_ASSIGN_OR_RETURN(sim::VirtualMachineResult machined, sim::MachineAndProbe(cls, plan, vm));
     FL_RETURN_IF_ERROR(metrology::WriteProbeLog(loop_dir / "probe_log.csv", machined.log));
     nlohmann::json machine_json = machined.ReportJson();
     machine_json["program"] = fs::relative(current_program_path, dir).string();
@@ -289,13 +282,15 @@ Result<RunSummary> RunPart(const PartSpec& part, const RunOptions& options) {
     return Status::BadInput(Where{.field = "--out"}, "run folder '" + out.string() + "' already exists",
                             "choose another folder or pass --force to replace it");
   }
-  if (out.has_parent_path() && !fs::exists(out.parent_path(), ec)) FL_RETURN_IF_ERROR(MakeDir(out.parent_path()));
+  if (out.has_parent_path() && !fs::exists(out.parent_path(), ec)) {
+    FL_RETURN_IF_ERROR(MakeDirectories(out.parent_path()));
+  }
   fs::path partial = out;
   partial += ".partial";
   fs::path failed = out;
   failed += ".failed";
   fs::remove_all(partial, ec);
-  FL_RETURN_IF_ERROR(MakeDir(partial));
+  FL_RETURN_IF_ERROR(MakeDirectories(partial));
   FL_RETURN_IF_ERROR(log::StartFileLog(partial / "formloop.log"));
   log::Info("formloop {} run of part '{}' into {}", kVersion, part.name, out.string());
 

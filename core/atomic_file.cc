@@ -84,4 +84,11 @@ Result<std::string> ReadFile(const std::filesystem::path& path) {
   return content;
 }
 
+Status MakeDirectories(const std::filesystem::path& dir) {
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) return Status::IoError("cannot create folder '" + dir.string() + "': " + ec.message());
+  return Status::Ok();
+}
+
 }  // namespace formloop

@@ -45,4 +45,7 @@ Status WriteFileAtomic(const std::filesystem::path& path, std::string_view conte
 // Reads a whole file; NotFound / IoError name the path.
 Result<std::string> ReadFile(const std::filesystem::path& path);
 
+// Creates a folder and its parents (nothing to do when it exists); IoError names the folder.
+Status MakeDirectories(const std::filesystem::path& dir);
+
 }  // namespace formloop

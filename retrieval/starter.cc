@@ -1,5 +1,6 @@
 #include "retrieval/starter.h"
 
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -64,12 +65,18 @@ json MaterialProperties(const std::string& material) {
   return {{"youngs_modulus_gpa", nullptr}, {"hardness_hv", nullptr}, {"specific_cutting_force_n_per_mm2", nullptr}};
 }
 
+// %.*g without the locale (std::to_chars), so the generated library is the same whatever LC_NUMERIC says.
 std::string Round(double x, int digits) {
   char buf[64];
-  std::snprintf(buf, sizeof buf, "%.*g", digits, x);
-  return buf;
+  const auto r = std::to_chars(buf, buf + sizeof buf, x, std::chars_format::general, digits);
+  return std::string(buf, r.ptr);
 }
-double R6(double x) { return std::strtod(Round(x, 6).c_str(), nullptr); }
+double R6(double x) {
+  const std::string text = Round(x, 6);
+  double value = 0;
+  std::from_chars(text.data(), text.data() + text.size(), value);
+  return value;
+}
 
 }  // namespace
 

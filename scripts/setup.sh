@@ -20,6 +20,7 @@ PACKAGES=(
   libeigen3-dev libcgal-dev
   libocct-foundation-dev libocct-modeling-data-dev libocct-modeling-algorithms-dev libocct-data-exchange-dev
   libsqlite3-dev libpcl-dev
+  libboost-dev      # Boost.Math's F distribution for diagnose's screening tests (PCL pulls it in too)
   libgtest-dev libgmock-dev libbenchmark-dev
   nlohmann-json3-dev libcli11-dev libfmt-dev libspdlog-dev
   linuxcnc-uspace   # reference tool: its rs274 interpreter checks our LinuxCNC programs in the tests

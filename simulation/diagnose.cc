@@ -363,8 +363,6 @@ Result<Diagnosis> SelectCauses(const Problem& prob, const Model& baseline, const
       grown << x, f.columns;
       x = grown;
     }
-  }
-  if (!named.empty()) {
     const Fit joint = LeastSquares(x, prob.r);
     int col = 0;
     for (std::size_t k = 0; k < named.size(); ++k) {
@@ -373,9 +371,6 @@ Result<Diagnosis> SelectCauses(const Problem& prob, const Model& baseline, const
       cause.parameters.clear();
       cause.std_errors.clear();
       for (int j = 0; j < e->parameter_count(); ++j, ++col) {
-        const bool nonlinear = !e->parameters()[j].linear;
-        // A nonlinear parameter keeps its profiled value; the joint fit corrects it to first order.
-        const double value = nonlinear ? named[k].theta[j] + joint.beta[col] : joint.beta[col];
         if (x.col(col).norm() == 0) {
           // Not observable in these data (e.g. a z parameter from 2-D feature positions): reported as
           // null, kept at 0 in the extended model.
@@ -383,24 +378,16 @@ Result<Diagnosis> SelectCauses(const Problem& prob, const Model& baseline, const
           cause.std_errors.push_back(std::numeric_limits<double>::quiet_NaN());
           continue;
         }
-        cause.parameters.push_back(value);
+        // A nonlinear parameter (τ) keeps its profiled optimum, where its column's coefficient is ~0;
+        // its standard error comes from the joint linearised fit like the others'.
+        cause.parameters.push_back(e->parameters()[j].linear ? joint.beta[col] : named[k].theta[j]);
         cause.std_errors.push_back(std::sqrt(std::max(0.0, joint.cov(col, col))));
       }
-      if (e->linear()) {
-        std::vector<double> v = cause.parameters, se = cause.std_errors;
-        for (std::size_t j = 0; j < v.size(); ++j) {
-          if (std::isnan(v[j])) v[j] = se[j] = 0.0;
-        }
-        (void)out.extended.Set(e->name(), v, se);
-      } else {
-        // Linearised correction of τ can overshoot; keep the profiled optimum for the model.
-        std::vector<double> v = named[k].theta;
-        for (int j = 0; j < e->parameter_count(); ++j) {
-          if (e->parameters()[j].linear) v[j] = cause.parameters[j];
-        }
-        cause.parameters = v;
-        (void)out.extended.Set(e->name(), v, cause.std_errors);
+      std::vector<double> v = cause.parameters, se = cause.std_errors;
+      for (std::size_t j = 0; j < v.size(); ++j) {
+        if (std::isnan(v[j])) v[j] = se[j] = 0.0;
       }
+      (void)out.extended.Set(e->name(), v, se);
     }
     current = joint;
   }

@@ -1,10 +1,9 @@
 #include "simulation/model.h"
 
 #include <cmath>
-#include <fstream>
-#include <sstream>
 
 #include "core/atomic_file.h"
+#include "core/json_io.h"
 
 namespace formloop::sim {
 namespace {
@@ -137,16 +136,7 @@ Result<Model> Model::FromJson(const nlohmann::json& json, const std::string& sou
 }
 
 Result<Model> ReadModel(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  if (!in) return Status::NotFound("cannot open model '" + path.string() + "'");
-  std::stringstream buffer;
-  buffer << in.rdbuf();
-  nlohmann::json json;
-  try {
-    json = nlohmann::json::parse(buffer.str());
-  } catch (const nlohmann::json::parse_error& e) {
-    return Status::BadInput(Where{.file = path.string()}, std::string("not valid JSON: ") + e.what());
-  }
+  FL_ASSIGN_OR_RETURN(const nlohmann::json json, ReadJsonFile(path));
   return Model::FromJson(json, path.string());
 }
 

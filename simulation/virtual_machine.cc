@@ -78,8 +78,7 @@ std::vector<MeasuredPoint> MeasuredPointsOf(const metrology::ProbingPlan& plan,
   return out;
 }
 
-Result<VirtualMachineResult> MachineAndProbe(const recon::BSplineSurface&,
-                                             const std::vector<CutterLocation>& cutter_locations,
+Result<VirtualMachineResult> MachineAndProbe(const std::vector<CutterLocation>& cutter_locations,
                                              const metrology::ProbingPlan& plan, const VirtualMachineOptions& options) {
   FL_RETURN_IF_ERROR(options.Validate());
   if (!options.approaches.empty() && options.approaches.size() != plan.points.size()) {

@@ -19,7 +19,6 @@
 
 #include "core/status.h"
 #include "metrology/probe.h"
-#include "reconstruction/bspline_surface.h"
 #include "simulation/covariates.h"
 #include "simulation/model.h"
 
@@ -75,8 +74,8 @@ struct VirtualMachineResult {
 std::vector<MeasuredPoint> MeasuredPointsOf(const metrology::ProbingPlan& plan,
                                             const std::vector<Eigen::Vector3d>& approaches = {});
 
-Result<VirtualMachineResult> MachineAndProbe(const recon::BSplineSurface& surface,
-                                             const std::vector<CutterLocation>& cutter_locations,
+// The plan's points carry Q's point and normal; Q itself is not needed.
+Result<VirtualMachineResult> MachineAndProbe(const std::vector<CutterLocation>& cutter_locations,
                                              const metrology::ProbingPlan& plan, const VirtualMachineOptions& options);
 
 // The probe log a model predicts for given contexts (no noise): the same physics as MachineAndProbe.

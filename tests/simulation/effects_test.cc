@@ -173,12 +173,11 @@ TEST(EffectPhysicsTest, ProbeRadiusAndToolRadiusReadAsHandComputedThroughTheProb
   const StraightPass pass = MakeStraightPass();
   metrology::ProbingPlan plan;
   for (const auto& p : pass.points) plan.points.push_back({p.id, p.point.x(), p.point.y(), p.point, p.normal});
-  recon::BSplineSurface unused;
   for (const char* effect : {"probe_radius", "tool_radius"}) {
     VirtualMachineOptions vm;
     vm.true_probe.ball_radius_mm = 1.0;
     ASSERT_TRUE(vm.model.Set(effect, {3.0}).ok());
-    const auto result = MachineAndProbe(unused, pass.cls, plan, vm);
+    const auto result = MachineAndProbe(pass.cls, plan, vm);
     ASSERT_TRUE(result.ok()) << result.status().message();
     for (std::size_t i = 0; i < plan.points.size(); ++i) {
       // Contact point c + R a with the assumed R = 1 mm, read along n (z here).

@@ -48,7 +48,7 @@ TEST(VirtualMachineTest, ScallopStaysBelowTheTargetAndNeverGouges) {
   for (const char* surface : {"plane", "sphere_cap", "egg_box"}) {
     const Scene s = MakeScene(surface, 4.0);
     VirtualMachineOptions vm;
-    const auto r = MachineAndProbe(s.q, s.cls, s.plan, vm);
+    const auto r = MachineAndProbe(s.cls, s.plan, vm);
     ASSERT_TRUE(r.ok()) << r.status().message();
     double max_scallop = -1e9, min_scallop = 1e9;
     for (const auto& t : r->truth) {
@@ -72,7 +72,7 @@ TEST(VirtualMachineTest, EffectsAddUpAndTheProbeModelInvertsTheLog) {
   vm.effects.thermal_tau_s = 900;
   vm.true_probe.ball_radius_mm = 1.0;
   vm.true_probe.pretravel_mm = 0.002;
-  const auto r = MachineAndProbe(s.q, s.cls, s.plan, vm);
+  const auto r = MachineAndProbe(s.cls, s.plan, vm);
   ASSERT_TRUE(r.ok());
   metrology::ProbeModel probe = vm.true_probe;  // analysis with the right probe model
   const auto dev = metrology::ComputeDeviations(s.q, s.plan, r->log, probe);
@@ -103,10 +103,10 @@ TEST(VirtualMachineTest, SameSeedSameLogOtherSeedOtherNoise) {
   vm.effects.surface_noise_um = 1.0;
   vm.effects.probe_noise_um = 0.5;
   vm.seed = 99;
-  const auto a = MachineAndProbe(s.q, s.cls, s.plan, vm);
-  const auto b = MachineAndProbe(s.q, s.cls, s.plan, vm);
+  const auto a = MachineAndProbe(s.cls, s.plan, vm);
+  const auto b = MachineAndProbe(s.cls, s.plan, vm);
   vm.seed = 100;
-  const auto c = MachineAndProbe(s.q, s.cls, s.plan, vm);
+  const auto c = MachineAndProbe(s.cls, s.plan, vm);
   ASSERT_TRUE(a.ok() && b.ok() && c.ok());
   double same = 0, differ = 0;
   for (std::size_t i = 0; i < a->log.records.size(); ++i) {
@@ -120,7 +120,7 @@ TEST(VirtualMachineTest, SameSeedSameLogOtherSeedOtherNoise) {
 TEST(VirtualMachineTest, ProbingOutsideTheMachinedAreaIsAnError) {
   Scene s = MakeScene("plane", 5.0);
   s.plan.points[3].point += Eigen::Vector3d(0, 500, 0);
-  const auto r = MachineAndProbe(s.q, s.cls, s.plan, {});
+  const auto r = MachineAndProbe(s.cls, s.plan, {});
   EXPECT_EQ(r.status().code(), StatusCode::kBadInput);
   EXPECT_NE(r.status().message().find("point 4 "), std::string::npos) << r.status().message();
 }

@@ -178,7 +178,7 @@ inline Scenario MakeScenario(Rng& rng, const std::string& surface, int points, d
     (void)s.truth.Set(name, theta);
   }
   vm.model = s.truth;
-  auto machined = sim::MachineAndProbe(q, s.machined->cls, s.plan, vm).value();
+  auto machined = sim::MachineAndProbe(s.machined->cls, s.plan, vm).value();
   if (bump) {
     // A bump of material left, outside the catalogue: moves the reported centres along the approach.
     const double height = 2.0 * s.snr * kScenarioSigmaUm;
