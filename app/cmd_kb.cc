@@ -27,6 +27,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/command.h"
+#include "app/kb_jobs.h"
 #include "core/json_io.h"
 #include "core/log.h"
 #include "kb/library.h"
@@ -72,34 +73,6 @@ retrieval::GhsomOptions TrainOptions(const KbArgs& args) {
   return o;
 }
 
-// kb init --starter: the starter cases, the starter rule base, a trained GHSOM.
-Result<nlohmann::json> FillStarter(const KbArgs& args) {
-  FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args.path));
-  FL_ASSIGN_OR_RETURN(kb::LibraryStats stats, library->Stats());
-  if (stats.cases > 0) {
-    return Status::BadInput("case library '" + args.path + "' already holds " + std::to_string(stats.cases) +
-                            " case(s); --starter fills only an empty library");
-  }
-  const std::filesystem::path data = DataDir(args);
-  FL_ASSIGN_OR_RETURN(retrieval::StarterSpec spec, retrieval::StarterSpec::Load(data / "starter" / "families.json"));
-  FL_ASSIGN_OR_RETURN(retrieval::FeatureOptions options, FeatureOptionsFor(args));
-  log::Info("starter library: generating {} families x {} cases", spec.families.size(), spec.cases_per_family);
-  FL_ASSIGN_OR_RETURN(auto cases, retrieval::GenerateStarterCases(spec, options));
-  // One transaction for all cases: the export format (kb/library.h), header line then one case per line.
-  std::string text =
-      nlohmann::json{{"format", kb::kExportFormatName}, {"format_version", kb::kExportFormatVersion}}.dump();
-  text += "\n";
-  for (const auto& c : cases) text += nlohmann::json{{"type", "case"}, {"case", c.ToJson()}}.dump() + "\n";
-  FL_ASSIGN_OR_RETURN(kb::ImportReport imported, library->ImportText(text, "<starter cases>"));
-  FL_ASSIGN_OR_RETURN(Json rules, ReadJsonFile(data / "starter" / "rules.json"));
-  FL_ASSIGN_OR_RETURN(int rules_version, library->SetRules(rules, (data / "starter" / "rules.json").string()));
-  FL_ASSIGN_OR_RETURN(nlohmann::json trained, retrieval::TrainLibraryGhsom(*library, TrainOptions(args)));
-  return nlohmann::json{{"cases", imported.cases_added},
-                        {"families", spec.families.size()},
-                        {"rules_version", rules_version},
-                        {"ghsom", trained}};
-}
-
 CLI::App* PathCommand(CLI::App* kb, const std::string& name, const std::string& help, KbArgs* args) {
   CLI::App* sub = kb->add_subcommand(name, help);
   sub->add_option("path", args->path, "case library file, e.g. cases.db")->required();
@@ -131,7 +104,7 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
                 report.migration.to_version, report.migration.applied.size());
       nlohmann::json out = report.ToJson();
       if (args->starter) {
-        FL_ASSIGN_OR_RETURN(out["starter"], FillStarter(*args));
+        FL_ASSIGN_OR_RETURN(out["starter"], FillStarterLibrary(args->path, DataDir(*args), TrainOptions(*args)));
         log::Info("starter library: {} cases, GHSOM trained", out["starter"]["cases"].get<long long>());
       }
       Print(out);

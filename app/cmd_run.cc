@@ -1,51 +1,186 @@
-// `formloop run PART.json --out DIR`: the per-part batch pipeline.
+// `formloop run PART.json|FOLDER ... [--kb KB] [--machine virtual[:PROFILE] | --measured LOG.csv ...] --out DIR`:
+// the per-part pipeline (app/pipeline.h), for one part or a batch.
+//
+// One part: DIR is its run folder (default runs/<part name>); summary.json is printed on stdout.
+// A batch (several part files, or a folder of *.json parts, taken in name order): DIR holds one run
+// folder per part and batch_summary.json; a progress bar goes to stderr and a summary table at the end.
+// Parts run in order, so a part can learn from the parts before it through the case library. One
+// failing part never stops the others. Exit status: 0 when every part ran (and, with --strict, ended
+// within tolerance); 1 otherwise; 2 for bad command-line input.
 
+#include <algorithm>
 #include <iostream>
 #include <memory>
 
+#include <fmt/format.h>
+
 #include "app/command.h"
 #include "app/pipeline.h"
+#include "core/atomic_file.h"
+#include "core/json_io.h"
 #include "core/log.h"
+#include "core/progress.h"
 
 namespace formloop::app {
+namespace {
+namespace fs = std::filesystem;
+
+struct RunArgs {
+  std::vector<std::string> parts;
+  std::string out;
+  std::string kb;
+  std::string machine;
+  std::vector<std::string> measured;
+  bool force = false;
+  bool strict = false;
+  bool no_retain = false;
+  bool no_learn = false;
+  bool no_report = false;
+};
+
+// Part files of the arguments: files as given, folders expanded to their *.json files in name order.
+Result<std::vector<fs::path>> PartFiles(const std::vector<std::string>& args) {
+  std::vector<fs::path> files;
+  for (const std::string& a : args) {
+    std::error_code ec;
+    if (fs::is_directory(a, ec)) {
+      std::vector<fs::path> in_folder;
+      for (const auto& entry : fs::directory_iterator(a, ec)) {
+        if (entry.is_regular_file() && entry.path().extension() == ".json") in_folder.push_back(entry.path());
+      }
+      std::sort(in_folder.begin(), in_folder.end());
+      if (in_folder.empty()) {
+        return Status::BadInput(Where{.file = a}, "the folder holds no part files (*.json)");
+      }
+      files.insert(files.end(), in_folder.begin(), in_folder.end());
+    } else if (fs::is_regular_file(a, ec)) {
+      files.emplace_back(a);
+    } else {
+      return Status::BadInput(Where{.file = a}, "no such part file or folder");
+    }
+  }
+  return files;
+}
+
+RunOptions OptionsOf(const RunArgs& args) {
+  RunOptions run;
+  run.force = args.force;
+  run.kb = args.kb;
+  run.machine = args.machine;
+  run.measured = args.measured;
+  run.retain = !args.no_retain;
+  run.learn = !args.no_learn;
+  run.report = !args.no_report;
+  return run;
+}
+
+Status RunOne(const RunArgs& args, const fs::path& file) {
+  FL_ASSIGN_OR_RETURN(PartSpec part, ReadPart(file));
+  RunOptions run = OptionsOf(args);
+  run.out = args.out.empty() ? fs::path("runs") / part.name : fs::path(args.out);
+  run.part_source = file.string();
+  FL_ASSIGN_OR_RETURN(RunSummary summary, RunPart(part, run));
+  nlohmann::json json = summary.ToJson();
+  json["run_folder"] = run.out.string();
+  std::cout << json.dump(2) << std::endl;
+  log::Info("outputs in {}/ (report.html, summary.json, surface/, toolpath/, loop-*/)", run.out.string());
+  if (args.strict && !summary.within_tolerance) {
+    return Status::Failed("part '" + part.name + "' is out of tolerance after " + std::to_string(summary.loops.size()) +
+                          " cycle(s) (--strict)");
+  }
+  return Status::Ok();
+}
+
+std::string Row(const std::string& part, const std::string& status, const std::string& route, const std::string& a,
+                const std::string& first, const std::string& last, const std::string& cycles) {
+  return fmt::format("{:<28} {:<8} {:<9} {:>7} {:>10} {:>10} {:>6}", part, status, route, a, first, last, cycles);
+}
+
+Status RunBatch(const RunArgs& args, const std::vector<fs::path>& files) {
+  const fs::path out = args.out.empty() ? fs::path("runs") / "batch" : fs::path(args.out);
+  FL_RETURN_IF_ERROR(MakeDirectories(out));
+  nlohmann::json rows = nlohmann::json::array();
+  int failed = 0, out_of_tolerance = 0;
+  std::vector<std::string> table = {Row("part", "status", "route", "A", "first um", "final um", "cycles")};
+  Progress progress("run", files.size());
+  for (const fs::path& file : files) {
+    nlohmann::json row = {{"part_file", file.string()}};
+    auto part = ReadPart(file);
+    Result<RunSummary> summary = part.ok() ? Result<RunSummary>(Status::Ok()) : Result<RunSummary>(part.status());
+    if (part.ok()) {
+      RunOptions run = OptionsOf(args);
+      run.out = out / part->name;
+      run.part_source = file.string();
+      row["part"] = part->name;
+      row["run_folder"] = run.out.string();
+      summary = RunPart(*part, run);
+    }
+    if (!summary.ok()) {
+      ++failed;
+      row["status"] = "failed";
+      row["error"] = summary.status().ToString();
+      log::Error("{}: {}", file.string(), summary.status().ToString());
+      table.push_back(Row(row.value("part", file.filename().string()), "FAILED", "-", "-", "-", "-", "-"));
+    } else {
+      const RunSummary& s = *summary;
+      if (!s.within_tolerance) ++out_of_tolerance;
+      row["status"] = s.within_tolerance ? "within tolerance" : "out of tolerance";
+      row["summary"] = s.ToJson();
+      table.push_back(Row(s.part, s.within_tolerance ? "ok" : "OUT", s.route,
+                          s.similarity >= 0 ? fmt::format("{:.3f}", s.similarity) : "-",
+                          fmt::format("{:.2f}", s.loops.front().form_error_um),
+                          fmt::format("{:.2f}", s.loops.back().form_error_um), std::to_string(s.loops.size())));
+    }
+    rows.push_back(row);
+    progress.Advance();
+  }
+  progress.Finish();
+  const nlohmann::json batch = {{"parts", rows},
+                                {"count", files.size()},
+                                {"failed", failed},
+                                {"out_of_tolerance", out_of_tolerance},
+                                {"within_tolerance", static_cast<int>(files.size()) - failed - out_of_tolerance}};
+  FL_RETURN_IF_ERROR(WriteJsonFile(out / "batch_summary.json", batch));
+  for (const std::string& line : table) std::cerr << line << '\n';
+  std::cout << batch.dump(2) << std::endl;
+  if (failed > 0) return Status::Failed(std::to_string(failed) + " of " + std::to_string(files.size()) + " part(s) failed");
+  if (args.strict && out_of_tolerance > 0) {
+    return Status::Failed(std::to_string(out_of_tolerance) + " part(s) out of tolerance (--strict)");
+  }
+  return Status::Ok();
+}
+
+}  // namespace
 
 void AddRunCommand(CLI::App& root, CommandAction* action) {
-  struct Options {
-    std::string part;
-    std::string out;
-    bool force = false;
-    bool strict = false;
-  };
-  auto opts = std::make_shared<Options>();
+  auto args = std::make_shared<RunArgs>();
   CLI::App* cmd = root.add_subcommand(
       "run",
-      "Run the per-part pipeline on PART.json: ideal surface (B-spline fit, STEP), tool path and LinuxCNC program, "
-      "probing program, virtual machining and probing, deviations, Moran's I, systematic/random decomposition, and "
-      "mirror-compensated programs until the form error is within tolerance. Writes a run folder with the resolved "
-      "inputs and every stage's JSON report; prints summary.json on stdout.");
-  cmd->add_option("part", opts->part, "part description (JSON), e.g. data/parts/demo-saddle.json")
-      ->required()
-      ->check(CLI::ExistingFile);
-  cmd->add_option("--out,-o", opts->out, "run folder to create (default: runs/<part name>)");
-  cmd->add_flag("--force", opts->force, "replace the run folder if it exists");
-  cmd->add_flag("--strict", opts->strict, "exit with code 1 when the part ends out of tolerance");
-  cmd->callback([opts, action] {
-    *action = [opts]() -> Status {
-      FL_ASSIGN_OR_RETURN(PartSpec part, ReadPart(opts->part));
-      RunOptions run;
-      run.out = opts->out.empty() ? std::filesystem::path("runs") / part.name : std::filesystem::path(opts->out);
-      run.force = opts->force;
-      run.part_source = opts->part;
-      FL_ASSIGN_OR_RETURN(RunSummary summary, RunPart(part, run));
-      nlohmann::json json = summary.ToJson();
-      json["run_folder"] = run.out.string();
-      std::cout << json.dump(2) << std::endl;
-      log::Info("outputs in {}/ (summary.json, surface/, toolpath/, loop-*/)", run.out.string());
-      if (opts->strict && !summary.within_tolerance) {
-        return Status::Failed("part '" + part.name + "' is out of tolerance after " +
-                              std::to_string(summary.loops.size()) + " loop(s) (--strict)");
+      "Run the per-part pipeline: ideal surface (B-spline), retrieval from the case library and routing by A (direct / "
+      "simulation-correction / flagged default plan), tool path, NC and probing programs, pre-compensation from the "
+      "case's learned model, machining (virtual machine or measured logs), analysis, diagnosis, compensation until "
+      "within tolerance, report.html, and the retain step. Several parts or a folder run as a batch.");
+  cmd->add_option("parts", args->parts, "part description(s) (JSON) or folder(s) of them, e.g. data/parts/demo-saddle.json")
+      ->required();
+  cmd->add_option("--out,-o", args->out, "run folder (one part; default runs/<part>) or batch folder (default runs/batch)");
+  cmd->add_option("--kb", args->kb, "case library (formloop kb init --starter); without it the default plan is used, flagged");
+  cmd->add_option("--machine", args->machine,
+                  "virtual (the part's machine.effects) or virtual:PROFILE (data/machines/PROFILE.json or a path)");
+  cmd->add_option("--measured", args->measured, "measured probe log(s) of a real machine, one per cycle, in order");
+  cmd->add_flag("--force", args->force, "replace existing run folders");
+  cmd->add_flag("--strict", args->strict, "exit with code 1 when a part ends out of tolerance");
+  cmd->add_flag("--no-retain", args->no_retain, "do not store the outcome in the case library");
+  cmd->add_flag("--no-learn", args->no_learn, "do not pre-compensate with the case's learned model");
+  cmd->add_flag("--no-report", args->no_report, "do not write report.html");
+  cmd->callback([args, action] {
+    *action = [args]() -> Status {
+      FL_ASSIGN_OR_RETURN(std::vector<fs::path> files, PartFiles(args->parts));
+      const bool batch = files.size() > 1 || (args->parts.size() == 1 && fs::is_directory(args->parts[0]));
+      if (batch && !args->measured.empty()) {
+        return Status::BadInput(Where{.field = "--measured"}, "measured logs belong to one part",
+                                "run the parts one at a time with their own logs");
       }
-      return Status::Ok();
+      return batch ? RunBatch(*args, files) : RunOne(*args, files.front());
     };
   });
 }

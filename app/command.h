@@ -38,5 +38,7 @@ void AddCalibrateCommand(CLI::App& root, CommandAction* action);
 // `simulate` and `diagnose` (app/cmd_simulate.cc).
 void AddSimulateCommand(CLI::App& root, CommandAction* action);
 void AddDiagnoseCommand(CLI::App& root, CommandAction* action);
+// `report` (app/cmd_report.cc).
+void AddReportCommand(CLI::App& root, CommandAction* action);
 
 }  // namespace formloop::app

@@ -36,6 +36,7 @@ int main(int argc, char** argv) {
   app::AddCalibrateCommand(app, &action);
   app::AddSimulateCommand(app, &action);
   app::AddDiagnoseCommand(app, &action);
+  app::AddReportCommand(app, &action);
 
   try {
     app.parse(argc, argv);

@@ -1,7 +1,9 @@
 #include "app/part.h"
 
 #include "core/json_io.h"
+#include "core/point_io.h"
 #include "reconstruction/analytic_surface.h"
+#include "retrieval/starter.h"
 
 namespace formloop::app {
 namespace {
@@ -32,8 +34,12 @@ constexpr NumberRange kNonNegative{.min = 0};
 Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source) {
   PartSpec part;
   JsonFields top(json, source);
-  FL_RETURN_IF_ERROR(top.CheckKnown({"name", "surface", "material", "tolerance_mm", "seed", "fit", "tool", "toolpath",
-                                     "machine", "probing", "analysis", "loops", "comment"}));
+  FL_RETURN_IF_ERROR(top.CheckKnown({"name", "surface", "material", "tolerance_mm", "seed", "fit", "tool", "tools",
+                                     "toolpath", "machine", "probing", "analysis", "loops", "comment", "shape_family",
+                                     "finish_ra_um", "batch_size"}));
+  FL_RETURN_IF_ERROR(top.OptionalString("shape_family", &part.shape_family));
+  FL_RETURN_IF_ERROR(top.OptionalNumber("finish_ra_um", &part.finish_ra_um, kPositive));
+  FL_RETURN_IF_ERROR(ReadInt(top, "batch_size", &part.batch_size, 1, 1000000));
   FL_RETURN_IF_ERROR(top.String("name", &part.name));
   if (part.name.empty() || part.name.find_first_of("/\\()") != std::string::npos) {
     return Status::BadInput(Where{.file = source, .field = "name"}, "must be non-empty without / \\ ( )",
@@ -51,10 +57,28 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
     return Status::BadInput(Where{.file = source, .field = "surface"}, "required field is missing",
                             "add \"surface\": {\"reference\": \"saddle\"} (see `formloop surfaces list`)");
   }
-  FL_RETURN_IF_ERROR(surface->CheckKnown({"reference"}));
-  FL_RETURN_IF_ERROR(surface->String("reference", &part.surface_reference));
-  if (auto made = recon::MakeReferenceSurface(part.surface_reference); !made.ok()) {
-    return Status::BadInput(Where{.file = source, .field = "surface.reference"}, made.status().message());
+  FL_RETURN_IF_ERROR(surface->CheckKnown({"reference", "kind", "params", "samples"}));
+  if (surface->Has("kind")) {
+    FL_RETURN_IF_ERROR(surface->String("kind", &part.surface_kind));
+    FL_RETURN_IF_ERROR(ReadInt(*surface, "samples", &part.surface_samples, 8, 400));
+    const Json params = json["surface"].value("params", Json::object());
+    if (!params.is_object()) {
+      return Status::BadInput(Where{.file = source, .field = "surface.params"}, "must be an object of numbers");
+    }
+    for (const auto& [key, value] : params.items()) {
+      if (!value.is_number()) {
+        return Status::BadInput(Where{.file = source, .field = "surface.params." + key}, "must be a number");
+      }
+      part.surface_params[key] = value.get<double>();
+    }
+    if (auto height = retrieval::StarterHeightOf(part.surface_kind, part.surface_params); !height.ok()) {
+      return Status::BadInput(Where{.file = source, .field = "surface"}, height.status().message());
+    }
+  } else {
+    FL_RETURN_IF_ERROR(surface->String("reference", &part.surface_reference));
+    if (auto made = recon::MakeReferenceSurface(part.surface_reference); !made.ok()) {
+      return Status::BadInput(Where{.file = source, .field = "surface.reference"}, made.status().message());
+    }
   }
 
   std::optional<JsonFields> f;
@@ -69,9 +93,27 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
 
   FL_RETURN_IF_ERROR(top.Object("tool", &f));
   if (f) {
-    FL_RETURN_IF_ERROR(f->CheckKnown({"number", "radius_mm"}));
+    FL_RETURN_IF_ERROR(f->CheckKnown({"number", "radius_mm", "flutes"}));
     FL_RETURN_IF_ERROR(ReadInt(*f, "number", &part.toolpath.tool.number, 1, 9999));
     FL_RETURN_IF_ERROR(f->OptionalNumber("radius_mm", &part.toolpath.tool.radius_mm, kPositive));
+    FL_RETURN_IF_ERROR(ReadInt(*f, "flutes", &part.flutes, 1, 16));
+  }
+  if (json.contains("tools")) {
+    const Json& tools = json["tools"];
+    if (!tools.is_array() || tools.empty()) {
+      return Status::BadInput(Where{.file = source, .field = "tools"}, "must be a non-empty array",
+                              "write e.g. [{\"number\": 2, \"radius_mm\": 1.5}]");
+    }
+    for (std::size_t k = 0; k < tools.size(); ++k) {
+      const std::string field = "tools[" + std::to_string(k) + "]";
+      if (!tools[k].is_object()) return Status::BadInput(Where{.file = source, .field = field}, "must be an object");
+      JsonFields t(tools[k], source, field);
+      FL_RETURN_IF_ERROR(t.CheckKnown({"number", "radius_mm"}));
+      nc::BallEndTool tool;
+      FL_RETURN_IF_ERROR(ReadInt(t, "number", &tool.number, 1, 9999));
+      FL_RETURN_IF_ERROR(t.Number("radius_mm", &tool.radius_mm, kPositive));
+      part.tools.push_back(tool);
+    }
   }
   FL_RETURN_IF_ERROR(top.Object("toolpath", &f));
   if (f) {
@@ -92,7 +134,9 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
   }
   FL_RETURN_IF_ERROR(top.Object("machine", &f));
   if (f) {
-    FL_RETURN_IF_ERROR(f->CheckKnown({"name", "dialect", "travel_min_mm", "travel_max_mm", "max_feed_mm_per_min",
+    FL_RETURN_IF_ERROR(f->OptionalString("name", &part.machine_name));
+    FL_RETURN_IF_ERROR(f->OptionalString("class", &part.machine_class));
+    FL_RETURN_IF_ERROR(f->CheckKnown({"name", "class", "dialect", "travel_min_mm", "travel_max_mm", "max_feed_mm_per_min",
                                       "max_spindle_rpm", "effects", "probe"}));
     FL_RETURN_IF_ERROR(ReadVec3(*f, "travel_min_mm", &part.limits.travel_min_mm));
     FL_RETURN_IF_ERROR(ReadVec3(*f, "travel_max_mm", &part.limits.travel_max_mm));
@@ -108,6 +152,7 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
     std::optional<JsonFields> e;
     FL_RETURN_IF_ERROR(f->Object("effects", &e));
     if (e) {
+      part.effects_given = true;
       auto& x = part.effects;
       FL_RETURN_IF_ERROR(e->CheckKnown({"tool_radius_error_um", "deflection_um", "thermal_amplitude_um",
                                         "thermal_tau_s", "surface_noise_um", "probe_noise_um"}));
@@ -163,6 +208,10 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
     FL_RETURN_IF_ERROR(ReadInt(*f, "max", &part.max_loops, 1, 20));
     FL_RETURN_IF_ERROR(f->OptionalNumber("max_offset_um", &part.compensation.max_offset_um, kPositive));
   }
+  // The magazine always holds the part's own tool.
+  bool has_own_tool = false;
+  for (const auto& t : part.tools) has_own_tool |= t.radius_mm == part.toolpath.tool.radius_mm;
+  if (!has_own_tool) part.tools.insert(part.tools.begin(), part.toolpath.tool);
   // Cross-field validation, reported against the part file.
   auto in_file = [&](Status s) { return s.ok() ? s : Status(s.code(), source + ": " + s.message()); };
   FL_RETURN_IF_ERROR(in_file(part.toolpath.Validate()));
@@ -182,8 +231,16 @@ Result<PartSpec> ReadPart(const std::filesystem::path& path) {
 
 nlohmann::json PartSpec::ToJson() const {
   const auto& t = toolpath;
+  nlohmann::json surface = {{"reference", surface_reference}};
+  if (!surface_kind.empty()) surface = {{"kind", surface_kind}, {"params", surface_params}, {"samples", surface_samples}};
+  nlohmann::json magazine = nlohmann::json::array();
+  for (const auto& tool : tools) magazine.push_back({{"number", tool.number}, {"radius_mm", tool.radius_mm}});
   return {{"name", name},
-          {"surface", {{"reference", surface_reference}}},
+          {"surface", surface},
+          {"shape_family", ShapeConcept()},
+          {"finish_ra_um", finish_ra_um},
+          {"batch_size", batch_size},
+          {"tools", magazine},
           {"material", material},
           {"tolerance_mm", tolerance_mm},
           {"seed", seed},
@@ -192,7 +249,7 @@ nlohmann::json PartSpec::ToJson() const {
             {"samples_v", fit_samples_v},
             {"tolerance_mm", fit.tolerance_mm},
             {"check_points", fit_check_points}}},
-          {"tool", {{"number", t.tool.number}, {"radius_mm", t.tool.radius_mm}}},
+          {"tool", {{"number", t.tool.number}, {"radius_mm", t.tool.radius_mm}, {"flutes", flutes}}},
           {"toolpath",
            {{"scallop_um", t.scallop_um},
             {"chord_tolerance_um", t.chord_tolerance_um},
@@ -205,7 +262,9 @@ nlohmann::json PartSpec::ToJson() const {
             {"spindle_rpm", t.spindle_rpm},
             {"clearance_mm", t.clearance_mm}}},
           {"machine",
-           {{"dialect", dialect},
+           {{"name", machine_name},
+            {"class", machine_class},
+            {"dialect", dialect},
             {"travel_min_mm", {limits.travel_min_mm.x(), limits.travel_min_mm.y(), limits.travel_min_mm.z()}},
             {"travel_max_mm", {limits.travel_max_mm.x(), limits.travel_max_mm.y(), limits.travel_max_mm.z()}},
             {"max_feed_mm_per_min", limits.max_feed_mm_per_min},
@@ -231,6 +290,26 @@ nlohmann::json PartSpec::ToJson() const {
             {"max_control_net", analysis.max_control_net},
             {"coverage_factor", analysis.coverage_factor}}},
           {"loops", {{"max", max_loops}, {"max_offset_um", compensation.max_offset_um}}}};
+}
+
+std::string PartSpec::SurfaceName() const {
+  if (surface_kind.empty()) return surface_reference;
+  std::string text = surface_kind + "(";
+  bool first = true;
+  for (const auto& [k, v] : surface_params) {
+    text += (first ? "" : ", ") + k + "=" + FormatExact(v);
+    first = false;
+  }
+  return text + ")";
+}
+
+std::string PartSpec::ShapeConcept() const {
+  if (!shape_family.empty()) return shape_family;
+  if (surface_kind.empty()) return surface_reference;  // the shape taxonomy's leaves carry these names
+  static const std::map<std::string, std::string> kShapeOfKind = {
+      {"paraboloid", "tilted_paraboloid"}, {"gaussian_pocket", "bowl"}, {"twisted_ruled", "blade"}};
+  const auto it = kShapeOfKind.find(surface_kind);
+  return it == kShapeOfKind.end() ? surface_kind : it->second;
 }
 
 }  // namespace formloop::app

@@ -5,21 +5,26 @@
 //
 // {
 //   "name": "demo-saddle",                       // run and program names
-//   "surface": {"reference": "saddle"},          // analytic reference surface (STEP input: later issue)
-//   "material": "H13 tool steel",
+//   "surface": {"reference": "saddle"},          // analytic reference surface, or a parametric kind:
+//              {"kind": "gaussian_pocket", "params": {"size_mm": 80, ...}, "samples": 41}  (retrieval/starter.h)
+//   "shape_family": "bowl", "finish_ra_um": 0.8, "batch_size": 1,   // retrieval description (optional)
+//   "material": "H13",                           // a leaf or alias of data/taxonomies/material.txt
 //   "tolerance_mm": 0.010,                       // form tolerance α
 //   "seed": 20261121,                            // every random draw of the run derives from it
 //   "fit": {"samples_u": 50, "samples_v": 50, "tolerance_mm": 0.0001},
-//   "tool": {"number": 1, "radius_mm": 3.0},
+//   "tool": {"number": 1, "radius_mm": 3.0, "flutes": 2},
+//   "tools": [{"number": 2, "radius_mm": 1.5}, ...],   // magazine for the simulation-correction step
 //   "toolpath": {"scallop_um": 3, "chord_tolerance_um": 1, "feed_mm_per_min": 1500, ...},
-//   "machine": {"travel_min_mm": [..], "travel_max_mm": [..], "max_feed_mm_per_min": .., "effects": {..}},
+//   "machine": {"name": "vm-1", "class": "3-axis", "travel_min_mm": [..], "travel_max_mm": [..], "max_feed_mm_per_min": .., "effects": {..}},
 //   "probing": {"grid": [20, 20], "inset_fraction": 0.05, "ball_radius_mm": 1.0, ...},
 //   "analysis": {"neighbours": 8, "max_control_net": 8, "coverage_factor": 2},
 //   "loops": {"max": 3, "max_offset_um": 200}
 // }
 
 #include <filesystem>
+#include <map>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -37,7 +42,19 @@ namespace formloop::app {
 
 struct PartSpec {
   std::string name = "part";
-  std::string surface_reference;        // name of an analytic reference surface
+  std::string surface_reference;        // name of an analytic reference surface, or ...
+  std::string surface_kind;             // ... a parametric kind of retrieval/starter.h with its parameters
+  std::map<std::string, double> surface_params;
+  int surface_samples = 41;             // grid samples per direction of a parametric kind's fit
+  // Retrieval description (retrieval::PartDescription): the shape concept defaults from the surface.
+  std::string shape_family;
+  double finish_ra_um = 0.8;
+  int batch_size = 1;
+  std::string machine_class = "3-axis";
+  std::string machine_name = "virtual-3axis";  // key of learned models in the case library
+  int flutes = 2;                       // of the ball-end tools (feed per tooth)
+  std::vector<nc::BallEndTool> tools;   // the magazine the planner may choose from (default: the part's tool)
+  bool effects_given = false;           // machine.effects present: the part carries its own virtual machine
   std::string material = "unspecified";
   double tolerance_mm = 0.010;
   unsigned long long seed = 1;
@@ -58,6 +75,8 @@ struct PartSpec {
   nc::CompensationOptions compensation;
 
   nlohmann::json ToJson() const;  // fully resolved
+  std::string SurfaceName() const;  // the reference name or "<kind>(p=v, ...)"
+  std::string ShapeConcept() const; // shape_family, else the shape taxonomy leaf of the surface
 };
 
 Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source);

@@ -1,18 +1,23 @@
 #pragma once
-// The per-part batch pipeline behind `formloop run` (docs/ARCHITECTURE.md, "One part through the
-// pipeline"). This first version runs every stage for real on an analytic reference surface:
+// The per-part pipeline behind `formloop run` (docs/ARCHITECTURE.md, "One part through the pipeline"):
 //
-//   sample → B-spline fit (OpenCASCADE) → raster tool path with ball-end offset → LinuxCNC program
-//   (+ probing plan and probing program) → loop: virtual machining of the program as written →
-//   probe log → probe compensation → signed deviations to Q → Moran's I and systematic/random
-//   decomposition → if the form error exceeds the tolerance, a mirror-compensated program, which the
-//   next loop machines.
+//   surface Q (B-spline) → retrieval from the case library and routing by A → plan (the case's, the
+//   simulation-corrected one, or the flagged default) → tool path, NC and probing programs → pre-
+//   compensation from the case's learned model → loop: machining (virtual machine with a machine
+//   profile, or measured probe logs) → probe compensation, deviations, Moran's I, decomposition →
+//   diagnosis against the case's model (loop 0) → mirror compensation while the form error exceeds α
+//   → report.html → retain: the part becomes a case (or updates its own) with outcome, causes and
+//   the learned model.
 //
-// Outputs go to a run folder that is built under "<out>.partial" and renamed to <out> only when the
-// run completes, so <out> is never half-written; a failed run leaves "<out>.failed" with the log.
+// A run folder is built as "<out>.partial" with status.json {"state": "incomplete", "stage": ...}
+// and renamed to <out> (state "complete") only when every output is written and the case library
+// has been updated; a killed run leaves "<out>.partial" marked incomplete and the library untouched
+// (the library changes in one transaction at the very end). A failed run leaves "<out>.failed".
 
 #include <filesystem>
+#include <functional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -23,30 +28,39 @@
 namespace formloop::app {
 
 struct RunOptions {
-  std::filesystem::path out;      // run folder
-  bool force = false;             // replace an existing run folder
-  std::string part_source;        // path of the part file, recorded in the summary
+  std::filesystem::path out;            // run folder
+  bool force = false;                   // replace an existing run folder
+  std::string part_source;              // path of the part file, recorded in the summary
+  std::string kb;                       // case library; empty: no retrieval (default plan, flagged)
+  std::string machine;                  // "virtual" (the part's machine.effects) or "virtual:NAME|PATH.json"
+  std::vector<std::string> measured;    // measured probe logs, one per cycle, instead of the virtual machine
+  bool retain = true;                   // store the outcome in the case library (needs kb)
+  bool learn = true;                    // pre-compensate with the case's learned model
+  bool report = true;                   // write report.html
+  std::filesystem::path data_dir;       // taxonomies, machines (default: retrieval::DefaultDataDir())
+  // Called after each stage with its wall time (the pipeline benchmark); never written to the run
+  // folder, which stays byte-identical between runs.
+  std::function<void(std::string_view stage, double seconds)> on_stage;
 };
 
-// One loop of the run. The compensation decision is the §8 evaluation of the decomposition
-// (metrology::EvaluateForm, spec/metrology.md §7–§8): compensate when the form error exceeds the
-// tolerance and d_s is significant (a non-constant model was chosen, or a constant offset beyond
-// 2.576 standard errors), and a further loop is allowed. The raw Moran z is reported, not decided on.
+// One machining cycle. The compensation decision is the §8 evaluation of the decomposition
+// (metrology::EvaluateForm): compensate when the form error exceeds the tolerance and d_s is
+// significant, while a further loop is allowed.
 struct LoopSummary {
   int index = 0;
   double form_error_um = 0;
   double systematic_peak_um = 0;
   double random_sigma_um = 0;
-  double raw_moran_z = 0;         // Moran z of the deviations themselves (reported only)
+  double raw_moran_z = 0;
   int field_degree = 0;
   bool within_tolerance = false;
-  bool compensated = false;       // a compensated program was written after this loop
-  std::string chosen_model;       // the decomposition's chosen model ("constant", "plane", "bspline 6x6", ...)
-  double residual_moran_z = 0;    // residual Moran z (Cliff–Ord) of the chosen model
-  bool residual_independent = false;  // residual_moran_z <= 2.326
-  bool systematic_significant = false;  // from the §8 evaluation
-  bool compensation_advised = false;    // the §8 evaluation's decision (before the loop limit)
-  std::string decision;                 // one sentence: what the loop decided and why
+  bool compensated = false;
+  std::string chosen_model;
+  double residual_moran_z = 0;
+  bool residual_independent = false;
+  bool systematic_significant = false;
+  bool compensation_advised = false;
+  std::string decision;
 };
 
 struct RunSummary {
@@ -54,9 +68,19 @@ struct RunSummary {
   std::string surface;
   double tolerance_um = 0;
   double fit_check_max_um = 0;
+  std::string route = "default";        // direct | simulate | default
+  double similarity = -1;               // A of the best case (-1: no library)
+  std::string case_uid;                 // the retrieved case
+  bool flag_engineer = true;
+  std::string plan_source;              // "case X", "case X, simulation-corrected", "default plan"
+  bool precompensated = false;
+  double precompensation_scale = 0;
+  std::vector<std::string> causes;      // named by the diagnosis of loop 0
+  std::string retained;                 // "added <uid>", "updated <uid>", "" (not retained)
   std::vector<LoopSummary> loops;
   bool within_tolerance = false;
   std::filesystem::path out;
+  int LoopsToTolerance() const;         // compensation loops until within tolerance, -1 if never
   nlohmann::json ToJson() const;
 };
 

@@ -145,8 +145,7 @@ const StarterFamily* StarterSpec::Find(const std::string& family) const {
   return nullptr;
 }
 
-Result<recon::BSplineSurface> BuildStarterSurface(const std::string& kind, const std::map<std::string, double>& p,
-                                                  int samples) {
+Result<StarterHeight> StarterHeightOf(const std::string& kind, const std::map<std::string, double>& p) {
   const Where where{.field = "surface." + kind};
   double sx = 0, sy = 0;
   std::function<double(double, double)> f;
@@ -201,9 +200,18 @@ Result<recon::BSplineSurface> BuildStarterSurface(const std::string& kind, const
   if (!(sx > 0) || !(sy > 0) || !std::isfinite(sx) || !std::isfinite(sy)) {
     return Status::BadInput(where, "missing or non-positive size parameter");
   }
+  return StarterHeight{std::move(f), {-sx / 2, sx / 2, -sy / 2, sy / 2}};
+}
+
+Result<recon::BSplineSurface> BuildStarterSurface(const std::string& kind, const std::map<std::string, double>& p,
+                                                  int samples) {
+  const Where where{.field = "surface." + kind};
+  FL_ASSIGN_OR_RETURN(const StarterHeight height, StarterHeightOf(kind, p));
+  const auto& f = height.z;
+  const double sx = height.domain.u_max - height.domain.u_min, sy = height.domain.v_max - height.domain.v_min;
   recon::GridSamples g;
   g.nu = g.nv = samples;
-  g.domain = {-sx / 2, sx / 2, -sy / 2, sy / 2};
+  g.domain = height.domain;
   g.points.reserve(static_cast<size_t>(samples * samples));
   for (int j = 0; j < samples; ++j) {
     for (int i = 0; i < samples; ++i) {

@@ -22,6 +22,7 @@
 //   twisted_ruled    chord_mm, span_ratio, twist_deg z = x·tan(twist·(y/span)) (a ruled, twisted blade)
 
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <string>
 #include <vector>
@@ -74,6 +75,13 @@ struct StarterPart {
   nlohmann::json simulation = nlohmann::json::object();
   nlohmann::json manufacturing = nlohmann::json::object();
 };
+
+// The height function z = f(x, y) of a kind with its parameters and its rectangle (x = u, y = v).
+struct StarterHeight {
+  std::function<double(double, double)> z;
+  recon::ParamDomain domain;
+};
+Result<StarterHeight> StarterHeightOf(const std::string& kind, const std::map<std::string, double>& params);
 
 // The surface of a kind with its parameters, fitted from samples × samples grid points.
 Result<recon::BSplineSurface> BuildStarterSurface(const std::string& kind, const std::map<std::string, double>& params,

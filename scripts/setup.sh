@@ -23,6 +23,8 @@ PACKAGES=(
   libboost-dev      # Boost.Math's F distribution for diagnose's screening tests (PCL pulls it in too)
   libgtest-dev libgmock-dev libbenchmark-dev
   nlohmann-json3-dev libcli11-dev libfmt-dev libspdlog-dev
+  libpng-dev        # PNG pictures embedded in each run's report.html
+  chromium          # headless browser: the report test checks every picture of report.html loads
   linuxcnc-uspace   # reference tool: its rs274 interpreter checks our LinuxCNC programs in the tests
 )
 
@@ -67,8 +69,12 @@ case "$cmd" in
   demo)
     install_deps; build
     out="${FORMLOOP_DEMO_OUT:-$ROOT/runs/demo}"
-    "$BUILD_DIR/app/formloop" run "$ROOT/data/parts/demo-saddle.json" --out "$out" --force
-    log "demo finished: open $out/summary.json (stage reports are in $out/)"
+    kb="$out-kb.sqlite"   # a fresh starter case library each time, so the demo repeats exactly
+    rm -f "$kb" "$kb-wal" "$kb-shm"
+    mkdir -p "$(dirname "$out")"
+    "$BUILD_DIR/app/formloop" --quiet kb init "$kb" --starter >/dev/null
+    "$BUILD_DIR/app/formloop" run "$ROOT/data/parts/demo-saddle.json" --kb "$kb" --out "$out" --force >/dev/null
+    log "demo finished: open $out/report.html (summary.json and every stage's report are in $out/)"
     ;;
   test)
     install_deps; build

@@ -1,0 +1,44 @@
+// `formloop report RUN_DIR [--out FILE]`: the self-contained report.html of a run folder
+// (app/report.h). Prints {"report": FILE} on stdout (stdout carries only JSON).
+
+#include <iostream>
+#include <memory>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "app/command.h"
+#include "app/report.h"
+#include "core/log.h"
+
+namespace formloop::app {
+namespace {
+
+struct ReportArgs {
+  std::string run_dir;
+  std::string out;  // empty: RUN_DIR/report.html
+};
+
+Status RunReport(const ReportArgs& args) {
+  const std::filesystem::path out =
+      args.out.empty() ? std::filesystem::path(args.run_dir) / "report.html" : std::filesystem::path(args.out);
+  FL_RETURN_IF_ERROR(WriteRunReport(args.run_dir, out));
+  log::Info("report written: {}", out.string());
+  std::cout << nlohmann::json{{"report", out.string()}}.dump() << std::endl;
+  return Status::Ok();
+}
+
+}  // namespace
+
+void AddReportCommand(CLI::App& root, CommandAction* action) {
+  auto args = std::make_shared<ReportArgs>();
+  CLI::App* cmd = root.add_subcommand(
+      "report",
+      "Write a self-contained HTML report of a run folder: verdict, retrieval, plan, loop history, deviation maps "
+      "before/after, Moran scatter and LISA clusters, diagnosis. Pictures are embedded; nothing is fetched.");
+  cmd->add_option("RUN_DIR", args->run_dir, "a `formloop run` folder (holds summary.json)")->required();
+  cmd->add_option("--out", args->out, "HTML file to write; default: RUN_DIR/report.html");
+  cmd->callback([args, action] { *action = [args] { return RunReport(*args); }; });
+}
+
+}  // namespace formloop::app

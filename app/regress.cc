@@ -1,0 +1,206 @@
+#include "app/regress.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include "app/kb_jobs.h"
+#include "core/atomic_file.h"
+#include "core/json_io.h"
+#include "core/log.h"
+#include "core/progress.h"
+#include "retrieval/starter.h"
+
+namespace formloop::app {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+std::vector<std::string> DefectKinds(const json& list) {
+  std::vector<std::string> kinds;
+  if (!list.is_array()) return kinds;
+  for (const auto& d : list) kinds.push_back(d.value("kind", "?"));
+  std::sort(kinds.begin(), kinds.end());
+  return kinds;
+}
+
+bool Within(double value, double golden, const FigureTolerance& t) {
+  return std::abs(value - golden) <= t.abs + t.rel * std::abs(golden);
+}
+
+const FigureTolerance* ToleranceOf(const std::string& figure) {
+  for (const auto& [name, t] : FigureTolerances()) {
+    if (name == figure) return &t;
+  }
+  return nullptr;
+}
+
+}  // namespace
+
+const std::vector<std::pair<std::string, FigureTolerance>>& FigureTolerances() {
+  // Same inputs give the same figures bit for bit; these bands are for deliberate changes elsewhere
+  // (a library upgrade, a better fit) that should not fail the regression, while a real change of
+  // behaviour (another route, a cause lost, a form error 10 % worse) does.
+  static const std::vector<std::pair<std::string, FigureTolerance>> t = {
+      {"similarity", {.abs = 0.002}},
+      {"fit_check_max_um", {.abs = 0.05, .rel = 0.2}},
+      {"scallop_um", {.abs = 0.05}},
+      {"raw_moran_z", {.abs = 0.5, .rel = 0.1}},
+      {"form_error_um", {.abs = 0.5, .rel = 0.1}},
+  };
+  return t;
+}
+
+Result<json> KeyFigures(const fs::path& run_dir) {
+  FL_ASSIGN_OR_RETURN(Json summary, ReadJsonFile(run_dir / "summary.json"));
+  FL_ASSIGN_OR_RETURN(Json plan, ReadJsonFile(run_dir / "plan.json"));
+  json errors = json::array();
+  for (const auto& l : summary["loops"]) errors.push_back(l["form_error_um"]);
+  json f = {{"route", summary["route"]["name"]},
+            {"similarity", summary["route"]["similarity"]},
+            {"case_uid", summary["route"]["case_uid"]},
+            {"fit_check_max_um", summary["fit_check_max_um"]},
+            {"scallop_um", plan["toolpath"]["scallop_um"]},
+            {"tool_radius_mm", plan["toolpath"]["tool_radius_mm"]},
+            {"raw_moran_z", summary["loops"][0]["raw_moran_z"]},
+            {"causes", summary["causes"]},
+            {"form_error_um", errors},
+            {"loops_to_tolerance", summary["loops_to_tolerance"]},
+            {"within_tolerance", summary["within_tolerance"]},
+            {"precompensated", summary["precompensated"]}};
+  std::error_code ec;
+  if (fs::exists(run_dir / "sim_correction.json", ec)) {
+    FL_ASSIGN_OR_RETURN(Json sc, ReadJsonFile(run_dir / "sim_correction.json"));
+    f["sim_correction"] = {{"corrected", sc.value("corrected", false)},
+                           {"defects_before", DefectKinds(sc.value("defects_before", json::array()))},
+                           {"defects_after", DefectKinds(sc.value("defects_after", json::array()))}};
+  } else {
+    f["sim_correction"] = nullptr;
+  }
+  return f;
+}
+
+std::vector<FigureDifference> CompareFigures(const json& golden, const json& value) {
+  std::vector<FigureDifference> out;
+  for (const auto& [name, g] : golden.items()) {
+    const json v = value.contains(name) ? value[name] : json();
+    const FigureTolerance* t = ToleranceOf(name);
+    bool same = false;
+    std::string allowed = "exact";
+    if (t != nullptr) {
+      allowed = fmt::format("±({:g} + {:g}·|golden|)", t->abs, t->rel);
+      if (g.is_number() && v.is_number()) {
+        same = Within(v.get<double>(), g.get<double>(), *t);
+      } else if (g.is_array() && v.is_array() && g.size() == v.size()) {
+        same = true;
+        for (std::size_t k = 0; k < g.size(); ++k) {
+          same = same && g[k].is_number() && v[k].is_number() && Within(v[k].get<double>(), g[k].get<double>(), *t);
+        }
+      } else {
+        same = g == v;
+      }
+    } else {
+      same = g == v;
+    }
+    if (!same) out.push_back({name, g, v, allowed});
+  }
+  return out;
+}
+
+json RegressResult::ToJson() const {
+  return {{"parts", table},
+          {"regressions", regressions},
+          {"within_tolerance_after_at_most_one_compensation", within_one_loop},
+          {"count", parts}};
+}
+
+Result<RegressResult> RunRegress(const RegressOptions& options) {
+  const fs::path data_dir = options.data_dir.empty() ? retrieval::DefaultDataDir() : options.data_dir;
+  std::vector<fs::path> files;
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(options.parts, ec)) {
+    if (entry.path().extension() == ".json") files.push_back(entry.path());
+  }
+  if (ec) return Status::BadInput(Where{.file = options.parts.string()}, "cannot list the reference parts: " + ec.message());
+  std::sort(files.begin(), files.end());
+  if (files.empty()) return Status::BadInput(Where{.file = options.parts.string()}, "no reference parts (*.json)");
+
+  // A fresh starter library: the regression must not depend on what earlier runs stored.
+  fs::remove_all(options.out, ec);
+  FL_RETURN_IF_ERROR(MakeDirectories(options.out));
+  const fs::path kb = options.out / "kb.sqlite";
+  FL_RETURN_IF_ERROR(CreateStarterLibrary(kb.string(), data_dir).status());
+  if (options.update) FL_RETURN_IF_ERROR(MakeDirectories(options.goldens));
+
+  RegressResult result;
+  Progress progress("regress", files.size());
+  for (const fs::path& file : files) {
+    FL_ASSIGN_OR_RETURN(PartSpec part, ReadPart(file));
+    if (!options.only.empty() && std::find(options.only.begin(), options.only.end(), part.name) == options.only.end()) {
+      progress.Advance();
+      continue;
+    }
+    ++result.parts;
+    RunOptions run;
+    run.out = options.out / part.name;
+    run.force = true;
+    run.part_source = file.string();
+    run.kb = kb.string();
+    run.machine = "virtual";
+    run.data_dir = data_dir;
+    json row = {{"part", part.name}};
+    auto summary = RunPart(part, run);
+    if (!summary.ok()) {
+      row["status"] = "FAILED";
+      row["error"] = summary.status().ToString();
+      ++result.regressions;
+      result.table.push_back(row);
+      progress.Advance();
+      continue;
+    }
+    FL_ASSIGN_OR_RETURN(json figures, KeyFigures(run.out));
+    row["figures"] = figures;
+    const int to_tolerance = summary->LoopsToTolerance();
+    if (to_tolerance >= 0 && to_tolerance <= 1) ++result.within_one_loop;
+    const fs::path golden_path = options.goldens / (part.name + ".json");
+    json golden;
+    if (fs::exists(golden_path, ec)) {
+      FL_ASSIGN_OR_RETURN(Json g, ReadJsonFile(golden_path));
+      golden = g.value("figures", json::object());
+    }
+    const auto differences = golden.is_null() ? std::vector<FigureDifference>{} : CompareFigures(golden, figures);
+    json diff_json = json::array();
+    for (const auto& d : differences) {
+      diff_json.push_back({{"figure", d.figure}, {"golden", d.golden}, {"value", d.value}, {"allowed", d.allowed}});
+    }
+    row["differences"] = diff_json;
+    if (options.update) {
+      // What --update changes: every figure that differs from the old golden at all.
+      json changes = json::array();
+      for (const auto& [name, v] : figures.items()) {
+        const json g = golden.is_object() && golden.contains(name) ? golden[name] : json();
+        if (g != v) changes.push_back({{"figure", name}, {"golden", g}, {"value", v}});
+      }
+      row["changes"] = changes;
+      const bool changed = golden.is_null() || golden != figures;
+      row["status"] = golden.is_null() ? "golden created" : (changed ? "golden updated" : "golden unchanged");
+      if (changed) {
+        FL_RETURN_IF_ERROR(WriteJsonFile(golden_path, {{"part", part.name}, {"figures", figures}}));
+      }
+    } else if (golden.is_null()) {
+      row["status"] = "NO GOLDEN";
+      ++result.regressions;
+    } else {
+      row["status"] = differences.empty() ? "pass" : "REGRESSION";
+      if (!differences.empty()) ++result.regressions;
+    }
+    result.table.push_back(row);
+    progress.Advance();
+  }
+  progress.Finish();
+  return result;
+}
+
+}  // namespace formloop::app

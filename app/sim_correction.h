@@ -1,0 +1,181 @@
+#pragma once
+// The simulation-correction loop (spec/simulation.md §4; route 0.80 ≤ A ≤ 0.95 of the per-part pipeline).
+//
+// The retrieved case is close but not equal: its plan and its learned model are tried on the NEW part in
+// the virtual machine, the defects are predicted, and the plan is corrected by the plan GA of
+// spec/process-optimization.md §4 (AGA of §1.6 on a fast surrogate, §4.3) until the full simulation
+// shows no defect, or the result says exactly why not.
+//
+// Defects of a plan (the "full check"):
+//   gouge       the planner lifted CL points (a concave radius below the ball): that region is left uncut;
+//               or the tool is above the GA's gouge-free bound margin · ρ_cc,min (no lift yet, no margin)
+//   scallop     the scallop (the planner's target, and the peak the virtual machine leaves at the probe
+//               points) above h_tol
+//   axis_limit  the move list fails nc::CheckMoveList (travel, feed, spindle)
+//   form_error  predicted form error above the tolerance α. The plan is machined on the virtual machine
+//               with the case's model without its noise; per probe point the prediction splits into the
+//               scallop (geometry, not compensable by moving the path), the model's tool_deflection (it
+//               depends on the new plan, the stored field was learned with the case's plan, so it is not
+//               pre-compensated, like δ in the surrogate) and the rest `sys`, which pre-compensation by
+//               c_pc removes in proportion to A:  residual = sys·(1 − c_pc) + (1 − A)·|sys|·c_pc
+//               + deflection + scallop;  e_pred = max |residual| + e_rand.
+//
+// Rounds (at most ga.max_rounds): GA on the surrogate → full check; when the check fails, the surrogate's
+// terms are rescaled from what the simulation measured (E_sys, deflection, scallop), a tool that was
+// lifted is struck, and the GA runs again. Everything is seeded from input.seed (formloop::Rng), so the
+// same input gives the same result and the same JSON.
+
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "core/status.h"
+#include "metrology/probe.h"
+#include "nc-gen/post.h"
+#include "nc-gen/toolpath.h"
+#include "reconstruction/bspline_surface.h"
+#include "simulation/model.h"
+
+namespace formloop::app {
+
+struct Defect {
+  std::string kind;    // "gouge", "scallop", "form_error", "axis_limit"
+  std::string detail;  // one sentence with the figures
+  double value = 0;    // gouge: tool r; scallop: scallop height; form_error: e_pred (mm); axis_limit: 0
+  double limit = 0;    // gouge: margin · ρ_cc,min; scallop: h_tol; form_error: α (mm); axis_limit: 0
+  nlohmann::json ToJson() const;
+};
+
+// The decoded plan: what the GA chose, in machine terms.
+struct PlanGenes {
+  int tool_number = 0;
+  double tool_radius_mm = 0;
+  double step_over_mm = 0;
+  double scallop_um = 0;  // target handed to the planner: h = s²/8 · (1/r + κ_cvx,max)
+  double feed_per_tooth_mm = 0;
+  double feed_mm_per_min = 0;
+  double spindle_rpm = 0;
+  double precompensation_scale = 0;  // c_pc
+  nlohmann::json ToJson() const;
+};
+
+// Plan GA settings (spec/process-optimization.md §1.6, §4.2–4.4 defaults).
+struct GaOptions {
+  int population = 60;
+  int generations = 100;
+  int elites = 2;
+  int max_rounds = 3;
+  double w_e = 0.7, w_t = 0.3;
+  double f_z_min_mm = 0.02, f_z_max_mm = 0.15;
+  double cutting_speed_m_per_min = 200;  // v_c
+  double n_max_rpm = 18000;              // further capped by MachineLimits::max_spindle_rpm
+  double finish_depth_mm = 0.3;          // a_p,fin
+  double t_link_min = 0.02;              // per pass
+  double youngs_modulus_n_per_mm2 = 6e5;
+  double k_n = 2500;                     // N·mm^-1.75
+  double s_min_mm = 0.05;
+  double c_pc_max = 1.2;
+  double gouge_margin = 0.9;             // gouge-free: r ≤ margin · ρ_cc,min
+  nlohmann::json ToJson() const;
+};
+
+struct SimCorrectionInput {
+  const recon::BSplineSurface* surface = nullptr;  // ideal surface Q of the NEW part
+  nc::ToolpathOptions case_plan;                   // the retrieved case's plan as given
+  std::vector<nc::BallEndTool> tools;              // the machine's magazine
+  int flutes = 2;
+  sim::Model model;                                // the case's learned model (may be empty)
+  double similarity = 0.9;                         // A of the retrieval
+  double tolerance_mm = 0.010;                     // α (t_form)
+  double scallop_limit_mm = 0.0;                   // h_tol; 0 → 0.3 · tolerance
+  double random_um = 2.0;                          // e_rand = 2σ of the random error
+  nc::MachineLimits limits;
+  metrology::ProbingPlan probing_plan;             // where the predicted form error is evaluated
+  std::uint64_t seed = 1;
+  GaOptions ga;
+};
+
+struct SimCorrectionResult {
+  bool corrected = false;
+  std::vector<Defect> defects_before, defects_after;
+  PlanGenes chosen;          // the last plan the GA chose (null in JSON when none: PLAN-NO-TOOL)
+  nc::ToolpathOptions plan;  // ready for nc::PlanRaster
+  double predicted_form_error_before_um = 0, predicted_form_error_after_um = 0;
+  double precompensation_scale = 0;  // c_pc applied to the model's predicted field before the first cut
+  int rounds = 0;
+  nlohmann::json history = nlohmann::json::array();  // per round: GA best J per generation, genes, check
+  std::string why_not;                               // when !corrected
+  nlohmann::json ToJson() const;
+};
+
+// Errors (Status) are for bad input and failures of the planner or the virtual machine; a plan that
+// cannot be corrected is a result with corrected = false and why_not.
+Result<SimCorrectionResult> RunSimulationCorrection(const SimCorrectionInput& input);
+
+// ---- Pieces exposed for tests ----
+
+// ρ_cc,min: the smallest concave principal radius (−1/k over k < 0) on a grid of about grid_mm spacing
+// on Q; +inf when Q has no concave point.
+double SmallestConcaveRadiusMm(const recon::BSplineSurface& q, double grid_mm = 1.0);
+// κ_cvx,max: the largest convex principal curvature (≥ 0) on the same grid, 1/mm.
+double LargestConvexCurvature(const recon::BSplineSurface& q, double grid_mm = 1.0);
+
+// The §4.3 surrogate's constants.
+struct SurrogateInputs {
+  double area_mm2 = 10000;       // S
+  double width_mm = 100;         // W_y: extent across the passes
+  double t_link_min = 0.02;
+  double finish_depth_mm = 0.3;  // a_p,fin
+  double cutting_speed_m_per_min = 200;
+  double n_max_rpm = 18000;
+  int flutes = 2;                // z
+  double youngs_modulus_n_per_mm2 = 6e5;
+  double k_n = 2500;
+  double rho_cc_min_mm = 5;
+  double kappa_cvx_max_per_mm = 0.05;
+  double h_tol_mm = 0.010;
+  double t_form_mm = 0.050;
+  double e_sys_mm = 0.040;
+  double e_rand_mm = 0.006;
+  double similarity = 0.88;      // A
+  double w_e = 0.7, w_t = 0.3;
+  double t_ref_min = 10;
+  double f_z_min_mm = 0.02, f_z_max_mm = 0.15;
+  double s_min_mm = 0.05;
+  double c_pc_max = 1.2;
+  double gouge_margin = 0.9;
+  double max_feed_mm_per_min = std::numeric_limits<double>::infinity();  // caps f_z at each n
+  // Rescaling from the full simulation (1 and 0: the surrogate as printed): δ is multiplied by
+  // deflection_scale, h gets scallop_offset_mm added (see RescaleSurrogate in the .cc).
+  double deflection_scale = 1, scallop_offset_mm = 0;
+  std::vector<double> tool_radii_mm = {1.5, 2, 3, 4, 5, 6};
+  // AGA settings.
+  int population = 60, generations = 100, elites = 2;
+  // The reference instance of spec/process-optimization.md §4.4.
+  static SurrogateInputs ReferenceInstance() { return {}; }
+  nlohmann::json ToJson() const;
+};
+
+struct SurrogateResult {
+  double r = 0, s = 0, f_z = 0, c_pc = 0;
+  double n_rpm = 0, v_f_mm_per_min = 0;
+  double time_min = 0, deflection_mm = 0, scallop_mm = 0, e_pred = 0, J = 0;
+  double fitness = -std::numeric_limits<double>::infinity();  // −J, minus the penalty when e_pred > t_form
+  int tool_index = -1;  // into the sorted gouge-free radii; −1: none (PLAN-NO-TOOL)
+  int generations = 0;  // GA only: generations run
+  nlohmann::json ToJson() const;
+};
+
+// The gouge-free radii (r ≤ margin · ρ_cc,min), sorted ascending, duplicates kept once.
+std::vector<double> GougeFreeRadii(const SurrogateInputs& in);
+// The surrogate at one plan (no decoding; f_z is taken as given).
+SurrogateResult EvaluateSurrogate(const SurrogateInputs& in, double r, double s, double f_z, double c_pc);
+// AGA of §1.6 with the §4.2 decoding; history (optional) gets {"best_J": [...per generation]}.
+SurrogateResult SurrogateGa(const SurrogateInputs& in, std::uint64_t seed, nlohmann::json* history);
+// Every gouge-free tool × n_s step-overs × n_f log-spaced f_z × n_c values of c_pc in [0, c_pc_max].
+SurrogateResult SurrogateBruteForce(const SurrogateInputs& in, int n_s = 301, int n_f = 301, int n_c = 25);
+
+}  // namespace formloop::app
