@@ -685,15 +685,8 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, const fs
   }
   summary->within_tolerance = summary->loops.back().within_tolerance;
 
-  // 7. Summary and report.
-  FL_RETURN_IF_ERROR(stages.Begin("8/9: report"));
-  json summary_json = summary->ToJson();
-  summary_json["part_file"] = options.part_source;
-  FL_RETURN_IF_ERROR(WriteJsonFile(dir / "summary.json", summary_json));
-  if (options.report) FL_RETURN_IF_ERROR(WriteRunReport(dir, dir / "report.html"));
-
-  // 8. Retain: the case the library will hold (committed by RunPart after everything else is written).
-  FL_RETURN_IF_ERROR(stages.Begin("9/9: retain"));
+  // 7. Retain: the case the library will hold (committed by RunPart after everything else is written).
+  FL_RETURN_IF_ERROR(stages.Begin("8/9: retain"));
   if (!options.kb.empty() && options.retain) {
     RetainInput in;
     in.part = &part;
@@ -733,6 +726,13 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, const fs
     summary->retained = (retrieved.own ? "updated " : "added ") + record.uid;
     *retained = std::move(record);
   }
+  // 8. Summary and report.
+  FL_RETURN_IF_ERROR(stages.Begin("9/9: report"));
+  json summary_json = summary->ToJson();
+  summary_json["part_file"] = options.part_source;
+  FL_RETURN_IF_ERROR(WriteJsonFile(dir / "summary.json", summary_json));
+  if (options.report) FL_RETURN_IF_ERROR(WriteRunReport(dir, dir / "report.html"));
+
   stages.End();
   return Status::Ok();
 }

@@ -86,6 +86,7 @@ TEST_F(PipelineTest, RetrievesRoutesAndRetainsTheCaseWithTheLearnedModel) {
     EXPECT_TRUE(fs::exists(dir_ / "dome" / file)) << file;
   }
   EXPECT_EQ(ReadJsonFile(dir_ / "dome" / "status.json").value()["state"], "complete");
+  EXPECT_EQ(ReadJsonFile(dir_ / "dome" / "summary.json").value()["retained"], "added reg-dome-a");
   // vm-mill-a: the worn ball, deflection and thermal growth; the diagnosis names what it finds.
   EXPECT_FALSE(summary->causes.empty());
   EXPECT_EQ(Cases(), before + 1);
@@ -99,7 +100,11 @@ TEST_F(PipelineTest, RetrievesRoutesAndRetainsTheCaseWithTheLearnedModel) {
   EXPECT_TRUE(models[0].contains("model"));
   EXPECT_EQ(record->part["outcome"]["within_tolerance"], summary->within_tolerance);
   // A second run of the same part updates its own case instead of adding one.
-  ASSERT_TRUE(RunPart(part, Options("dome2")).ok());
+  const auto again = RunPart(part, Options("dome2"));
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(again->retained, "updated reg-dome-a");
+  EXPECT_EQ(again->case_uid, "reg-dome-a") << "the part's own case is now the nearest";
+  EXPECT_TRUE(again->precompensated) << "planned with what the first run learned";
   EXPECT_EQ(Cases(), before + 1);
   EXPECT_EQ(summary->route == "default", summary->flag_engineer);
 }
