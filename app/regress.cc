@@ -45,6 +45,7 @@ const std::vector<std::pair<std::string, FigureTolerance>>& FigureTolerances() {
   // behaviour (another route, a cause lost, a form error 10 % worse) does.
   static const std::vector<std::pair<std::string, FigureTolerance>> t = {
       {"similarity", {.abs = 0.002}},
+      {"fit_rms_um", {.abs = 0.05, .rel = 0.2}},
       {"fit_check_max_um", {.abs = 0.05, .rel = 0.2}},
       {"scallop_um", {.abs = 0.05}},
       {"raw_moran_z", {.abs = 0.5, .rel = 0.1}},
@@ -56,11 +57,13 @@ const std::vector<std::pair<std::string, FigureTolerance>>& FigureTolerances() {
 Result<json> KeyFigures(const fs::path& run_dir) {
   FL_ASSIGN_OR_RETURN(Json summary, ReadJsonFile(run_dir / "summary.json"));
   FL_ASSIGN_OR_RETURN(Json plan, ReadJsonFile(run_dir / "plan.json"));
+  FL_ASSIGN_OR_RETURN(Json surface, ReadJsonFile(run_dir / "surface" / "surface.json"));
   json errors = json::array();
   for (const auto& l : summary["loops"]) errors.push_back(l["form_error_um"]);
   json f = {{"route", summary["route"]["name"]},
             {"similarity", summary["route"]["similarity"]},
             {"case_uid", summary["route"]["case_uid"]},
+            {"fit_rms_um", surface["fit"]["rms_mm"].get<double>() * 1e3},
             {"fit_check_max_um", summary["fit_check_max_um"]},
             {"scallop_um", plan["toolpath"]["scallop_um"]},
             {"tool_radius_mm", plan["toolpath"]["tool_radius_mm"]},

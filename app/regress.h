@@ -14,7 +14,7 @@
 
 namespace formloop::app {
 
-// The key figures of a finished run folder: route, A and case, fit check, planned scallop, raw Moran z
+// The key figures of a finished run folder: route, A and case, fit RMS and check max, planned scallop, raw Moran z
 // of the first cycle, causes named, form error per cycle, loops to tolerance, the simulation-correction's
 // defects before/after.
 Result<nlohmann::json> KeyFigures(const std::filesystem::path& run_dir);
