@@ -46,4 +46,10 @@ struct RetainInput {
 // The case record the run stores: uid = part name; an existing record keeps its other learned models.
 Result<kb::CaseRecord> MakeRetainedCase(const RetainInput& input);
 
+// Calibration from what actually happened: the cases the pipeline retained carry part.outcome (the
+// route taken, A, the form error per cycle). Per route: how many parts, how many were within tolerance
+// on the first cycle and after at most one compensation loop, and the median first-cycle form error.
+// Cases without a pipeline outcome (e.g. the starter cases) are counted apart.
+nlohmann::json OutcomesByRoute(const std::vector<kb::CaseRecord>& cases);
+
 }  // namespace formloop::app

@@ -27,6 +27,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/command.h"
+#include "app/case_knowledge.h"
 #include "app/kb_jobs.h"
 #include "core/json_io.h"
 #include "core/log.h"
@@ -133,7 +134,8 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
   CLI::App* calibrate = PathCommand(
       kb, "calibrate",
       "Leave-one-out: retrieve every case against the others; per route how often the best case is of the same "
-      "family, the distribution of A and the family confusion (JSON).",
+      "family, the distribution of A and the family confusion; and, from the outcomes `formloop run` retained, per "
+      "route how many parts were within tolerance on the first cycle and after one compensation loop (JSON).",
       args.get());
   calibrate->add_option("--breadth", args->breadth, "candidate breadth (0 leaf, 1 + neighbours, 2 + the leaf's map ...)");
   calibrate->add_option("--data", args->data, "data folder with taxonomies/ (default: the source tree's data/)");
@@ -146,6 +148,8 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
       retrieval::RetrieveOptions ro;
       ro.breadth = args->breadth;
       FL_ASSIGN_OR_RETURN(nlohmann::json report, model.LeaveOneOut(ro));
+      FL_ASSIGN_OR_RETURN(std::vector<kb::CaseRecord> cases, library->ListCases());
+      report["outcomes"] = OutcomesByRoute(cases);
       Print(report);
       return Status::Ok();
     };

@@ -135,6 +135,18 @@ TEST_F(PipelineTest, SecondPartPlannedWithTheLearnedModelHalvesTheFirstCycleErro
   std::cerr << "first-cycle form error: " << e_with << " um with the learned model, " << e_without
             << " um without (ratio " << e_with / e_without << ")\n";
   EXPECT_LE(e_with, 0.5 * e_without);
+  // The calibration report counts the retained outcome of the first part under the route it took.
+  std::string out, err;
+  ASSERT_EQ(testing::RunFormloop("kb calibrate " + kb_.string(), &out, &err), 0) << err;
+  const Json report = ParseJson(out, "kb calibrate").value();
+  int parts = 0, within = 0;
+  for (const auto& [name, r] : report["outcomes"]["by_route"].items()) {
+    parts += r["parts"].get<int>();
+    within += r["within_tolerance_after_at_most_one_loop"].get<int>();
+  }
+  EXPECT_EQ(parts, 1) << "only the first part was retained";
+  EXPECT_EQ(within, 1);
+  EXPECT_EQ(report["outcomes"]["cases_without_pipeline_outcome"], 252) << "the starter cases";
 }
 
 TEST_F(PipelineTest, KilledRunIsMarkedIncompleteLeavesTheLibraryAloneAndRerunCompletes) {
