@@ -112,7 +112,9 @@ Result<kb::CaseRecord> MakeRetainedCase(const RetainInput& in) {
   record.uid = part.name;
   record.name = part.name + " (" + part.SurfaceName() + ", " + part.material + ")";
   record.family = part.ShapeConcept();
-  record.part = retrieval::PartDescriptionToJson(DescriptionOf(part, in.plan));
+  // The part as it was asked for (its own tool), like the descriptor and concepts it is found by; the
+  // tool the plan used is in manufacturing.tools.
+  record.part = retrieval::PartDescriptionToJson(DescriptionOf(part, part.toolpath));
   record.part["surface"] = part.ToJson()["surface"];
   record.part["outcome"] = in.outcome;
   const auto& d = in.features->descriptors;

@@ -546,15 +546,9 @@ Status RunPartAnalysis(const PartArgs& args) {
 
   // 5. Local Moran of the deviations on the same k-NN weights in (u, v).
   const long n = static_cast<long>(deviations.size());
-  Eigen::MatrixXd uv(2, n);
   Eigen::VectorXd y(n);
-  for (long i = 0; i < n; ++i) {
-    uv(0, i) = deviations[static_cast<std::size_t>(i)].u;
-    uv(1, i) = deviations[static_cast<std::size_t>(i)].v;
-    y[i] = deviations[static_cast<std::size_t>(i)].deviation_mm;
-  }
-  FL_ASSIGN_OR_RETURN(const SpatialWeights weights,
-                      metrology::KnnWeights(uv, args.knn, WeightStyle::kRowStandardised));
+  for (long i = 0; i < n; ++i) y[i] = deviations[static_cast<std::size_t>(i)].deviation_mm;
+  FL_ASSIGN_OR_RETURN(const SpatialWeights weights, metrology::UvKnnWeights(deviations, args.knn));
   FL_ASSIGN_OR_RETURN(const metrology::LocalMoranResult lisa,
                       metrology::LocalMoranI(y, weights,
                                              {.islands = IslandPolicy::kRefuse,

@@ -105,16 +105,17 @@ Status RunBatch(const RunArgs& args, const std::vector<fs::path>& files) {
   Progress progress("run", files.size());
   for (const fs::path& file : files) {
     nlohmann::json row = {{"part_file", file.string()}};
-    auto part = ReadPart(file);
-    Result<RunSummary> summary = part.ok() ? Result<RunSummary>(Status::Ok()) : Result<RunSummary>(part.status());
-    if (part.ok()) {
+    // A part file that does not parse fails like a run that does not complete.
+    auto run_one = [&]() -> Result<RunSummary> {
+      FL_ASSIGN_OR_RETURN(PartSpec part, ReadPart(file));
       RunOptions run = OptionsOf(args);
-      run.out = out / part->name;
+      run.out = out / part.name;
       run.part_source = file.string();
-      row["part"] = part->name;
+      row["part"] = part.name;
       row["run_folder"] = run.out.string();
-      summary = RunPart(*part, run);
-    }
+      return RunPart(part, run);
+    };
+    const Result<RunSummary> summary = run_one();
     if (!summary.ok()) {
       ++failed;
       row["status"] = "failed";

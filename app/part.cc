@@ -71,8 +71,9 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
       }
       part.surface_params[key] = value.get<double>();
     }
-    if (auto height = retrieval::StarterHeightOf(part.surface_kind, part.surface_params); !height.ok()) {
-      return Status::BadInput(Where{.file = source, .field = "surface"}, height.status().message());
+    // Sampled here, so parameters that give no surface are refused before a run writes anything.
+    if (auto grid = retrieval::StarterGrid(part.surface_kind, part.surface_params, part.surface_samples); !grid.ok()) {
+      return Status::BadInput(Where{.file = source, .field = "surface"}, grid.status().message());
     }
   } else {
     FL_RETURN_IF_ERROR(surface->String("reference", &part.surface_reference));

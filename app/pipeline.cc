@@ -19,6 +19,7 @@
 #include "metrology/deviations.h"
 #include "metrology/morans_i.h"
 #include "metrology/spatial_weights.h"
+#include "nc-gen/cutter_locations.h"
 #include "nc-gen/deviation_field.h"
 #include "nc-gen/toolpath_io.h"
 #include "reconstruction/analytic_surface.h"
@@ -32,33 +33,6 @@ using nlohmann::json;
 namespace {
 
 constexpr const char* kVersion = "0.2.0";
-
-// Cutter locations as the program commands them: every feed move, ball centre = tip + r ẑ, path
-// length and time accumulated over feed moves.
-std::vector<sim::CutterLocation> CutterLocationsFromProgram(const std::vector<nc::ProgramMove>& moves,
-                                                            double radius_mm) {
-  std::vector<sim::CutterLocation> out;
-  double length = 0, time = 0;
-  const nc::ProgramMove* previous = nullptr;
-  for (const auto& m : moves) {
-    if (!m.rapid) {
-      if (previous != nullptr && !previous->rapid) {
-        const double d = (m.tip - previous->tip).norm();
-        length += d;
-        time += d / (m.feed_mm_per_min / 60.0);
-      }
-      sim::CutterLocation cl;
-      cl.centre = m.tip + radius_mm * Eigen::Vector3d::UnitZ();
-      cl.path_length_mm = length;
-      cl.time_s = time;
-      cl.line = m.line;
-      cl.fed_from_previous = previous != nullptr && !previous->rapid;
-      out.push_back(cl);
-    }
-    previous = &m;
-  }
-  return out;
-}
 
 // The sum of the fields compensated so far (mm): the pre-compensation and one term per loop.
 struct Field {
@@ -120,18 +94,10 @@ Result<Surface> BuildSurface(const PartSpec& part, std::uint64_t seed, const fs:
   } else {
     FL_ASSIGN_OR_RETURN(const retrieval::StarterHeight height,
                         retrieval::StarterHeightOf(part.surface_kind, part.surface_params));
-    recon::GridSamples g;
-    g.nu = g.nv = part.surface_samples;
-    g.domain = height.domain;
+    FL_ASSIGN_OR_RETURN(const recon::GridSamples g,
+                        retrieval::StarterGrid(part.surface_kind, part.surface_params, part.surface_samples));
     PointSet samples;
-    for (int j = 0; j < g.nv; ++j) {
-      for (int i = 0; i < g.nu; ++i) {
-        const double x = g.domain.u_min + g.domain.u_span() * i / (g.nu - 1);
-        const double y = g.domain.v_min + g.domain.v_span() * j / (g.nv - 1);
-        g.points.emplace_back(x, y, height.z(x, y));
-        samples.points.push_back(g.points.back());
-      }
-    }
+    samples.points = g.points;
     FL_RETURN_IF_ERROR(WritePoints(dir / "surface" / "samples.csv", samples));
     FL_ASSIGN_OR_RETURN(s.q, recon::FitGrid(g, part.fit, &s.report));
     Rng rng(seed);
@@ -210,17 +176,13 @@ Result<Retrieved> Retrieve(const PartSpec& part, const recon::BSplineSurface& q,
 // out: it is local to each pass and no mirror offset removes it), as a smooth field in mm.
 Result<nc::SystematicField> PredictedField(const recon::BSplineSurface& q, const nc::Toolpath& nominal,
                                            const sim::Model& learned, std::uint64_t seed, json* report) {
-  sim::Model model;
-  for (const auto& e : learned.effects) {
-    if (e.effect->name() == "noise") continue;
-    FL_RETURN_IF_ERROR(model.Set(e.effect->name(), e.values, e.std_errors));
-  }
+  const sim::Model model = learned.WithoutNoise();
   FL_ASSIGN_OR_RETURN(metrology::ProbingPlan grid, metrology::PlanProbingGrid(q, 24, 24, 0.0));
   sim::VirtualMachineOptions vm;
   vm.tool_radius_mm = nominal.options.tool.radius_mm;
   vm.model = model;
   vm.seed = seed;
-  FL_ASSIGN_OR_RETURN(sim::VirtualMachineResult predicted, sim::MachineAndProbe(CutterLocationsOf(nominal), grid, vm));
+  FL_ASSIGN_OR_RETURN(sim::VirtualMachineResult predicted, sim::MachineAndProbe(nc::CutterLocationsOf(nominal), grid, vm));
   std::vector<nc::DeviationSample> samples;
   double peak = 0;
   for (std::size_t i = 0; i < grid.points.size(); ++i) {
@@ -236,14 +198,9 @@ Result<nc::SystematicField> PredictedField(const recon::BSplineSurface& q, const
 // Spatial lag and LISA cluster of the deviations (k-NN in (u, v), row-standardised), for the report.
 Status AddLocalMoran(const std::vector<metrology::Deviation>& deviations, int k, std::uint64_t seed,
                      PointSet* points) {
-  Eigen::MatrixXd uv(2, static_cast<Eigen::Index>(deviations.size()));  // one column per point
-  Eigen::VectorXd d(uv.cols());
-  for (std::size_t i = 0; i < deviations.size(); ++i) {
-    uv(0, static_cast<Eigen::Index>(i)) = deviations[i].u;
-    uv(1, static_cast<Eigen::Index>(i)) = deviations[i].v;
-    d(static_cast<Eigen::Index>(i)) = deviations[i].deviation_mm * 1e3;
-  }
-  FL_ASSIGN_OR_RETURN(metrology::SpatialWeights w, metrology::KnnWeights(uv, k, metrology::WeightStyle::kRowStandardised));
+  Eigen::VectorXd d(static_cast<Eigen::Index>(deviations.size()));
+  for (std::size_t i = 0; i < deviations.size(); ++i) d(static_cast<Eigen::Index>(i)) = deviations[i].deviation_mm * 1e3;
+  FL_ASSIGN_OR_RETURN(metrology::SpatialWeights w, metrology::UvKnnWeights(deviations, k));
   metrology::LocalMoranOptions lo;
   lo.permutations = 199;
   lo.seed = seed;
@@ -313,6 +270,7 @@ struct PlanChoice {
   nc::ToolpathOptions plan;
   std::optional<sim::Model> learned;   // the case's model for this machine/tool/material
   double precompensation_scale = 0;
+  bool flag_engineer = false;          // the default plan, or a correction that could not remove every defect
   std::string source;
   json report = json::object();
 };
@@ -327,6 +285,7 @@ Result<PlanChoice> ChoosePlan(const PartSpec& part, const Retrieved& r, const re
   c.plan = part.toolpath;
   if (r.route == "default" || !r.best) {
     c.source = "default plan (the part file's), flagged for an engineer";
+    c.flag_engineer = true;
     c.report = {{"source", c.source}, {"route", r.route}};
     return c;
   }
@@ -347,6 +306,12 @@ Result<PlanChoice> ChoosePlan(const PartSpec& part, const Retrieved& r, const re
   in.flutes = part.flutes;
   if (c.learned) in.model = *c.learned;
   in.similarity = r.similarity;
+  // e_rand: the random error the case's own run left (coverage factor × σ(d_u) of its last cycle), when
+  // the case was retained by formloop run; else the GA's default.
+  const json outcome = r.best->part.value("outcome", json::object());
+  if (outcome.is_object() && outcome.contains("random_sigma_um") && outcome["random_sigma_um"].is_number()) {
+    in.random_um = part.analysis.coverage_factor * outcome["random_sigma_um"].get<double>();
+  }
   in.tolerance_mm = part.tolerance_mm;
   in.limits = part.limits;
   FL_ASSIGN_OR_RETURN(in.probing_plan, metrology::PlanProbingGrid(q, 10, 10, part.probe_inset_fraction));
@@ -369,6 +334,7 @@ Result<PlanChoice> ChoosePlan(const PartSpec& part, const Retrieved& r, const re
   } else {
     log::Warn("simulation-correction could not remove every predicted defect: {}", corrected.why_not);
     c.source += ", simulation-correction failed (" + corrected.why_not + "), flagged";
+    c.flag_engineer = true;
   }
   c.report["source"] = c.source;
   c.report["sim_correction"] = {{"defects_before", corrected.defects_before.size()},
@@ -521,6 +487,7 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, const fs
   FL_RETURN_IF_ERROR(stages.Begin("4/9: plan"));
   FL_ASSIGN_OR_RETURN(const PlanChoice choice, ChoosePlan(part, retrieved, q, machine, options, plan_seed, dir));
   summary->plan_source = choice.source;
+  summary->flag_engineer = summary->flag_engineer || choice.flag_engineer;
   const nc::ToolpathOptions& plan_options = choice.plan;
   log::Info("[plan] {}: ball r = {} mm, scallop {} um, feed {} mm/min", choice.source, plan_options.tool.radius_mm,
             plan_options.scallop_um, plan_options.feed_mm_per_min);
@@ -589,13 +556,16 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, const fs
   // 6. Cycles: machine (or read the measured log), analyse, diagnose (cycle 0), compensate.
   const int max_loops = machine.virtual_machine ? part.max_loops : static_cast<int>(machine.measured.size());
   std::optional<sim::Diagnosis> diagnosis;
+  // The nominal program as written: each compensated program is verified against it.
+  FL_ASSIGN_OR_RETURN(const std::vector<nc::ProgramMove> nominal_moves,
+                      nc::ReadProgram(program, part.dialect, nominal_program_path.string()));
   for (int loop = 0; loop < max_loops; ++loop) {
     const fs::path loop_dir = dir / ("loop-" + std::to_string(loop));
     FL_RETURN_IF_ERROR(MakeDirectories(loop_dir));
     FL_RETURN_IF_ERROR(stages.Begin("7/9: loop " + std::to_string(loop) + " machine"));
     FL_ASSIGN_OR_RETURN(std::vector<nc::ProgramMove> moves,
                         nc::ReadProgram(current_program, part.dialect, current_program_path.string()));
-    const std::vector<sim::CutterLocation> cls = CutterLocationsFromProgram(moves, plan_options.tool.radius_mm);
+    const std::vector<sim::CutterLocation> cls = nc::CutterLocationsOfProgram(moves, plan_options.tool.radius_mm);
     if (machine.virtual_machine) {
       log::Info("[machine] loop {}: virtual machine '{}' cuts {}", loop, machine.name,
                 fs::relative(current_program_path, dir).string());
@@ -662,8 +632,6 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, const fs
                           nc::WriteCompensatedProgram(nominal, program, field, source, part.compensation, post_k,
                                                       next_program, loop_dir / "compensation_side.csv", part.dialect));
       FL_ASSIGN_OR_RETURN(std::string compensated_program, ReadFile(next_program));
-      FL_ASSIGN_OR_RETURN(std::vector<nc::ProgramMove> nominal_moves,
-                          nc::ReadProgram(program, part.dialect, nominal_program_path.string()));
       FL_ASSIGN_OR_RETURN(std::vector<nc::ProgramMove> compensated_moves,
                           nc::ReadProgram(compensated_program, part.dialect, next_program.string()));
       FL_ASSIGN_OR_RETURN(double disagreement_um,
@@ -699,6 +667,7 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, const fs
                   {"loops", summary->loops.size()},
                   {"form_error_first_um", summary->loops.front().form_error_um},
                   {"form_error_final_um", summary->loops.back().form_error_um},
+                  {"random_sigma_um", summary->loops.back().random_sigma_um},
                   {"causes", summary->causes},
                   {"precompensated", summary->precompensated}};
     for (std::size_t k = 0; k + 1 < summary->loops.size(); ++k) {

@@ -6,27 +6,12 @@
 
 #include "core/json_io.h"
 #include "core/point_io.h"
+#include "nc-gen/cutter_locations.h"
 #include "nc-gen/toolpath_io.h"
 #include "reconstruction/cad_io.h"
 
 namespace formloop::app {
 namespace fs = std::filesystem;
-
-std::vector<sim::CutterLocation> CutterLocationsOf(const nc::Toolpath& toolpath) {
-  std::vector<sim::CutterLocation> out;
-  out.reserve(toolpath.points.size());
-  for (std::size_t k = 0; k < toolpath.points.size(); ++k) {
-    const nc::ClPoint& p = toolpath.points[k];
-    sim::CutterLocation cl;
-    cl.centre = p.centre;
-    cl.path_length_mm = p.path_length_mm;
-    cl.time_s = p.time_s;
-    cl.pass = p.pass;
-    cl.fed_from_previous = k > 0 && toolpath.points[k - 1].pass == p.pass;
-    out.push_back(cl);
-  }
-  return out;
-}
 
 namespace {
 
@@ -175,7 +160,7 @@ Result<RunFolder> ReadRunFolder(const fs::path& dir) {
   FL_ASSIGN_OR_RETURN(const recon::CadFace face, recon::ReadCadFace(dir / "surface" / "Q.step", {}));
   run.q = face.surface;
   FL_ASSIGN_OR_RETURN(run.toolpath, nc::ReadToolpathFile(dir / "toolpath" / "toolpath.csv"));
-  run.cutter_locations = CutterLocationsOf(run.toolpath);
+  run.cutter_locations = nc::CutterLocationsOf(run.toolpath);
   FL_ASSIGN_OR_RETURN(const PlanWithApproaches plan, ReadPlanJson(dir / "toolpath" / "probing_plan.json"));
   run.plan = plan.plan;
   return run;

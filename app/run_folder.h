@@ -22,15 +22,11 @@ struct RunFolder {
   PartSpec part;
   recon::BSplineSurface q;
   nc::Toolpath toolpath;
-  std::vector<sim::CutterLocation> cutter_locations;
+  std::vector<sim::CutterLocation> cutter_locations;  // nc::CutterLocationsOf(toolpath)
   metrology::ProbingPlan plan;
 };
 
 Result<RunFolder> ReadRunFolder(const std::filesystem::path& dir);
-
-// The cutter locations the virtual machine and diagnose work with: every CL point of the path in
-// cutting order, fed from its predecessor within a pass.
-std::vector<sim::CutterLocation> CutterLocationsOf(const nc::Toolpath& toolpath);
 
 // A probing plan with optional approach directions: formloop's JSON ({"points": [{"id", "u", "v",
 // "point", "normal"}]}) or CSV with the columns id, u, v, x, y, z, nx, ny, nz and optionally ax, ay, az

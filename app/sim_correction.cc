@@ -9,8 +9,8 @@
 
 #include <Eigen/Geometry>
 
-#include "app/run_folder.h"
 #include "core/random.h"
+#include "nc-gen/cutter_locations.h"
 #include "nc-gen/moves.h"
 #include "reconstruction/analytic_surface.h"
 #include "simulation/virtual_machine.h"
@@ -287,7 +287,7 @@ Status PredictFormError(const SimCorrectionInput& in, const Problem& pb, const n
   vm.model = pb.model_without_noise;
   vm.seed = in.seed;
   FL_ASSIGN_OR_RETURN(const sim::VirtualMachineResult r,
-                      sim::MachineAndProbe(CutterLocationsOf(path), in.probing_plan, vm));
+                      sim::MachineAndProbe(nc::CutterLocationsOf(path), in.probing_plan, vm));
   std::size_t k_defl = r.model.effects.size();
   for (std::size_t k = 0; k < r.model.effects.size(); ++k) {
     if (r.model.effects[k].effect->name() == "tool_deflection") k_defl = k;
@@ -499,9 +499,7 @@ Problem ProblemOf(const SimCorrectionInput& in) {
   pb.kappa_cvx_max = LargestConvexCurvature(*in.surface);
   pb.extent = ExtentOf(*in.surface, in.case_plan.raster_angle_deg);
   pb.n_max_rpm = std::min(in.ga.n_max_rpm, in.limits.max_spindle_rpm);
-  for (const sim::EffectInstance& e : in.model.effects) {
-    if (e.effect->name() != "noise") pb.model_without_noise.effects.push_back(e);
-  }
+  pb.model_without_noise = in.model.WithoutNoise();
   pb.has_deflection = pb.model_without_noise.Has("tool_deflection");
   return pb;
 }

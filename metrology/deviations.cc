@@ -58,4 +58,13 @@ PointSet DeviationsToPoints(const std::vector<Deviation>& deviations) {
   return points;
 }
 
+Result<SpatialWeights> UvKnnWeights(const std::vector<Deviation>& deviations, int k) {
+  Eigen::MatrixXd uv(2, static_cast<Eigen::Index>(deviations.size()));  // one column per point
+  for (std::size_t i = 0; i < deviations.size(); ++i) {
+    uv(0, static_cast<Eigen::Index>(i)) = deviations[i].u;
+    uv(1, static_cast<Eigen::Index>(i)) = deviations[i].v;
+  }
+  return KnnWeights(uv, k, WeightStyle::kRowStandardised);
+}
+
 }  // namespace formloop::metrology

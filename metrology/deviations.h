@@ -9,6 +9,7 @@
 #include "core/point_set.h"
 #include "core/status.h"
 #include "metrology/probe.h"
+#include "metrology/spatial_weights.h"
 #include "reconstruction/bspline_surface.h"
 
 namespace formloop::metrology {
@@ -31,5 +32,9 @@ Result<std::vector<Deviation>> ComputeDeviations(const recon::BSplineSurface& su
 // As a point set: contact points, normals (of Q at the foot points), ids, scalars u, v, foot_x, foot_y,
 // foot_z, deviation_um, on_boundary (1/0): the deviation vector, not only its length.
 PointSet DeviationsToPoints(const std::vector<Deviation>& deviations);
+
+// k-nearest-neighbour weights of the deviations in (u, v), row-standardised: the neighbourhood of
+// formloop's Moran statistics on a machined part (decomposition, LISA maps).
+Result<SpatialWeights> UvKnnWeights(const std::vector<Deviation>& deviations, int k);
 
 }  // namespace formloop::metrology

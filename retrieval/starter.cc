@@ -203,12 +203,11 @@ Result<StarterHeight> StarterHeightOf(const std::string& kind, const std::map<st
   return StarterHeight{std::move(f), {-sx / 2, sx / 2, -sy / 2, sy / 2}};
 }
 
-Result<recon::BSplineSurface> BuildStarterSurface(const std::string& kind, const std::map<std::string, double>& p,
-                                                  int samples) {
+Result<recon::GridSamples> StarterGrid(const std::string& kind, const std::map<std::string, double>& p, int samples) {
   const Where where{.field = "surface." + kind};
+  if (samples < 2) return Status::BadInput(where, "needs at least 2 samples per direction");
   FL_ASSIGN_OR_RETURN(const StarterHeight height, StarterHeightOf(kind, p));
-  const auto& f = height.z;
-  const double sx = height.domain.u_max - height.domain.u_min, sy = height.domain.v_max - height.domain.v_min;
+  const double sx = height.domain.u_span(), sy = height.domain.v_span();
   recon::GridSamples g;
   g.nu = g.nv = samples;
   g.domain = height.domain;
@@ -216,7 +215,7 @@ Result<recon::BSplineSurface> BuildStarterSurface(const std::string& kind, const
   for (int j = 0; j < samples; ++j) {
     for (int i = 0; i < samples; ++i) {
       const double x = g.domain.u_min + sx * i / (samples - 1), y = g.domain.v_min + sy * j / (samples - 1);
-      const double z = f(x, y);
+      const double z = height.z(x, y);
       if (!std::isfinite(z)) {
         return Status::BadInput(where, "the parameters give no surface at (" + Round(x, 4) + ", " + Round(y, 4) +
                                            ") (e.g. a radius smaller than the footprint)");
@@ -224,6 +223,12 @@ Result<recon::BSplineSurface> BuildStarterSurface(const std::string& kind, const
       g.points.emplace_back(x, y, z);
     }
   }
+  return g;
+}
+
+Result<recon::BSplineSurface> BuildStarterSurface(const std::string& kind, const std::map<std::string, double>& p,
+                                                  int samples) {
+  FL_ASSIGN_OR_RETURN(const recon::GridSamples g, StarterGrid(kind, p, samples));
   recon::GridFitOptions options;
   options.tolerance_mm = 1e-3;
   recon::FitReport report;

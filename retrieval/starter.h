@@ -83,6 +83,11 @@ struct StarterHeight {
 };
 Result<StarterHeight> StarterHeightOf(const std::string& kind, const std::map<std::string, double>& params);
 
+// samples × samples grid points of a kind with its parameters over its rectangle; BadInput naming
+// "surface.<kind>" where the parameters give no surface (e.g. a radius below the footprint).
+Result<recon::GridSamples> StarterGrid(const std::string& kind, const std::map<std::string, double>& params,
+                                       int samples);
+
 // The surface of a kind with its parameters, fitted from samples × samples grid points.
 Result<recon::BSplineSurface> BuildStarterSurface(const std::string& kind, const std::map<std::string, double>& params,
                                                   int samples);

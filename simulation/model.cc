@@ -57,6 +57,15 @@ double Model::DeviationUm(const PointContext& c) const {
   return sum;
 }
 
+Model Model::WithoutNoise() const {
+  Model m;
+  m.provenance = provenance;
+  for (const EffectInstance& e : effects) {
+    if (e.effect->name() != "noise") m.effects.push_back(e);
+  }
+  return m;
+}
+
 double Model::surface_sigma_um() const {
   const EffectInstance* n = Find("noise");
   return n == nullptr ? 0.0 : n->values[0];

@@ -42,6 +42,9 @@ struct Model {
   double DeviationUm(const PointContext& c) const;
   // Surface part only (what the machined surface carries, without the probe's effects), µm.
   double SurfaceDeviationUm(const PointContext& c) const;
+  // Every effect but noise: the mean deviation a machine produces, what a prediction or a
+  // pre-compensation works with.
+  Model WithoutNoise() const;
   // noise σ's (0 when the model has no noise effect).
   double surface_sigma_um() const;
   double probe_sigma_um() const;

@@ -240,6 +240,17 @@ TEST_F(PipelineTest, MeasuredLogGivesOneCycleAndTheCompensatedProgram) {
   EXPECT_NE(both.status().message().find("--measured"), std::string::npos);
 }
 
+TEST_F(PipelineTest, AParametricSurfaceWithNoSurfaceIsRefusedNamingIt) {
+  Json json = ReadJsonFile(kData / "regress" / "parts" / "reg-dome-a.json").value();
+  json["surface"]["params"]["radius_ratio"] = 0.5;  // the sphere is smaller than its square footprint
+  const auto part = ParsePart(json, "dome.json");
+  ASSERT_FALSE(part.ok());
+  EXPECT_EQ(part.status().code(), StatusCode::kBadInput);
+  for (const char* text : {"dome.json", "surface.sphere_cap", "no surface"}) {
+    EXPECT_NE(part.status().message().find(text), std::string::npos) << part.status().message();
+  }
+}
+
 TEST_F(PipelineTest, MachineProfilesAreCheckedWithTheField) {
   Json profile = ReadJsonFile(kData / "machines" / "vm-mill-a.json").value();
   EXPECT_TRUE(MachineProfile::FromJson(profile, "p.json").ok());

@@ -17,6 +17,7 @@
 
 #include "core/random.h"
 #include "metrology/probe.h"
+#include "nc-gen/cutter_locations.h"
 #include "nc-gen/toolpath.h"
 #include "reconstruction/analytic_surface.h"
 #include "reconstruction/bspline_surface.h"
@@ -66,16 +67,7 @@ inline const MachinedSurface& Machined(const std::string& surface) {
     o.max_point_spacing_mm = 1.0;
     o.raster_angle_deg = 30;
     const nc::Toolpath path = nc::PlanRaster(slot->q, o).value();
-    for (std::size_t k = 0; k < path.points.size(); ++k) {
-      const auto& p = path.points[k];
-      sim::CutterLocation cl;
-      cl.centre = p.centre;
-      cl.path_length_mm = p.path_length_mm;
-      cl.time_s = p.time_s;
-      cl.pass = p.pass;
-      cl.fed_from_previous = k > 0 && path.points[k - 1].pass == p.pass;
-      slot->cls.push_back(cl);
-    }
+    slot->cls = nc::CutterLocationsOf(path);
     slot->total_time_s = path.total_time_s;
   }
   return *slot;
