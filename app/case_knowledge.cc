@@ -117,6 +117,7 @@ Result<kb::CaseRecord> MakeRetainedCase(const RetainInput& in) {
   record.part = retrieval::PartDescriptionToJson(DescriptionOf(part, part.toolpath));
   record.part["surface"] = part.ToJson()["surface"];
   record.part["outcome"] = in.outcome;
+  if (!in.rerun.is_null()) record.part["rerun"] = in.rerun;
   const auto& d = in.features->descriptors;
   record.descriptor = std::vector<double>(d.data(), d.data() + d.size());
   record.concepts = in.features->Concepts();
@@ -162,43 +163,6 @@ Result<kb::CaseRecord> MakeRetainedCase(const RetainInput& in) {
       {"reconstruction", {{"algorithm", "B-spline"}, {"fit", part.ToJson()["fit"]}}}};
   // The library validates exactly as `kb add` does.
   return kb::CaseRecord::FromJson(record.ToJson(), Where{.file = "retained case " + record.uid});
-}
-
-nlohmann::json OutcomesByRoute(const std::vector<kb::CaseRecord>& cases) {
-  struct Tally {
-    int parts = 0, first_cycle = 0, within_one_loop = 0;
-    std::vector<double> first_error_um;
-  };
-  std::map<std::string, Tally> routes{{"direct", {}}, {"simulate", {}}, {"default", {}}};
-  int without = 0;
-  for (const auto& c : cases) {
-    const nlohmann::json outcome = c.part.value("outcome", nlohmann::json());
-    if (!outcome.is_object() || !outcome.contains("route") || !outcome.contains("form_error_first_um")) {
-      ++without;
-      continue;
-    }
-    Tally& t = routes[outcome["route"].get<std::string>()];
-    ++t.parts;
-    const int loops = outcome.value("loops", 0);
-    const bool within = outcome.value("within_tolerance", false);
-    t.first_cycle += within && loops == 1 ? 1 : 0;
-    t.within_one_loop += within && loops <= 2 ? 1 : 0;
-    t.first_error_um.push_back(outcome["form_error_first_um"].get<double>());
-  }
-  nlohmann::json out = nlohmann::json::object();
-  for (auto& [route, t] : routes) {
-    std::sort(t.first_error_um.begin(), t.first_error_um.end());
-    out[route] = {{"parts", t.parts},
-                  {"within_tolerance_first_cycle", t.first_cycle},
-                  {"within_tolerance_after_at_most_one_loop", t.within_one_loop},
-                  {"median_first_cycle_form_error_um",
-                   t.first_error_um.empty() ? nlohmann::json(nullptr)
-                                            : nlohmann::json(t.first_error_um[t.first_error_um.size() / 2])}};
-  }
-  return {{"by_route", out},
-          {"cases_without_pipeline_outcome", without},
-          {"method", "outcomes recorded by formloop run's retain step (part.outcome): the route the run took and "
-                     "its form error per cycle"}};
 }
 
 }  // namespace formloop::app

@@ -42,14 +42,11 @@ struct RetainInput {
   std::optional<sim::Model> learned;  // the extended model of the diagnosis (or the baseline kept)
   nlohmann::json learned_provenance = nlohmann::json::object();
   const kb::CaseRecord* existing = nullptr;  // the part's own case, when it is already in the library
+  // {"part": resolved part, "machine": "virtual[:PROFILE]"} when the part was cut on the virtual machine
+  // (stored as part.rerun, so app/calibration.h can run it again); null otherwise.
+  nlohmann::json rerun;
 };
 // The case record the run stores: uid = part name; an existing record keeps its other learned models.
 Result<kb::CaseRecord> MakeRetainedCase(const RetainInput& input);
-
-// Calibration from what actually happened: the cases the pipeline retained carry part.outcome (the
-// route taken, A, the form error per cycle). Per route: how many parts, how many were within tolerance
-// on the first cycle and after at most one compensation loop, and the median first-cycle form error.
-// Cases without a pipeline outcome (e.g. the starter cases) are counted apart.
-nlohmann::json OutcomesByRoute(const std::vector<kb::CaseRecord>& cases);
 
 }  // namespace formloop::app

@@ -3,7 +3,10 @@
 //   formloop kb init    PATH [--starter] [--data DIR]  create or migrate a library; --starter fills a new one with
 //                                                   the synthetic starter cases (data/starter/) and trains it
 //   formloop kb train   PATH [--tau1 T] [--tau2 T] [--seed S]  standardise, train and store the GHSOM (JSON report)
-//   formloop kb calibrate PATH [--breadth B] [--data DIR]  leave-one-out routing report (JSON)
+//   formloop kb calibrate PATH [--breadth B] [--rerun [--work DIR]] [--data DIR]  leave-one-out routing report
+//                                                   (JSON; app/route_calibration.h): retrieval without each case,
+//                                                   retained outcomes, and with --rerun the retained virtual-machine
+//                                                   parts run again on a library without them
 //   formloop kb migrate PATH                        bring an existing library to the current schema
 //   formloop kb add     PATH CASE.json [--replace]  add one case (refuses an existing uid unless --replace); when
 //                                                   the stored GHSOM was current, the case is inserted into it
@@ -29,6 +32,7 @@
 #include "app/command.h"
 #include "app/case_knowledge.h"
 #include "app/kb_jobs.h"
+#include "app/route_calibration.h"
 #include "core/json_io.h"
 #include "core/log.h"
 #include "kb/library.h"
@@ -53,17 +57,12 @@ struct KbArgs {
   double tau1 = -1, tau2 = -1;
   long long seed = -1;
   int breadth = 1;
+  bool rerun = false;
+  std::string work;
 };
 
 std::filesystem::path DataDir(const KbArgs& args) {
   return args.data.empty() ? retrieval::DefaultDataDir() : std::filesystem::path(args.data);
-}
-
-Result<retrieval::FeatureOptions> FeatureOptionsFor(const KbArgs& args) {
-  FL_ASSIGN_OR_RETURN(retrieval::FacetTaxonomies tax, retrieval::FacetTaxonomies::Load(DataDir(args) / "taxonomies"));
-  retrieval::FeatureOptions options;
-  options.taxonomies = std::make_shared<const retrieval::FacetTaxonomies>(std::move(tax));
-  return options;
 }
 
 retrieval::GhsomOptions TrainOptions(const KbArgs& args) {
@@ -133,23 +132,24 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
 
   CLI::App* calibrate = PathCommand(
       kb, "calibrate",
-      "Leave-one-out: retrieve every case against the others; per route how often the best case is of the same "
-      "family, the distribution of A and the family confusion; and, from the outcomes `formloop run` retained, per "
-      "route how many parts were within tolerance on the first cycle and after one compensation loop (JSON).",
+      "Leave-one-out calibration of the routes (JSON): every case retrieved by a model trained without it (per route "
+      "the share whose best case is of the same family); the outcomes `formloop run` retained per route; with "
+      "--rerun, every retained part cut on the virtual machine run again through the pipeline on a library without "
+      "it, per route how many end within tolerance on the first cycle and after one compensation loop.",
       args.get());
   calibrate->add_option("--breadth", args->breadth, "candidate breadth (0 leaf, 1 + neighbours, 2 + the leaf's map ...)");
-  calibrate->add_option("--data", args->data, "data folder with taxonomies/ (default: the source tree's data/)");
+  calibrate->add_flag("--rerun", args->rerun, "run the retained virtual-machine parts again (a pipeline run each)");
+  calibrate->add_option("--work", args->work, "keep the reruns' run folders here (default: a temporary folder)");
+  calibrate->add_option("--data", args->data,
+                        "data folder with taxonomies/ and machines/ (default: the source tree's data/)");
   calibrate->callback([args, action] {
     *action = [args]() -> Status {
-      FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
-      FL_ASSIGN_OR_RETURN(retrieval::FeatureOptions options, FeatureOptionsFor(*args));
-      FL_ASSIGN_OR_RETURN(retrieval::RetrievalModel model,
-                          retrieval::RetrievalModel::Load(*library, *options.taxonomies));
-      retrieval::RetrieveOptions ro;
-      ro.breadth = args->breadth;
-      FL_ASSIGN_OR_RETURN(nlohmann::json report, model.LeaveOneOut(ro));
-      FL_ASSIGN_OR_RETURN(std::vector<kb::CaseRecord> cases, library->ListCases());
-      report["outcomes"] = OutcomesByRoute(cases);
+      CalibrationOptions options;
+      options.breadth = args->breadth;
+      options.rerun = args->rerun;
+      options.work_dir = args->work;
+      options.data_dir = DataDir(*args);
+      FL_ASSIGN_OR_RETURN(nlohmann::json report, CalibrationReport(args->path, options));
       Print(report);
       return Status::Ok();
     };

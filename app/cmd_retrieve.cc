@@ -29,6 +29,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/command.h"
+#include "app/route_calibration.h"
 #include "core/json_io.h"
 #include "core/log.h"
 #include "kb/library.h"
@@ -131,7 +132,10 @@ void AddRetrieveCommand(CLI::App& root, CommandAction* action) {
       ro.top = args->top;
       ro.max_scored = args->max_scored;
       if (args->calibrate) {
-        FL_ASSIGN_OR_RETURN(nlohmann::json report, model.LeaveOneOut(ro));
+        CalibrationOptions co;
+        co.breadth = args->breadth;
+        co.data_dir = data;
+        FL_ASSIGN_OR_RETURN(nlohmann::json report, CalibrationReport(args->library, co));
         std::cout << report.dump(2) << std::endl;
         return Status::Ok();
       }

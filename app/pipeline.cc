@@ -156,9 +156,13 @@ Result<Retrieved> Retrieve(const PartSpec& part, const recon::BSplineSurface& q,
   const retrieval::PartFeatures& features = *extracted;
   r.features = features;
   FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(options.kb));
-  FL_ASSIGN_OR_RETURN(retrieval::RetrievalModel model, retrieval::RetrievalModel::Load(*library, *fo.taxonomies));
+  std::shared_ptr<const retrieval::RetrievalModel> model = options.retrieval_model;
+  if (!model) {
+    FL_ASSIGN_OR_RETURN(retrieval::RetrievalModel loaded, retrieval::RetrievalModel::Load(*library, *fo.taxonomies));
+    model = std::make_shared<const retrieval::RetrievalModel>(std::move(loaded));
+  }
   retrieval::RetrieveOptions ro;
-  FL_ASSIGN_OR_RETURN(retrieval::RetrievalResult result, model.Retrieve(features, ro));
+  FL_ASSIGN_OR_RETURN(retrieval::RetrievalResult result, model->Retrieve(features, ro));
   r.report = result.ToJson();
   r.report["query"]["concepts"] = features.Concepts();
   r.report["library"] = options.kb;
@@ -685,6 +689,9 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, const fs
                                {"heldout_rms_after_um", diagnosis->heldout_rms_after_um}};
     }
     if (retrieved.own) in.existing = &*retrieved.own;
+    // A part cut on the virtual machine can be run again (the leave-one-out of app/calibration.h); a
+    // measured one cannot.
+    if (options.measured.empty()) in.rerun = {{"part", part.ToJson()}, {"machine", options.machine}};
     FL_ASSIGN_OR_RETURN(kb::CaseRecord record, MakeRetainedCase(in));
     FL_RETURN_IF_ERROR(WriteJsonFile(dir / "retain.json",
                                      {{"library", options.kb},

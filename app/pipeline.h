@@ -16,6 +16,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -24,6 +25,7 @@
 
 #include "app/part.h"
 #include "core/status.h"
+#include "retrieval/retrieve.h"
 
 namespace formloop::app {
 
@@ -38,6 +40,9 @@ struct RunOptions {
   bool learn = true;                    // pre-compensate with the case's learned model
   bool report = true;                   // write report.html
   std::filesystem::path data_dir;       // taxonomies, machines (default: retrieval::DefaultDataDir())
+  // Retrieve with this model instead of the library's stored GHSOM (the leave-one-out rerun of
+  // app/calibration.h: a model trained without the part's own case); the cases are still read from kb.
+  std::shared_ptr<const retrieval::RetrievalModel> retrieval_model;
   // Called after each stage with its wall time (the pipeline benchmark); never written to the run
   // folder, which stays byte-identical between runs.
   std::function<void(std::string_view stage, double seconds)> on_stage;

@@ -249,8 +249,10 @@ Result<RetrievalModel> RetrievalModel::Assemble(const std::vector<kb::CaseRecord
 }
 
 Result<RetrievalModel> RetrievalModel::Train(const std::vector<kb::CaseRecord>& cases, const GhsomOptions& options,
-                                             const std::vector<kb::Rule>& rules, const FacetTaxonomies& taxonomies) {
-  const auto rows = WithDescriptor(cases);
+                                             const std::vector<kb::Rule>& rules, const FacetTaxonomies& taxonomies,
+                                             const std::string& exclude_uid) {
+  auto rows = WithDescriptor(cases);
+  std::erase_if(rows, [&](const kb::CaseRecord* r) { return !exclude_uid.empty() && r->uid == exclude_uid; });
   if (rows.size() < 2) return Status::BadInput("need at least 2 cases with a descriptor to train");
   FL_ASSIGN_OR_RETURN(Eigen::MatrixXd x, DescriptorMatrix(rows));
   FL_ASSIGN_OR_RETURN(Standardiser st, Standardiser::Fit(x));
@@ -260,7 +262,9 @@ Result<RetrievalModel> RetrievalModel::Train(const std::vector<kb::CaseRecord>& 
   FL_ASSIGN_OR_RETURN(Ghsom g, TrainGhsom(z, options));
   std::vector<std::string> uids;
   for (const auto* r : rows) uids.push_back(r->uid);
-  return Assemble(cases, std::move(st), std::move(w), std::move(g), uids, rules, taxonomies);
+  FL_ASSIGN_OR_RETURN(RetrievalModel m, Assemble(cases, std::move(st), std::move(w), std::move(g), uids, rules, taxonomies));
+  std::erase(m.untrained_, exclude_uid);  // left out on purpose, not awaiting training
+  return m;
 }
 
 Result<RetrievalModel> RetrievalModel::Load(kb::Library& library, const FacetTaxonomies& taxonomies) {
@@ -404,31 +408,43 @@ Result<RetrievalResult> RetrievalModel::RetrieveInput(const Eigen::VectorXd& x,
   return out;
 }
 
-Result<json> RetrievalModel::LeaveOneOut(const RetrieveOptions& options_in) const {
+Result<json> RetrievalModel::LeaveOneOut(const std::vector<kb::CaseRecord>& records, const GhsomOptions& ghsom,
+                                         const std::vector<kb::Rule>& rules, const FacetTaxonomies& taxonomies,
+                                         const RetrieveOptions& options_in) {
+  FL_RETURN_IF_ERROR(options_in.Validate());
   struct RouteCount {
     int count = 0, same = 0;
   };
   std::map<std::string, RouteCount> routes{{"direct", {}}, {"simulate", {}}, {"default", {}}};
   std::map<std::string, std::map<std::string, int>> confusion;
   std::vector<double> a_values, a_same, a_other;
+  json rows = json::array();
   int correct = 0, total = 0;
-  for (size_t i = 0; i < cases_.size(); ++i) {
-    const CaseConcepts& c = cases_[i];
-    if (c.case_id.empty()) continue;
+  for (const kb::CaseRecord* c : WithDescriptor(records)) {
+    FL_ASSIGN_OR_RETURN(RetrievalModel model, Train(records, ghsom, rules, taxonomies, c->uid));
     RetrieveOptions options = options_in;
-    options.exclude_uid = c.case_id;
     options.top = 1;
-    FL_ASSIGN_OR_RETURN(RetrievalResult r, RetrieveInput(c.geometric_x, c.categorical, options));
-    if (r.ranked.empty()) continue;
+    const Eigen::VectorXd descriptor = Eigen::Map<const Eigen::VectorXd>(
+        c->descriptor->data(), static_cast<Eigen::Index>(c->descriptor->size()));
+    auto r = model.Retrieve(descriptor, c->concepts, options);
+    if (!r.ok()) return r.status().WithContext("leave-one-out of case " + c->uid);
+    if (r->ranked.empty()) continue;
     ++total;
-    const bool same = r.ranked.front().family == families_[i];
+    const RetrievedCase& best = r->ranked.front();
+    const bool same = best.family == c->family;
     correct += same ? 1 : 0;
-    RouteCount& rc = routes[r.route];
+    RouteCount& rc = routes[r->route];
     ++rc.count;
     rc.same += same ? 1 : 0;
-    confusion[families_[i]][r.ranked.front().family] += 1;
-    a_values.push_back(r.best_similarity);
-    (same ? a_same : a_other).push_back(r.best_similarity);
+    confusion[c->family][best.family] += 1;
+    a_values.push_back(r->best_similarity);
+    (same ? a_same : a_other).push_back(r->best_similarity);
+    rows.push_back({{"uid", c->uid},
+                    {"family", c->family},
+                    {"route", r->route},
+                    {"similarity", r->best_similarity},
+                    {"case", best.uid},
+                    {"case_family", best.family}});
   }
   json routes_json = json::object();
   for (const auto& [name, rc] : routes) {
@@ -453,18 +469,29 @@ Result<json> RetrievalModel::LeaveOneOut(const RetrieveOptions& options_in) cons
                 {"max", v.empty() ? 0.0 : *std::max_element(v.begin(), v.end())},
                 {"histogram_0.05", hist}};
   };
+  FL_ASSIGN_OR_RETURN(kb::RouteThresholds thresholds, kb::ThresholdsOf(rules.empty() ? DefaultRules() : rules));
   return json{{"method",
-               "leave-one-out: each case is retrieved against the others (its own entry excluded from the candidates; "
-               "GHSOM and IC counts of the whole library)"},
+               "leave-one-out: each case is taken out, the standardiser, GHSOM and IC counts are trained on the "
+               "others, and the case is retrieved as a new part"},
+              {"ghsom", ghsom.ToJson()},
               {"cases", total},
               {"breadth", options_in.breadth},
-              {"thresholds", {{"low", thresholds_.low}, {"high", thresholds_.high}}},
+              {"thresholds", {{"low", thresholds.low}, {"high", thresholds.high}}},
               {"top1_same_family_rate", total ? static_cast<double>(correct) / total : 0.0},
               {"routes", routes_json},
               {"similarity", dist(a_values)},
               {"similarity_same_family", dist(a_same)},
               {"similarity_other_family", dist(a_other)},
-              {"confusion", confusion}};
+              {"confusion", confusion},
+              {"per_case", rows}};
+}
+
+Result<GhsomOptions> StoredGhsomOptions(kb::Library& library) {
+  FL_ASSIGN_OR_RETURN(std::optional<kb::GhsomRecord> rec, library.LoadGhsom());
+  if (!rec || !rec->parameters.contains("ghsom")) return LibraryGhsomDefaults();
+  auto options = GhsomOptions::FromJson(rec->parameters["ghsom"]);
+  if (!options.ok()) return options.status().WithContext("the stored GHSOM's parameters.ghsom");
+  return options;
 }
 
 Result<json> TrainLibraryGhsom(kb::Library& library, const GhsomOptions& options) {

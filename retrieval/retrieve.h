@@ -62,6 +62,9 @@ Result<Eigen::VectorXd> InputWeightsFromRules(const std::vector<kb::Rule>& rules
 // active rules of version 0 (for in-memory models).
 Result<std::vector<kb::Rule>> RulesFromJson(const nlohmann::json& j, const std::string& source);
 
+// The options the library's stored GHSOM was trained with (LibraryGhsomDefaults when none is stored).
+Result<GhsomOptions> StoredGhsomOptions(kb::Library& library);
+
 // Trains the library's GHSOM and stores it. Returns the JSON report printed by `kb train`.
 Result<nlohmann::json> TrainLibraryGhsom(kb::Library& library, const GhsomOptions& options);
 
@@ -106,8 +109,10 @@ class RetrievalModel {
   static Result<RetrievalModel> Load(kb::Library& library, const FacetTaxonomies& taxonomies);
   // In memory (tests, bench): standardise `cases`' descriptors, train, index. rules: the rule base (as
   // Library::GetRules gives; empty → the schema's defaults with kDefaultGeometryWeight).
+  // exclude_uid: train as if that case were not in `cases` (leave-one-out).
   static Result<RetrievalModel> Train(const std::vector<kb::CaseRecord>& cases, const GhsomOptions& options,
-                                      const std::vector<kb::Rule>& rules, const FacetTaxonomies& taxonomies);
+                                      const std::vector<kb::Rule>& rules, const FacetTaxonomies& taxonomies,
+                                      const std::string& exclude_uid = "");
   // From parts already computed (a stored GHSOM record's contents).
   static Result<RetrievalModel> Assemble(const std::vector<kb::CaseRecord>& cases, Standardiser standardiser,
                                          Eigen::VectorXd input_weights, Ghsom ghsom, const std::vector<std::string>& case_uids,
@@ -132,10 +137,15 @@ class RetrievalModel {
   Result<CaseSimilarity> Score(const Eigen::VectorXd& descriptor, const std::map<std::string, std::string>& concepts,
                                const std::string& uid) const;
 
-  // Leave-one-out over the model's cases (the GHSOM and IC counts are kept; the case is excluded from its
-  // own candidates): per route the count and the share whose best case is of the same family, A's
-  // distribution, and the family confusion of the top-1 case.
-  Result<nlohmann::json> LeaveOneOut(const RetrieveOptions& options) const;
+  // Leave-one-out over a library's cases (spec §4): every case with a descriptor is taken out, a model is
+  // trained on the others exactly as Train does (standardiser, GHSOM with `ghsom`, IC counts), and the case is
+  // retrieved from it as a new part would be. Reports per route the count and the share whose best case is of
+  // the same family, A's distribution, the family confusion of the top-1 case, and one row per case (uid,
+  // family, route, A, best case and its family). Whether a route leads to an in-tolerance part needs the part
+  // machined again: app/loo_outcomes.h.
+  static Result<nlohmann::json> LeaveOneOut(const std::vector<kb::CaseRecord>& cases, const GhsomOptions& ghsom,
+                                            const std::vector<kb::Rule>& rules, const FacetTaxonomies& taxonomies,
+                                            const RetrieveOptions& options);
 
   const Ghsom& ghsom() const { return ghsom_; }
   const Standardiser& standardiser() const { return standardiser_; }

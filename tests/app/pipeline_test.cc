@@ -137,7 +137,7 @@ TEST_F(PipelineTest, SecondPartPlannedWithTheLearnedModelHalvesTheFirstCycleErro
   EXPECT_LE(e_with, 0.5 * e_without);
   // The calibration report counts the retained outcome of the first part under the route it took.
   std::string out, err;
-  ASSERT_EQ(testing::RunFormloop("kb calibrate " + kb_.string(), &out, &err), 0) << err;
+  ASSERT_EQ(testing::RunFormloop("kb calibrate " + kb_.string() + " --rerun", &out, &err), 0) << err;
   const Json report = ParseJson(out, "kb calibrate").value();
   int parts = 0, within = 0;
   for (const auto& [name, r] : report["outcomes"]["by_route"].items()) {
@@ -147,6 +147,22 @@ TEST_F(PipelineTest, SecondPartPlannedWithTheLearnedModelHalvesTheFirstCycleErro
   EXPECT_EQ(parts, 1) << "only the first part was retained";
   EXPECT_EQ(within, 1);
   EXPECT_EQ(report["outcomes"]["cases_without_pipeline_outcome"], 252) << "the starter cases";
+  EXPECT_EQ(report["retrieval"]["cases"], 253);
+  // Leave-one-out by machining: the first part run again on the library without it, which is the
+  // starter library it was first run on, so the rerun reproduces what was recorded: same route, case,
+  // A and first-cycle form error (same seed, same virtual machine).
+  const Json& rerun = report["rerun"];
+  ASSERT_EQ(rerun["parts"], 1);
+  EXPECT_EQ(rerun["failed"], 0);
+  const Json& row = rerun["per_part"][0];
+  EXPECT_EQ(row["uid"], "reg-dome-a");
+  EXPECT_EQ(row["route"], row["recorded"]["route"]);
+  EXPECT_EQ(row["case"], row["recorded"]["retrieved_case"]);
+  EXPECT_NEAR(row["similarity"].get<double>(), row["recorded"]["similarity"].get<double>(), 1e-12);
+  EXPECT_NEAR(row["form_error_first_um"].get<double>(), row["recorded"]["form_error_first_um"].get<double>(), 1e-9);
+  const Json& route = rerun["by_route"][row["route"].get<std::string>()];
+  EXPECT_EQ(route["parts"], 1);
+  EXPECT_EQ(route["within_tolerance_after_at_most_one_loop"], row["loops_to_tolerance"].get<int>() <= 1 ? 1 : 0);
 }
 
 TEST_F(PipelineTest, KilledRunIsMarkedIncompleteLeavesTheLibraryAloneAndRerunCompletes) {

@@ -105,9 +105,11 @@ TEST_F(KbTrainCliTest, StarterTrainRetrieveAddCheck) {
 
   ASSERT_EQ(Run("kb calibrate " + db), 0) << err_;
   const auto cal = Out();
-  EXPECT_EQ(cal["cases"].get<int>(), init["starter"]["cases"].get<int>());
-  EXPECT_TRUE(cal["routes"].contains("direct"));
-  EXPECT_TRUE(cal["confusion"].is_object());
+  EXPECT_EQ(cal["retrieval"]["cases"].get<int>(), init["starter"]["cases"].get<int>());
+  EXPECT_TRUE(cal["retrieval"]["routes"].contains("direct"));
+  EXPECT_TRUE(cal["retrieval"]["confusion"].is_object());
+  EXPECT_EQ(cal["outcomes"]["cases_without_pipeline_outcome"].get<int>(), init["starter"]["cases"].get<int>());
+  EXPECT_FALSE(cal.contains("rerun")) << "only with --rerun";
 }
 
 TEST_F(KbTrainCliTest, RetrieveRefusesUntrainedLibrary) {
