@@ -66,6 +66,12 @@ const std::array<std::string_view, kDescriptorCount>& DescriptorNames() {
   return names;
 }
 
+bool DescriptorIsMagnitude(int k) {
+  if (k < 0 || k >= kDescriptorCount) return false;
+  const std::string_view name = DescriptorNames()[static_cast<std::size_t>(k)];
+  return !name.starts_with("h_frac_") && !name.starts_with("k_frac_");
+}
+
 Result<FacetTaxonomies> FacetTaxonomies::Load(const std::filesystem::path& dir) {
   FacetTaxonomies t;
   FL_ASSIGN_OR_RETURN(t.shape, Taxonomy::Load(dir / "shape.txt"));

@@ -72,6 +72,9 @@ namespace formloop::retrieval {
 inline constexpr int kDescriptorCount = 24;
 // The 24 descriptor names in order (table above).
 const std::array<std::string_view, kDescriptorCount>& DescriptorNames();
+// True for the magnitudes (lengths, area, curvatures, radius, slope, aspect ratios), false for the area
+// fractions (h_frac_*, k_frac_*). Retrieval compares magnitudes on a logarithmic scale (retrieve.h).
+bool DescriptorIsMagnitude(int k);
 
 // Facet names, as used by CaseConcepts::categorical and SimilarityOptions::facet_weights.
 inline constexpr char kShapeFacet[] = "shape";

@@ -25,9 +25,10 @@
 // unit's border would score. So a case at the leaf's radius (d ≥ r_leaf) scores like a neighbour
 // unit, an identical part (d = 0) scores 1, and any part with d ≤ 0.05·r_leaf scores ≥ 0.95 whatever
 // s_leaf is (Sim ≥ 1 − 0.05·(1 − s_leaf)). When IC(leaf) = 0 (every case sits in this unit) the
-// taxonomy tells nothing and geometry alone decides (s_leaf = 0). r_leaf is the query's leaf radius
-// in the units of x (the GHSOM supplies it, e.g. the largest distance of the unit's inputs to its
-// weight); r_leaf = 0 makes the refinement a step: 1 when d = 0, s_leaf otherwise.
+// taxonomy tells nothing and geometry alone decides (s_leaf = 0). r_leaf is the refinement radius
+// in the units of x, supplied by the caller (retrieval/retrieve.h: the query's leaf radius times a
+// scale, or one radius from the rule base); r_leaf = 0 makes the refinement a step: 1 when d = 0,
+// s_leaf otherwise.
 //
 // Overall similarity ("standardised similarity"): A = Σ_i ω_i Sim_i / Σ_i ω_i over the facets, with
 // weights ω_i ≥ 0 from the rule base (§5), Σ ω_i > 0. A result carries each facet's concepts, common

@@ -2,9 +2,11 @@
 // Case retrieval and routing over a trained case library (spec/case-library.md §2–§4; issue 7).
 //
 // Training (TrainLibraryGhsom, `formloop kb train`): the library's cases with a descriptor, sorted by uid,
-// become rows of X (N × 24); a Standardiser is fitted on X and stored with the map; TrainGhsom runs on the
-// z-scores with input ids 0..N−1 (row = position in "case_uids"). The stored GhsomRecord holds:
-//   parameters: {"ghsom": GhsomOptions, "standardiser": Standardiser, "case_uids": [...], "descriptor_names"}
+// become rows of D (N × 24); the magnitude transform T (below) and a Standardiser are fitted on them and stored
+// with the map; TrainGhsom runs on w ⊙ z(T(D)) with input ids 0..N−1 (row = position in "case_uids"). The stored
+// GhsomRecord holds:
+//   parameters: {"ghsom": GhsomOptions, "descriptor_transform": T, "standardiser": Standardiser,
+//                "case_uids": [...], "input_weights", "descriptor_names"}
 //   quality:    GhsomReport (per map QE / TE / MQE, units, leaves, depth, times) + leaf QE
 //   map:        Ghsom::ToJson()
 //   change_counter: the library's change counter read before the cases (so a concurrent add marks it stale).
@@ -21,14 +23,24 @@
 // (all cases under the parent unit); b ≥ 3 climbs b − 2 more levels. When fewer than min_candidates are
 // found, breadth grows by one until enough (or the whole library). Every candidate is scored with A
 // (CaseSimilarityIndex: the five categorical facets from data/taxonomies and the geometric facet = the
-// GHSOM chains, refined within the query's leaf with r = radius_scale · LeafRadius(leaf) in z-score units),
+// GHSOM chains, refined within the query's leaf with r of "Refinement radius" below),
 // ranked (A descending, uid ascending) and the best A routed with the rule-base thresholds:
 //   A > high → "direct" (rule route.direct), low ≤ A ≤ high → "simulate" (route.simulate),
 //   A < low → "default" (route.default, flagged for an engineer).
 // Facet weights are the rule base's "facet.weights" restricted to the index's facets; a facet the rule base
 // does not weigh (e.g. "geometry" in a version-1 rule base) gets kDefaultGeometryWeight (geometry) or 1.
-// radius_scale comes from the optional rule "retrieval.refinement" {"radius_scale": κ} (default 1).
-// Descriptor choice: the GHSOM input is x = w ⊙ z (z the z-scores), w from the optional rule
+// Magnitudes on a log scale: the GHSOM input is built from T(d), T_k(d_k) = asinh(d_k / ε_k) for the magnitude
+// descriptors (DescriptorIsMagnitude: lengths, area, curvatures, radius, slope, aspect ratios) with ε_k = 1 % of the
+// library's median |d_k| (logarithmic for |d_k| ≫ ε_k, continuous through zero for signed curvatures), and
+// T_k(d_k) = d_k for the area fractions. So two parts that differ by a given percentage are about the same distance
+// apart whatever their size or family; on raw values that distance varied about 4× between the starter families.
+// T is fitted when training and stored with the map ("descriptor_transform"); a map stored without it (formloop
+// before this) is read with T = identity, as it was trained.
+// Refinement radius: the rule "retrieval.refinement" {"radius": r} fixes r in GHSOM input units for every leaf
+// (the starter rule base does: a leaf's radius measures how spread its cases are, not how near a part must be to
+// reuse a case's plan, and leaves hold one to two families of very different spread); {"radius_scale": κ} gives
+// the spec's r = κ · leaf radius (default κ = 1).
+// Descriptor choice: the GHSOM input is x = w ⊙ z (z the z-scores of T(d)), w from the optional rule
 // "retrieval.descriptors" {"exclude": [descriptor names], "weights": {name: w ≥ 0}} (default all 1), read when
 // training and stored with the map ("input_weights"), so queries use the same input space.
 
@@ -49,6 +61,18 @@
 namespace formloop::retrieval {
 
 inline constexpr double kDefaultGeometryWeight = 3.0;
+
+// T of the header comment. eps_k = 0: linear.
+struct DescriptorTransform {
+  Eigen::VectorXd eps;
+  static DescriptorTransform Identity(int dimension);
+  // x: N × kDescriptorCount, the library's raw descriptors.
+  static DescriptorTransform Fit(const Eigen::MatrixXd& x);
+  Eigen::VectorXd Apply(const Eigen::VectorXd& d) const;
+  Eigen::MatrixXd ApplyRows(const Eigen::MatrixXd& x) const;
+  nlohmann::json ToJson() const;
+  static Result<DescriptorTransform> FromJson(const nlohmann::json& j, int dimension);
+};
 
 // GHSOM options `kb train` and `kb init --starter` use unless told otherwise (calibrated on the starter
 // library, see the .cc).
@@ -92,7 +116,7 @@ struct RetrievedCase {
 
 struct RetrievalResult {
   std::vector<std::string> query_chain;  // root → ... → leaf unit
-  double r_leaf = 0;                     // refinement radius used (z-score units)
+  double r_leaf = 0;                     // refinement radius used (GHSOM input units)
   int breadth_used = 0;
   int candidates = 0;
   std::vector<RetrievedCase> ranked;     // best first, at most options.top
@@ -114,11 +138,12 @@ class RetrievalModel {
                                       const std::vector<kb::Rule>& rules, const FacetTaxonomies& taxonomies,
                                       const std::string& exclude_uid = "");
   // From parts already computed (a stored GHSOM record's contents).
-  static Result<RetrievalModel> Assemble(const std::vector<kb::CaseRecord>& cases, Standardiser standardiser,
-                                         Eigen::VectorXd input_weights, Ghsom ghsom, const std::vector<std::string>& case_uids,
-                                         const std::vector<kb::Rule>& rules, const FacetTaxonomies& taxonomies);
+  static Result<RetrievalModel> Assemble(const std::vector<kb::CaseRecord>& cases, DescriptorTransform transform,
+                                         Standardiser standardiser, Eigen::VectorXd input_weights, Ghsom ghsom,
+                                         const std::vector<std::string>& case_uids, const std::vector<kb::Rule>& rules,
+                                         const FacetTaxonomies& taxonomies);
 
-  // The GHSOM input of a raw descriptor: w ⊙ z.
+  // The GHSOM input of a raw descriptor: w ⊙ z(T(d)).
   Result<Eigen::VectorXd> Input(const Eigen::VectorXd& descriptor) const;
   // Query from a GHSOM input (Input()) and facet concepts.
   Result<RetrievalResult> RetrieveInput(const Eigen::VectorXd& x, const std::map<std::string, std::string>& concepts,
@@ -153,6 +178,8 @@ class RetrievalModel {
   const kb::RouteThresholds& thresholds() const { return thresholds_; }
   const std::map<std::string, double>& weights() const { return weights_; }
   double radius_scale() const { return radius_scale_; }
+  double fixed_radius() const { return fixed_radius_; }  // 0: radius_scale · leaf radius
+  const DescriptorTransform& transform() const { return transform_; }
   int case_count() const { return static_cast<int>(cases_.size()); }
   const std::string& family(int row) const { return families_[static_cast<size_t>(row)]; }
   const CaseConcepts& case_concepts(int row) const { return cases_[static_cast<size_t>(row)]; }
@@ -171,6 +198,9 @@ class RetrievalModel {
   std::map<std::string, double> weights_;
   kb::RouteThresholds thresholds_;
   double radius_scale_ = 1.0;
+  double fixed_radius_ = 0.0;
+  DescriptorTransform transform_;
+  double RefinementRadius(const GhsomUnitRef& leaf) const;
   std::map<std::string, nlohmann::json> route_rules_;
   std::shared_ptr<const CaseSimilarityIndex> index_;
 };

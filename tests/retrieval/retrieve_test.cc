@@ -2,8 +2,7 @@
 // show" 1), routing, breadth and leave-one-out.
 //
 // The library: the starter cases of data/starter/families.json, GHSOM with LibraryGhsomDefaults(), the rule
-// base of data/starter/rules.json. The held-out set (seeded): for each family every 4th library part is a
-// base; from it
+// base of data/starter/rules.json. The held-out set (seeded): every library part (252) is a base; from it
 //   identical  the base part itself                                     → A(query, base) ≥ 0.99
 //   near       every surface parameter × (1 ± δ), δ ~ U[0.01, 0.05]      → A(query, base) > 0.95 in ≥ 95 %
 //   far        every surface parameter × (1 ± δ), δ ~ U[0.10, 0.30]      → 0.80 ≤ A(query, base) ≤ 0.95 in ≥ 80 %
@@ -69,9 +68,12 @@ const Fixture& Shared() {
     EXPECT_TRUE(model.ok()) << model.status().ToString();
     fx->model = std::make_unique<RetrievalModel>(std::move(model).value());
 
-    // The tuning of data/starter/rules.json and LibraryGhsomDefaults used another set (seed 1111, bases offset 2).
+    // The refinement radius of data/starter/rules.json was chosen on another draw of the perturbations (seed 1111,
+    // same bases); this set (seed 4242) was measured once with it. Measured with other seeds (same radius):
+    // far 10-30 % in band 94.0 % (777), 91.7 % (9001); near > 0.95 99.6 %, 99.2 %. Before the logarithmic
+    // magnitudes and the fixed radius (leaf radius × 2.6 on raw z-scores) the far band held 70-72 % of these
+    // 252-base sets: the 81 % once measured on 63 bases was a lucky draw.
     Rng rng(4242);
-    const size_t first = 0;
     auto features_of = [&](const StarterPart& p) {
       auto surface = BuildStarterSurface(p.kind, p.params, fx->spec.fit_samples);
       EXPECT_TRUE(surface.ok()) << p.uid << ": " << surface.status().ToString();
@@ -79,7 +81,7 @@ const Fixture& Shared() {
       EXPECT_TRUE(feat.ok()) << p.uid << ": " << feat.status().ToString();
       return *feat;
     };
-    for (size_t i = first; i < fx->parts.size(); i += 4) {
+    for (size_t i = 0; i < fx->parts.size(); ++i) {
       const StarterPart& base = fx->parts[i];
       fx->queries.push_back({"identical", base.family, base.uid, features_of(base)});
       const double d_near = rng.Uniform(0.01, 0.05);
@@ -286,6 +288,46 @@ TEST(StarterRetrieval, LeaveOneOutRetrainsWithoutEachCase) {
     EXPECT_EQ(r->best_similarity, row["similarity"].get<double>()) << uid;
     EXPECT_EQ(r->route, row["route"].get<std::string>()) << uid;
   }
+}
+
+// Magnitudes on a log scale: the same relative change is the same step whatever the size; fractions stay linear.
+TEST(DescriptorTransform, MagnitudesLogarithmicFractionsLinearAndStoredExactly) {
+  Eigen::MatrixXd d(3, kDescriptorCount);
+  for (int k = 0; k < kDescriptorCount; ++k) d.col(k) << 10.0 * (k + 1), 20.0 * (k + 1), 40.0 * (k + 1);
+  const DescriptorTransform t = DescriptorTransform::Fit(d);
+  for (int k = 0; k < kDescriptorCount; ++k) {
+    if (DescriptorIsMagnitude(k)) {
+      EXPECT_DOUBLE_EQ(t.eps(k), 0.01 * 20.0 * (k + 1)) << DescriptorNames()[static_cast<size_t>(k)];
+    } else {
+      EXPECT_EQ(t.eps(k), 0.0) << DescriptorNames()[static_cast<size_t>(k)];
+    }
+  }
+  const int extent = 0, fraction = 13;  // extent_x_mm, h_frac_flat
+  ASSERT_TRUE(DescriptorIsMagnitude(extent));
+  ASSERT_FALSE(DescriptorIsMagnitude(fraction));
+  Eigen::VectorXd small = d.row(0).transpose(), big = 50 * small;
+  Eigen::VectorXd small_up = small, big_up = big;
+  small_up(extent) *= 1.1;
+  big_up(extent) *= 1.1;
+  const double step_small = t.Apply(small_up)(extent) - t.Apply(small)(extent);
+  const double step_big = t.Apply(big_up)(extent) - t.Apply(big)(extent);
+  EXPECT_NEAR(step_small, std::log(1.1), 2e-4);
+  EXPECT_NEAR(step_big, step_small, 1e-4);
+  EXPECT_EQ(t.Apply(small)(fraction), small(fraction));
+  // Signed magnitudes pass through zero continuously (asinh).
+  Eigen::VectorXd signed_curv = small;
+  signed_curv(extent) = -small(extent);
+  EXPECT_DOUBLE_EQ(t.Apply(signed_curv)(extent), -t.Apply(small)(extent));
+
+  auto back = DescriptorTransform::FromJson(t.ToJson(), kDescriptorCount);
+  ASSERT_TRUE(back.ok()) << back.status().ToString();
+  EXPECT_EQ(back->eps, t.eps);
+  nlohmann::json bad = t.ToJson();
+  bad["eps"][3] = -1.0;
+  const auto refused = DescriptorTransform::FromJson(bad, kDescriptorCount);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().ToString().find("descriptor_transform.eps"), std::string::npos);
+  EXPECT_FALSE(DescriptorTransform::FromJson(t.ToJson(), kDescriptorCount - 1).ok());
 }
 
 }  // namespace
