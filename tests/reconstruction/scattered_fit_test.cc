@@ -272,7 +272,8 @@ TEST_P(ScatteredFitReference, GridAndScatteredFitsAreWithinOneMicron) {
   // franke by a small margin. The smoothing weight moves the corner error erratically (quintic
   // egg_box at fixed λ = 1e-12, 1e-10, 1e-9, 1e-8, 1e-6: 1.46, 1.19, 0.28, 1.01, 13.1 µm; franke
   // 1.61, 1.43, 0.69, 0.77, 10.6 µm), so GCV's λ is kept. With the margin as a span of its own
-  // (scattered_fit.h) quintic egg_box was 1.35 µm, degree 6 franke 1.50 µm.
+  // (scattered_fit.h) quintic egg_box was 1.35 µm, degree 6 franke 1.50 µm; before the local
+  // weights of the thin-plate energy (scattered_fit.h) degree 6 franke was 0.98 / 0.08 µm.
   // Three correction rounds: later rounds gain < 1 % in RMS here.
   const Samples samples = Scatter(*s, kScatteredPoints, 11);
   ScatteredFitOptions options;
@@ -301,7 +302,7 @@ TEST_P(ScatteredFitReference, GridAndScatteredFitsAreWithinOneMicron) {
   // Where the samples surround the check point, Q is within 1 µm.
   EXPECT_LE(check.max_inside_hull_mm, kMicron);
   // Over the whole domain, the corner hole included (see above): within 1 µm (issue item 1).
-  // Measured at most 0.98 µm (franke, at the corner (0, 0)); egg_box 0.13 µm.
+  // Measured at most 0.57 µm (franke, at the corner (0, 0)); egg_box 0.13 µm.
   EXPECT_LE(check.max_outside_hull_mm, 5 * kMicron);
   EXPECT_LE(check.max_mm, kMicron);
   if (check.max_mm > kMicron) {
@@ -325,23 +326,41 @@ INSTANTIATE_TEST_SUITE_P(ScatteredFit, ScatteredFitReference, ::testing::ValuesI
 
 // ---------------------------------------------------------------------------------------------
 // Noise: 5 µm Gaussian along the normal on 10,000 scattered points of the reference surfaces, with
-// the default options (cubic, GCV, parameter correction).
+// the default options (cubic, GCV with local penalty weights, parameter correction).
 //
 // The boundary criterion is taken over check points inside the samples' convex hull. Outside it
 // (the corners the random samples miss: here a 1.8 mm hole at (100, 0)) any fit extrapolates the
-// noise; measured there 10-49 µm on the reference surfaces, with λ → 0 as well, so it is printed
-// and only bounded loosely. Measured inside the hull, outer-5 %-band max / interior max: plane
-// 1.05, sphere_cap 1.83, cylinder 1.75, saddle 1.05, egg_box 1.54, franke 1.35, tilted_paraboloid
-// 1.05 (ScatteredFitNoise); ellipsoid_cap 2.50 and blade 2.75 miss the issue's 2.0
-// (ScatteredFitNoiseCornerBias below states them).
+// noise; measured there 0.3-25 µm on the reference surfaces (10-49 µm on the curved ones before the
+// local weights, and with λ → 0 as well), so it is printed and only bounded loosely. Measured
+// inside the hull, before and with the local weights of the thin-plate energy (scattered_fit.h), µm:
+//                      band max / interior max   band max        interior max    vs truth RMS
+//   plane              1.05 -> 1.06              0.34 -> 0.35    0.33 -> 0.33    0.160 -> 0.162
+//   sphere_cap         1.83 -> 1.81              6.78 -> 7.81    3.72 -> 4.31    1.305 -> 1.245
+//   cylinder           1.75 -> 1.32              10.36 -> 8.42   5.92 -> 6.36    1.623 -> 1.549
+//   ellipsoid_cap      2.50 -> 1.73              6.32 -> 5.89    2.53 -> 3.40    0.988 -> 0.970
+//   saddle             1.05 -> 1.05              0.35 -> 0.34    0.33 -> 0.33    0.160 -> 0.162
+//   egg_box            1.54 -> 1.64              10.42 -> 11.07  6.77 -> 6.76    1.861 -> 1.778
+//   franke             1.35 -> 1.62              8.81 -> 10.55   6.52 -> 6.52    1.802 -> 1.793
+//   blade              2.75 -> 1.92              15.39 -> 10.79  5.60 -> 5.61    1.542 -> 1.448
+//   tilted_paraboloid  1.05 -> 1.05              0.35 -> 0.35    0.33 -> 0.33    0.160 -> 0.162
+// What kept ellipsoid_cap and blade above 2 was smoothing bias at the corners, not noise and not
+// oscillation: without noise at GCV's λ the band error was 7.6 µm (ellipsoid_cap, λ = 1.15, at the
+// corner (0, 0)) and 10.7 µm (blade, λ = 0.10) against interior 1.5 and 2.3 µm. The energy of
+// S − S₀ flattens what the cubic trend S₀ misses, most at the edges where these shapes curve
+// fastest, and GCV's λ minimises the global error, not the band's. The local weights lower the
+// energy where the estimated bias outweighs the noise, mostly along those edges; there the fit is
+// noisier, so the band max rises where it was noise-dominated (sphere_cap, egg_box, franke) and
+// falls where it was bias-dominated (cylinder, ellipsoid_cap, blade). On ellipsoid_cap the lowered
+// weights reach 4-6 spans (more than 10 mm) in from the long edges, past the 4 mm band, so the
+// interior max rises too; the error against the true surface falls on every curved surface.
+// The ratio depends on the noise draw: over the nine surfaces with noise seeds 24, 25 and 26
+// instead of 23 the largest ratio went 3.05 -> 2.12 (blade), 2.24 -> 1.93 (ellipsoid_cap ->
+// sphere_cap) and 2.44 -> 2.01 (ellipsoid_cap -> plane); plane, saddle and tilted_paraboloid
+// (λ → ∞: the fit is the cubic trend, whose variance grows towards the corners) reached 1.46-1.49
+// (seed 24) and 1.96-2.01 (seed 26) on their own, unchanged by the weights.
 //
-// Why those two miss it: smoothing bias at the corners, not noise and not oscillation. Without
-// noise at the same fixed λ the band error is 12.6 µm (ellipsoid_cap, λ = 2.2, worst at the corner
-// (100, 0)) and 14 µm (blade, λ = 0.2) against interior 1.3 and 2.0 µm. The thin-plate energy of
-// S − S₀ flattens what the cubic trend S₀ misses, most at the corners where these shapes curve
-// fastest, and GCV's λ minimises the global error, not the band's. Every variant measured either
-// leaves the ratio above 2 or meets it by making the interior worse rather than the band better
-// (ratios ellipsoid_cap / blade; truth RMS in µm where it moved):
+// Variants measured that were not kept (ratios ellipsoid_cap / blade; truth RMS in µm where it
+// moved). Without local weights:
 // - fixed λ = 0.02 (instead of GCV's 2.2 / 0.17): 1.24 / 1.56, but the interior max doubles
 //   (ellipsoid_cap 2.5 -> 6.5 µm) and egg_box fails (2.30);
 // - quartic trend (monomials above the spline degree L2-projected): band 6.5 -> 4.8 µm, but GCV
@@ -361,49 +380,47 @@ INSTANTIATE_TEST_SUITE_P(ScatteredFit, ScatteredFitReference, ::testing::ValuesI
 //   penalties, wider margins: worse (earlier measurements);
 // - parameter plane tilted from the principal one to the plane whose projection best fills its
 //   bounding rectangle: blade 1.81 (ellipsoid_cap unchanged), but noise-free franke's corner error
-//   2.9 µm.
+//   2.9 µm;
+// - twicing (Tukey 1977: one more pass of the same smoother over the residuals, influence matrix
+//   2H − H²) at GCV's λ: all nine ≤ 1.76 (1.66 / 1.76), but the interior gets noisier: truth RMS
+//   -2 to +19 % (plane 0.160 -> 0.190, sphere_cap 1.31 -> 1.41, ellipsoid_cap 0.99 -> 1.08);
+// - twicing with λ chosen by GCV for the twiced fit (tr(2H − H²) = tr H + a Hutchinson estimate
+//   of tr(H − H²) with 32 fixed ±1 probes): GCV raises λ 2-10 times: 2.01 / 2.79, cylinder 2.55.
+// With local weights, other choices:
+// - bias estimated from the difference of the fits at λ and λ/10 (bias ∝ λ^½) instead of twicing,
+//   pooled over 3 × 3 spans: 1.28 / 1.86 but franke 2.13 and plane's truth RMS +7 % (the weight map
+//   follows the noise); with the noise expectation subtracted twice / four times: 3.00 / 1.86,
+//   2.50 / 1.97;
+// - λ chosen again by GCV with the weights: the best truth RMS (ellipsoid_cap 0.87, blade 1.33,
+//   cylinder 1.45) but GCV raises λ 2-4 times: 2.18 / 2.59 (cylinder 2.02, sphere_cap 2.06);
+// - weights estimated a second time from the weighted fit: 2.43 / 2.34 (its smaller bias raises
+//   the weights again).
 constexpr double kNoiseMm = 5e-3;
-
-struct NoisyFit {
-  FitReport report;
-  TruthCheck check;
-  double ratio = 0;
-};
-
-NoisyFit FitNoisy(const AnalyticSurface& s, const std::string& name) {
-  const Samples samples = Scatter(s, 10000, 23, kNoiseMm);
-  NoisyFit out;
-  const auto q = FitScattered(samples.points, ScatteredFitOptions{}, &out.report);
-  EXPECT_TRUE(q.ok()) << q.status().ToString();
-  if (!q.ok()) return out;
-  const FitReport& report = out.report;
-  out.check = CheckAgainstTruth(s, *q, kCheckPoints, 302, Hull(samples.uv), 0.05,
-                                [&](const Vector3d& p, double, double) { return FrameStart(report, p); });
-  const TruthCheck& check = out.check;
-  out.ratio = check.max_band_mm / check.max_interior_mm;
-  std::printf(
-      "[ measured ] %-8s noisy scattered: %d x %d poles, lambda %.2e, dof %.0f, residual rms %.3f um; vs truth rms "
-      "%.3f um; inside the hull: interior max %.3f um, outer 5%% band max %.3f um (ratio %.2f); outside the hull (%d "
-      "points) max %.3f um; initial gap %.2f spans (%s)\n",
-      name.c_str(), q->u_poles(), q->v_poles(), report.details.at("lambda").get<double>(),
-      report.details.at("effective_dof").get<double>(), report.rms_mm * 1e3, check.rms_mm * 1e3,
-      check.max_interior_mm * 1e3, check.max_band_mm * 1e3, out.ratio, check.outside_hull,
-      check.max_outside_hull_mm * 1e3, report.details.at("initial_gap_spans").get<double>(),
-      report.details.at("edge_spans").get<std::string>().c_str());
-  EXPECT_EQ(check.failures, 0);
-  EXPECT_NEAR(report.rms_mm, kNoiseMm, 0.1 * kNoiseMm);
-  EXPECT_LT(check.rms_mm, 0.5 * kNoiseMm);  // most of the noise is removed
-  EXPECT_LT(check.max_outside_hull_mm, 20 * kNoiseMm);
-  return out;
-}
 
 class ScatteredFitNoise : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(ScatteredFitNoise, ResidualMatchesNoiseAndBoundaryDoesNotOscillate) {
   const auto s = Make(GetParam());
-  const NoisyFit fit = FitNoisy(*s, GetParam());
-  const TruthCheck& check = fit.check;
-  const double ratio = fit.ratio;
+  const Samples samples = Scatter(*s, 10000, 23, kNoiseMm);
+  FitReport report;
+  const auto q = FitScattered(samples.points, ScatteredFitOptions{}, &report);
+  ASSERT_TRUE(q.ok()) << q.status().ToString();
+  const TruthCheck check = CheckAgainstTruth(*s, *q, kCheckPoints, 302, Hull(samples.uv), 0.05,
+                                             [&](const Vector3d& p, double, double) { return FrameStart(report, p); });
+  const double ratio = check.max_band_mm / check.max_interior_mm;
+  std::printf(
+      "[ measured ] %-8s noisy scattered: %d x %d poles, lambda %.2e, dof %.0f, penalty weights min %.2f mean %.2f, "
+      "residual rms %.3f um; vs truth rms %.3f um; inside the hull: interior max %.3f um, outer 5%% band max %.3f um "
+      "(ratio %.2f); outside the hull (%d points) max %.3f um; initial gap %.2f spans (%s)\n",
+      GetParam().c_str(), q->u_poles(), q->v_poles(), report.details.at("lambda").get<double>(),
+      report.details.at("effective_dof").get<double>(), report.details.at("penalty_weight_min").get<double>(),
+      report.details.at("penalty_weight_mean").get<double>(), report.rms_mm * 1e3, check.rms_mm * 1e3,
+      check.max_interior_mm * 1e3, check.max_band_mm * 1e3, ratio, check.outside_hull, check.max_outside_hull_mm * 1e3,
+      report.details.at("initial_gap_spans").get<double>(), report.details.at("edge_spans").get<std::string>().c_str());
+  EXPECT_EQ(check.failures, 0);
+  EXPECT_NEAR(report.rms_mm, kNoiseMm, 0.1 * kNoiseMm);
+  EXPECT_LT(check.rms_mm, 0.5 * kNoiseMm);  // most of the noise is removed
+  EXPECT_LT(check.max_outside_hull_mm, 20 * kNoiseMm);
   EXPECT_LE(ratio, 2.0);
 
   // OpenCASCADE's grid approximator on a noisy 100 × 100 grid (same noise), default degrees 3-5,
@@ -436,26 +453,7 @@ TEST_P(ScatteredFitNoise, ResidualMatchesNoiseAndBoundaryDoesNotOscillate) {
   EXPECT_LT(check.max_band_mm, grid_check.max_band_mm);
 }
 
-// ellipsoid_cap and blade: ScatteredFitNoiseCornerBias (see above).
-INSTANTIATE_TEST_SUITE_P(ScatteredFit, ScatteredFitNoise,
-                         ::testing::Values("plane", "sphere_cap", "cylinder", "saddle", "egg_box", "franke",
-                                           "tilted_paraboloid"),
-                         ParamName);
-
-// The two surfaces whose corner smoothing bias keeps the band ratio above 2 (see above): the same
-// checks on RMS and truth, and the ratio held to the figure measured (2.50 and 2.75) with a little
-// room, so that a change that makes it worse is seen.
-class ScatteredFitNoiseCornerBias : public ::testing::TestWithParam<std::string> {};
-
-TEST_P(ScatteredFitNoiseCornerBias, ResidualMatchesNoiseAndBandRatioIsAsStated) {
-  const auto s = Make(GetParam());
-  const NoisyFit fit = FitNoisy(*s, GetParam());
-  EXPECT_LE(fit.ratio, 2.9);
-  EXPECT_LT(fit.check.max_band_mm, 4 * kNoiseMm);
-}
-
-INSTANTIATE_TEST_SUITE_P(ScatteredFit, ScatteredFitNoiseCornerBias, ::testing::Values("ellipsoid_cap", "blade"),
-                         ParamName);
+INSTANTIATE_TEST_SUITE_P(ScatteredFit, ScatteredFitNoise, ::testing::ValuesIn(ReferenceSurfaceNames()), ParamName);
 
 // ---------------------------------------------------------------------------------------------
 // Smoothing weight
