@@ -43,7 +43,7 @@ struct RetainInput {
   nlohmann::json learned_provenance = nlohmann::json::object();
   const kb::CaseRecord* existing = nullptr;  // the part's own case, when it is already in the library
   // {"part": resolved part, "machine": "virtual[:PROFILE]"} when the part was cut on the virtual machine
-  // (stored as part.rerun, so app/calibration.h can run it again); null otherwise.
+  // (stored as part.rerun, so app/route_calibration.h can run it again); null otherwise.
   nlohmann::json rerun;
 };
 // The case record the run stores: uid = part name; an existing record keeps its other learned models.

@@ -3,8 +3,9 @@
 //   formloop kb init    PATH [--starter] [--data DIR]  create or migrate a library; --starter fills a new one with
 //                                                   the synthetic starter cases (data/starter/) and trains it
 //   formloop kb train   PATH [--tau1 T] [--tau2 T] [--seed S]  standardise, train and store the GHSOM (JSON report)
-//   formloop kb calibrate PATH [--breadth B] [--rerun [--work DIR]] [--data DIR]  leave-one-out routing report
-//                                                   (JSON; app/route_calibration.h): retrieval without each case,
+//   formloop kb calibrate PATH [--breadth B] [--max-cases N] [--rerun [--work DIR]] [--data DIR]  leave-one-out report
+//                                                   of the routes (JSON; app/route_calibration.h): retrieval
+//                                                   without each case (at most N of them, evenly spaced),
 //                                                   retained outcomes, and with --rerun the retained virtual-machine
 //                                                   parts run again on a library without them
 //   formloop kb migrate PATH                        bring an existing library to the current schema
@@ -59,6 +60,7 @@ struct KbArgs {
   int breadth = 1;
   bool rerun = false;
   std::string work;
+  int max_cases = 1000;
 };
 
 std::filesystem::path DataDir(const KbArgs& args) {
@@ -138,6 +140,9 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
       "it, per route how many end within tolerance on the first cycle and after one compensation loop.",
       args.get());
   calibrate->add_option("--breadth", args->breadth, "candidate breadth (0 leaf, 1 + neighbours, 2 + the leaf's map ...)");
+  calibrate->add_option("--max-cases", args->max_cases,
+                        "leave out at most this many cases, evenly spaced (0: all; each costs one GHSOM training)")
+      ->capture_default_str();
   calibrate->add_flag("--rerun", args->rerun, "run the retained virtual-machine parts again (a pipeline run each)");
   calibrate->add_option("--work", args->work, "keep the reruns' run folders here (default: a temporary folder)");
   calibrate->add_option("--data", args->data,
@@ -147,6 +152,7 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
       CalibrationOptions options;
       options.breadth = args->breadth;
       options.rerun = args->rerun;
+      options.max_cases = args->max_cases;
       options.work_dir = args->work;
       options.data_dir = DataDir(*args);
       FL_ASSIGN_OR_RETURN(nlohmann::json report, CalibrationReport(args->path, options));

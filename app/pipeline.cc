@@ -689,7 +689,7 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, const fs
                                {"heldout_rms_after_um", diagnosis->heldout_rms_after_um}};
     }
     if (retrieved.own) in.existing = &*retrieved.own;
-    // A part cut on the virtual machine can be run again (the leave-one-out of app/calibration.h); a
+    // A part cut on the virtual machine can be run again (the leave-one-out of app/route_calibration.h); a
     // measured one cannot.
     if (options.measured.empty()) in.rerun = {{"part", part.ToJson()}, {"machine", options.machine}};
     FL_ASSIGN_OR_RETURN(kb::CaseRecord record, MakeRetainedCase(in));

@@ -41,7 +41,7 @@ struct RunOptions {
   bool report = true;                   // write report.html
   std::filesystem::path data_dir;       // taxonomies, machines (default: retrieval::DefaultDataDir())
   // Retrieve with this model instead of the library's stored GHSOM (the leave-one-out rerun of
-  // app/calibration.h: a model trained without the part's own case); the cases are still read from kb.
+  // app/route_calibration.h: a model trained without the part's own case); the cases are still read from kb.
   std::shared_ptr<const retrieval::RetrievalModel> retrieval_model;
   // Called after each stage with its wall time (the pipeline benchmark); never written to the run
   // folder, which stays byte-identical between runs.

@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <map>
 #include <memory>
-#include <optional>
 
 #include <unistd.h>
 
@@ -98,8 +97,13 @@ Result<json> Rerun(const std::string& kb_path, const std::vector<kb::CaseRecord>
       ++failed;
       continue;
     }
-    FL_ASSIGN_OR_RETURN(retrieval::RetrievalModel model,
-                        retrieval::RetrievalModel::Train(cases, ghsom, rules, taxonomies, c.uid));
+    auto model = retrieval::RetrievalModel::Train(cases, ghsom, rules, taxonomies, c.uid);
+    if (!model.ok()) {
+      row["error"] = model.status().WithContext("retrieval model without the case").ToString();
+      rows.push_back(std::move(row));
+      ++failed;
+      continue;
+    }
     RunOptions ro;
     ro.out = work.path() / c.uid;
     ro.force = true;
@@ -109,7 +113,7 @@ Result<json> Rerun(const std::string& kb_path, const std::vector<kb::CaseRecord>
     ro.retain = false;
     ro.report = false;
     ro.data_dir = options.data_dir;
-    ro.retrieval_model = std::make_shared<const retrieval::RetrievalModel>(std::move(model));
+    ro.retrieval_model = std::make_shared<const retrieval::RetrievalModel>(std::move(model).value());
     auto summary = RunPart(*part, ro);
     if (!summary.ok()) {
       row["error"] = summary.status().ToString();
@@ -176,7 +180,8 @@ Result<json> CalibrationReport(const std::string& kb_path, const CalibrationOpti
   library.reset();  // the reruns open it themselves
   retrieval::RetrieveOptions ro;
   ro.breadth = options.breadth;
-  FL_ASSIGN_OR_RETURN(json report, retrieval::RetrievalModel::LeaveOneOut(cases, ghsom, rules.rules, taxonomies, ro));
+  FL_ASSIGN_OR_RETURN(json report, retrieval::RetrievalModel::LeaveOneOut(cases, ghsom, rules.rules, taxonomies, ro,
+                                                                                 options.max_cases));
   json out = {{"library", kb_path}, {"retrieval", std::move(report)}, {"outcomes", OutcomesByRoute(cases)}};
   if (options.rerun) {
     FL_ASSIGN_OR_RETURN(out["rerun"], Rerun(kb_path, cases, ghsom, rules.rules, taxonomies, options));

@@ -506,8 +506,9 @@ Result<RetrievalResult> RetrievalModel::RetrieveInput(const Eigen::VectorXd& x,
 
 Result<json> RetrievalModel::LeaveOneOut(const std::vector<kb::CaseRecord>& records, const GhsomOptions& ghsom,
                                          const std::vector<kb::Rule>& rules, const FacetTaxonomies& taxonomies,
-                                         const RetrieveOptions& options_in) {
+                                         const RetrieveOptions& options_in, int max_cases) {
   FL_RETURN_IF_ERROR(options_in.Validate());
+  if (max_cases < 0) return Status::BadInput(Where{.field = "max_cases"}, "must be >= 0 (0: every case)");
   struct RouteCount {
     int count = 0, same = 0;
   };
@@ -516,7 +517,13 @@ Result<json> RetrievalModel::LeaveOneOut(const std::vector<kb::CaseRecord>& reco
   std::vector<double> a_values, a_same, a_other;
   json rows = json::array();
   int correct = 0, total = 0;
-  for (const kb::CaseRecord* c : WithDescriptor(records)) {
+  const std::vector<const kb::CaseRecord*> all = WithDescriptor(records);
+  std::vector<const kb::CaseRecord*> left_out = all;
+  if (max_cases > 0 && static_cast<int>(all.size()) > max_cases) {
+    left_out.clear();
+    for (int i = 0; i < max_cases; ++i) left_out.push_back(all[static_cast<size_t>(i) * all.size() / max_cases]);
+  }
+  for (const kb::CaseRecord* c : left_out) {
     FL_ASSIGN_OR_RETURN(RetrievalModel model, Train(records, ghsom, rules, taxonomies, c->uid));
     RetrieveOptions options = options_in;
     options.top = 1;
@@ -571,6 +578,7 @@ Result<json> RetrievalModel::LeaveOneOut(const std::vector<kb::CaseRecord>& reco
                "others, and the case is retrieved as a new part"},
               {"ghsom", ghsom.ToJson()},
               {"cases", total},
+              {"library_cases", all.size()},
               {"breadth", options_in.breadth},
               {"thresholds", {{"low", thresholds.low}, {"high", thresholds.high}}},
               {"top1_same_family_rate", total ? static_cast<double>(correct) / total : 0.0},

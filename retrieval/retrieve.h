@@ -168,9 +168,11 @@ class RetrievalModel {
   // the same family, A's distribution, the family confusion of the top-1 case, and one row per case (uid,
   // family, route, A, best case and its family). Whether a route leads to an in-tolerance part needs the part
   // machined again: app/loo_outcomes.h.
+  // Every case costs one training, so a big library is sampled: max_cases > 0 leaves out at most that many
+  // cases, evenly spaced in uid order (the report says how many of how many).
   static Result<nlohmann::json> LeaveOneOut(const std::vector<kb::CaseRecord>& cases, const GhsomOptions& ghsom,
                                             const std::vector<kb::Rule>& rules, const FacetTaxonomies& taxonomies,
-                                            const RetrieveOptions& options);
+                                            const RetrieveOptions& options, int max_cases = 0);
 
   const Ghsom& ghsom() const { return ghsom_; }
   const Standardiser& standardiser() const { return standardiser_; }

@@ -110,6 +110,13 @@ TEST_F(KbTrainCliTest, StarterTrainRetrieveAddCheck) {
   EXPECT_TRUE(cal["retrieval"]["confusion"].is_object());
   EXPECT_EQ(cal["outcomes"]["cases_without_pipeline_outcome"].get<int>(), init["starter"]["cases"].get<int>());
   EXPECT_FALSE(cal.contains("rerun")) << "only with --rerun";
+  // A big library is sampled: at most --max-cases left out, evenly spaced, each with its own training.
+  ASSERT_EQ(Run("kb calibrate " + db + " --max-cases 7"), 0) << err_;
+  const auto sampled = Out();
+  EXPECT_EQ(sampled["retrieval"]["cases"].get<int>(), 7);
+  EXPECT_EQ(sampled["retrieval"]["library_cases"].get<int>(), init["starter"]["cases"].get<int>());
+  ASSERT_EQ(sampled["retrieval"]["per_case"].size(), 7u);
+  EXPECT_EQ(sampled["retrieval"]["per_case"][0]["uid"], cal["retrieval"]["per_case"][0]["uid"]);
 }
 
 TEST_F(KbTrainCliTest, RetrieveRefusesUntrainedLibrary) {
