@@ -21,6 +21,7 @@
 #include "core/log.h"
 #include "kb/library.h"
 #include "tests/support/run_binary.h"
+#include "tests/support/test_dir.h"
 
 namespace formloop::app {
 namespace {
@@ -44,10 +45,7 @@ class PipelineTest : public ::testing::Test {
  protected:
   void SetUp() override {
     log::SetLevel(log::Level::kWarn);
-    dir_ = fs::temp_directory_path() / ("formloop-pipeline-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
+    dir_ = testing::FreshTestDir("formloop-pipeline");
     kb_ = dir_ / "kb.sqlite";
     fs::copy_file(StarterLibrary(), kb_);
   }

@@ -21,6 +21,7 @@
 #include "core/log.h"
 #include "tests/support/run_binary.h"
 #include "tests/support/run_fixture.h"
+#include "tests/support/test_dir.h"
 
 namespace formloop::app {
 namespace {
@@ -102,10 +103,7 @@ class ReportTest : public ::testing::Test {
  protected:
   void SetUp() override {
     log::SetLevel(log::Level::kWarn);
-    dir_ = fs::temp_directory_path() / ("formloop-report-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
+    dir_ = testing::FreshTestDir("formloop-report");
     run_ = dir_ / "run";
   }
   void TearDown() override { fs::remove_all(dir_); }

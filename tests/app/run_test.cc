@@ -16,6 +16,7 @@
 #include "core/json_io.h"
 #include "core/log.h"
 #include "tests/support/run_binary.h"
+#include "tests/support/test_dir.h"
 
 namespace formloop::app {
 namespace {
@@ -27,10 +28,7 @@ class RunTest : public ::testing::Test {
  protected:
   void SetUp() override {
     log::SetLevel(log::Level::kWarn);
-    dir_ = fs::temp_directory_path() / ("formloop-run-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
+    dir_ = testing::FreshTestDir("formloop-run");
   }
   void TearDown() override { fs::remove_all(dir_); }
   fs::path dir_;

@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "kb/library.h"
+#include "tests/support/test_dir.h"
 
 namespace formloop::kb::testing {
 
@@ -21,11 +22,7 @@ namespace fs = std::filesystem;
 class KbLibraryTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("formloop-kblib-" + std::to_string(::getpid()) + "-" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
+    dir_ = formloop::testing::FreshTestDir("formloop-kblib");
   }
   void TearDown() override { fs::remove_all(dir_); }
 

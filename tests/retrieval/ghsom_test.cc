@@ -5,6 +5,7 @@
 #include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <map>
 #include <set>
@@ -197,6 +198,8 @@ TEST(GhsomBreadth, LayerOneQeFallsWithTau1) {
     auto g = TrainGhsom(z, o, &report);
     ASSERT_TRUE(g.ok()) << g.status().ToString();
     const GhsomMap& top = g->maps().front();
+    std::printf("tau1 %.2f: layer-1 map %d x %d, QE %.4f, TE %.4f, MQE %.4f (mqe0 %.4f)\n", tau1, top.rows, top.cols,
+                top.qe, top.te, top.mqe, g->mqe0());
     EXPECT_LT(top.qe, previous_qe) << "tau1 = " << tau1;
     EXPECT_GT(top.unit_count(), previous_units) << "tau1 = " << tau1;
     // The stopping rule held: MQE_m < tau1 · mqe_0 (or the unit cap was reached).
