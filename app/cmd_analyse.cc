@@ -600,7 +600,7 @@ Status RunPartAnalysis(const PartArgs& args) {
   // 7. The output, all computed before anything is written.
   PointSet points = metrology::DeviationsToPoints(deviations);
   points.scalars.clear();
-  std::vector<double> u_col, v_col, dev_col, ds_col, du_col, lisa_col, cluster_col, lisa_random_col,
+  std::vector<double> u_col, v_col, dev_col, ds_col, df_col, du_col, lisa_col, cluster_col, lisa_random_col,
       cluster_random_col;
   for (long i = 0; i < n; ++i) {
     const auto k = static_cast<std::size_t>(i);
@@ -608,6 +608,7 @@ Status RunPartAnalysis(const PartArgs& args) {
     v_col.push_back(deviations[k].v);
     dev_col.push_back(deviations[k].deviation_mm * 1e3);
     ds_col.push_back(dec.systematic_mm[k] * 1e3);
+    df_col.push_back(dec.fine_scale_mm[k] * 1e3);
     du_col.push_back(dec.random_mm[k] * 1e3);
     lisa_col.push_back(std::isfinite(lisa.i[i]) ? lisa.i[i] : 0.0);
     cluster_col.push_back(static_cast<double>(static_cast<int>(lisa.cluster[k])));
@@ -623,6 +624,7 @@ Status RunPartAnalysis(const PartArgs& args) {
   points.SetScalar("v", std::move(v_col));
   points.SetScalar("deviation", std::move(dev_col));
   points.SetScalar("systematic", std::move(ds_col));
+  points.SetScalar("fine_scale", std::move(df_col));
   points.SetScalar("random", std::move(du_col));
   points.SetScalar("local_moran", std::move(lisa_col));
   points.SetScalar("lisa_cluster", std::move(cluster_col));
@@ -666,6 +668,7 @@ Status RunPartAnalysis(const PartArgs& args) {
   analysis["chosen_model"] = dec.systematic.name();
   analysis["systematic_rms_um"] = dec.systematic_rms_um;
   analysis["systematic_peak_um"] = dec.systematic_peak_um;
+  analysis["fine_scale_rms_um"] = dec.fine_scale_rms_um;
   analysis["random_rms_um"] = dec.random_rms_um;
   analysis["random_sigma_um"] = dec.random_sigma_um;
   analysis["form_error_um"] = dec.form_error_um;
@@ -674,7 +677,7 @@ Status RunPartAnalysis(const PartArgs& args) {
   if (lisa_random) {
     analysis["lisa_random"] = lisa_random->SummaryJson();
     analysis["lisa_random"]["of"] =
-        "the random part d_u (the chosen model's residual), same k-NN weights in (u, v), row-standardised";
+        "the random part d_u (the residual of the field and, when it ran, the spatial filter), same k-NN weights in (u, v), row-standardised";
     analysis["lisa_random"]["note"] =
         "d_u is a least-squares residual: its p-values are a screening approximation; the ladder's residual Moran "
         "z (Cliff-Ord) is the exact global test";
@@ -715,7 +718,9 @@ Status RunPartAnalysis(const PartArgs& args) {
           {"v", "foot-point parameter"},
           {"deviation", "signed normal deviation, um (positive = material left)"},
           {"systematic", "d_s at the point, um"},
-          {"random", "d_u = deviation - d_s, um"},
+          {"fine_scale", "d_f at the point, um: correlated structure finer than the field, taken out by the spatial "
+                         "filter when the field's residual is correlated (0 otherwise); never compensated"},
+          {"random", "d_u = deviation - d_s - d_f, um"},
           {"local_moran", "local Moran I_i of the deviations (dimensionless)"},
           {"lisa_cluster", "LISA cluster of the deviations: 0 not significant, 1 HH, 2 LH, 3 LL, 4 HL, 5 island"},
           {"local_moran_random", "local Moran I_i of the random part d_u (dimensionless; 0 when d_u is all zero)"},

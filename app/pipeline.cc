@@ -365,6 +365,8 @@ json LoopJson(const LoopSummary& l) {
           {"chosen_model", l.chosen_model},
           {"residual_moran_z", l.residual_moran_z},
           {"residual_independent", l.residual_independent},
+          {"field_residual_moran_z", l.field_residual_moran_z},
+          {"fine_scale_rms_um", l.fine_scale_rms_um},
           {"systematic_significant", l.systematic_significant},
           {"compensation_advised", l.compensation_advised},
           {"decision", l.decision}};
@@ -382,12 +384,14 @@ Result<LoopResult> AnalyseLoop(const PartSpec& part, const recon::BSplineSurface
   FL_ASSIGN_OR_RETURN(metrology::Decomposition decomposition,
                       metrology::Decompose(deviations, q.domain(), part.analysis));
   PointSet points = metrology::DeviationsToPoints(deviations);
-  std::vector<double> ds_um, du_um;
+  std::vector<double> ds_um, df_um, du_um;
   for (std::size_t i = 0; i < deviations.size(); ++i) {
     ds_um.push_back(decomposition.systematic_mm[i] * 1e3);
+    df_um.push_back(decomposition.fine_scale_mm[i] * 1e3);
     du_um.push_back(decomposition.random_mm[i] * 1e3);
   }
   points.SetScalar("systematic_um", std::move(ds_um));
+  points.SetScalar("fine_scale_um", std::move(df_um));
   points.SetScalar("random_um", std::move(du_um));
   FL_RETURN_IF_ERROR(AddLocalMoran(deviations, part.analysis.neighbours, seed, &points));
   FL_RETURN_IF_ERROR(WritePoints(loop_dir / "deviations.csv", points, {.precision = 6}));
@@ -406,7 +410,9 @@ Result<LoopResult> AnalyseLoop(const PartSpec& part, const recon::BSplineSurface
   ls.field_degree = decomposition.systematic.degree();
   ls.within_tolerance = evaluation.within_tolerance;
   ls.chosen_model = decomposition.systematic.name();
-  ls.residual_moran_z = chosen.residual_moran_z;
+  ls.residual_moran_z = decomposition.residual_moran_z;
+  ls.field_residual_moran_z = chosen.residual_moran_z;
+  ls.fine_scale_rms_um = decomposition.fine_scale_rms_um;
   ls.residual_independent = decomposition.independent;
   ls.systematic_significant = evaluation.systematic_significant;
   ls.compensation_advised = evaluation.compensate;

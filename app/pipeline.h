@@ -61,8 +61,10 @@ struct LoopSummary {
   bool within_tolerance = false;
   bool compensated = false;
   std::string chosen_model;
-  double residual_moran_z = 0;
+  double residual_moran_z = 0;        // of d_u
   bool residual_independent = false;
+  double field_residual_moran_z = 0;  // of y − d_s (differs when the spatial filter ran)
+  double fine_scale_rms_um = 0;       // d_f: correlated structure finer than the field, not compensated
   bool systematic_significant = false;
   bool compensation_advised = false;
   std::string decision;

@@ -666,6 +666,14 @@ Result<Decomposition> Decompose(const std::vector<Deviation>& deviations, const 
       if (m + 1 == ladder.size()) result.stop_reason = "the ladder ended at " + model.name();
     }
     result.independent = result.steps[static_cast<std::size_t>(result.chosen_step)].independent;
+    if (!result.independent && options.spatial_filter) {
+      SpatialFilterOptions filter_options = options.filter;
+      filter_options.z_critical = kMoranZCritical;
+      const Rows rows = BuildRows(current, uv);
+      FL_ASSIGN_OR_RETURN(SpatialFilter filter,
+                          FilterResidual(y, DenseDesign(rows, n, current.parameters()), weights, filter_options));
+      result.filter = std::move(filter);
+    }
     if (result.independent && result.stop_reason.rfind("the ladder ended", 0) == 0) {
       result.stop_reason = "the residual of the " + current.name() +
                            " model is spatially independent (z = " + Num(current_fit.z) +
@@ -678,11 +686,34 @@ Result<Decomposition> Decompose(const std::vector<Deviation>& deviations, const 
   }
 
   result.systematic = current;
+  result.field_independent = result.independent;
+  result.residual_moran_z = result.steps[static_cast<std::size_t>(result.chosen_step)].residual_moran_z;
   result.systematic_mm.resize(static_cast<std::size_t>(n));
+  result.fine_scale_mm.assign(static_cast<std::size_t>(n), 0.0);
   result.random_mm.resize(static_cast<std::size_t>(n));
   for (int i = 0; i < n; ++i) {
     result.random_mm[static_cast<std::size_t>(i)] = current_fit.residuals[i];
     result.systematic_mm[static_cast<std::size_t>(i)] = y[i] - current_fit.residuals[i];
+  }
+  if (result.filter) {
+    const SpatialFilter& f = *result.filter;
+    result.residual_moran_z = f.final.z;
+    result.independent = f.independent;
+    for (int i = 0; i < n; ++i) {
+      result.fine_scale_mm[static_cast<std::size_t>(i)] = f.fitted[i];
+      result.random_mm[static_cast<std::size_t>(i)] = current_fit.residuals[i] - f.fitted[i];
+    }
+    result.fine_scale_rms_um = 1e3 * Rms(result.fine_scale_mm);
+    result.fine_scale_peak_um = 1e3 * PeakAbs(result.fine_scale_mm);
+    result.fine_scale_assessment = FineScaleAssessment(f.z_before);
+    result.stop_reason += f.independent
+                              ? "; a spatial filter of " + std::to_string(f.vectors) +
+                                    " Moran eigenvector" + (f.vectors == 1 ? "" : "s") +
+                                    " takes the correlated fine-scale part d_f (RMS " + Num(result.fine_scale_rms_um) +
+                                    " um) out of the residual, leaving d_u independent (z = " + Num(f.final.z) +
+                                    "); d_f is " + result.fine_scale_assessment
+                              : "; the spatial filter did not make the residual independent (" + f.stop_reason +
+                                    ", z = " + Num(f.final.z) + ")";
   }
   const std::vector<double> all(y.data(), y.data() + n);
   result.deviation_rms_um = 1e3 * Rms(all);
@@ -700,6 +731,18 @@ Result<Decomposition> Decompose(const std::vector<Deviation>& deviations, const 
     FL_ASSIGN_OR_RETURN(result.evaluation, EvaluateForm(result, *options.tolerance_mm));
   }
   return result;
+}
+
+std::string FineScaleAssessment(double field_residual_z) {
+  const double p = NormalUpperTail(field_residual_z);
+  char p_text[32];
+  std::snprintf(p_text, sizeof p_text, "%.2g", p);
+  if (field_residual_z <= kFineScaleChanceZ) {
+    return "consistent with chance: an independent residual reaches the field's z = " + Num(field_residual_z) +
+           " with probability " + p_text;
+  }
+  return "not chance (the field's residual z = " + Num(field_residual_z) + ", p = " + p_text +
+         "): a real error finer than the field the probe points support; probe denser where it matters";
 }
 
 nlohmann::json Decomposition::ToJson() const {
@@ -723,12 +766,23 @@ nlohmann::json Decomposition::ToJson() const {
       {"chosen_model", systematic.name()},
       {"chosen_step", chosen_step},
       {"residual_independent", independent},
+      {"residual_moran_z", residual_moran_z},
+      {"field_residual_independent", field_independent},
+      {"spatial_filter", filter ? filter->ToJson() : nlohmann::json(nullptr)},
+      {"fine_scale_rms_um", fine_scale_rms_um},
+      {"fine_scale_peak_um", fine_scale_peak_um},
+      {"fine_scale_assessment", fine_scale_assessment.empty() ? nlohmann::json(nullptr) : nlohmann::json(fine_scale_assessment)},
+      {"fine_scale_note",
+       "d_f: spatially correlated structure finer than the field (chance at the 1 % level, or a real error finer than "
+       "the probe spacing); at the probe points only, never compensated"},
       {"stop_reason", stop_reason},
       {"selection_rule",
        "walk constant, plane, quadric, bicubic B-spline nets of increasing size; a richer model becomes current only "
        "if the CV guard accepts it (" +
            std::string(CvGuardRule(cv_guard)) +
-           "); stop at the first current model whose residual Moran z (Cliff-Ord, that model's design) is <= 2.326"},
+           "); stop at the first current model whose residual Moran z (Cliff-Ord, that model's design) is <= 2.326; "
+           "if the ladder ends on a correlated residual, a Moran eigenvector spatial filter takes the correlated part "
+           "out as d_f (y = d_s + d_f + d_u)"},
       {"cross_validation",
        {{"blocks_per_direction", cv_blocks},
         {"folds", cv_folds},

@@ -7,6 +7,7 @@
 #include "metrology/decomposition.h"
 
 #include <gtest/gtest.h>
+#include <Eigen/QR>
 
 #include <algorithm>
 #include <cmath>
@@ -118,8 +119,20 @@ void ExpectTheRuleWasFollowed(const Decomposition& d, CvGuard guard) {
   if (guard == CvGuard::kLowerHeldOutError) {
     for (const auto& s : d.steps) EXPECT_GE(s.cv_rms_um, d.steps[current].cv_rms_um);
   }
-  EXPECT_EQ(d.independent, d.steps[current].independent);
+  EXPECT_EQ(d.field_independent, d.steps[current].independent);
   EXPECT_EQ(d.steps[current].model, d.systematic.name());
+  // The filter runs exactly when the field's residual is correlated; d = d_s + d_f + d_u.
+  EXPECT_EQ(d.filter.has_value(), !d.field_independent);
+  if (d.filter) {
+    EXPECT_EQ(d.independent, d.filter->independent);
+    EXPECT_EQ(d.residual_moran_z, d.filter->final.z);
+    EXPECT_EQ(d.independent, d.residual_moran_z <= kMoranZCritical);
+    EXPECT_EQ(d.filter->final.p, d.systematic.parameters() + d.filter->vectors);
+  } else {
+    EXPECT_EQ(d.independent, d.field_independent);
+    EXPECT_EQ(d.residual_moran_z, d.steps[current].residual_moran_z);
+    for (double f : d.fine_scale_mm) EXPECT_EQ(f, 0);
+  }
 }
 
 std::string Rate(int k, int n) { return std::to_string(k) + "/" + std::to_string(n); }
@@ -134,6 +147,8 @@ std::string Seeds(const std::vector<int>& seeds) {
 // a 41 × 41 grid), pure noise (constant chosen) and a field of RMS σ (detected).
 struct ItemFourFigures {
   int independent = 0, recovered_points = 0, recovered_grid = 0, constant_on_noise = 0, detected = 0;
+  int field_independent = 0, filtered = 0, filter_vectors_max = 0;
+  double fine_scale_rms_max = 0;  // largest d_f RMS / σ where the filter ran
   std::vector<double> grid_errors;      // d_s RMS error on the grid / σ, sorted
   std::vector<int> model_counts = std::vector<int>(12, 0);
   std::vector<int> not_independent;     // seeds of the smooth fields whose chosen residual is correlated
@@ -154,7 +169,13 @@ void MeasureSmoothFields(const DecompositionOptions& options, ItemFourFigures* f
     const DecompositionStep& chosen = d->steps[static_cast<std::size_t>(d->chosen_step)];
     EXPECT_EQ(chosen.model, d->systematic.name());
     ++f->model_counts[static_cast<std::size_t>(d->chosen_step)];
-    if (d->independent && chosen.residual_moran_z <= kMoranZCritical) {
+    if (d->filter) {
+      ++f->filtered;
+      f->fine_scale_rms_max = std::max(f->fine_scale_rms_max, 1e-3 * d->fine_scale_rms_um / kSigmaMm);
+      f->filter_vectors_max = std::max(f->filter_vectors_max, d->filter->vectors);
+    }
+    if (d->field_independent) ++f->field_independent;
+    if (d->independent && d->residual_moran_z <= kMoranZCritical) {
       ++f->independent;
     } else {
       f->not_independent.push_back(seed);
@@ -213,28 +234,36 @@ void MeasureDetection(const DecompositionOptions& options, ItemFourFigures* f) {
 }
 
 // Claims 1 and 2 of issue 5 item 4: on smooth fields (RMS 1..4 σ) + noise with 1,000 points the
-// chosen model's residual passes the Moran test, and d_s is recovered to ≤ 30 % of σ RMS, both at
-// the points and on a 41 × 41 grid over the domain (the compensation evaluates d_s anywhere).
+// chosen model's residual d_u passes the Moran test in every seed, and d_s is recovered to ≤ 30 % of σ
+// RMS at the points in every seed (and on a 41 × 41 grid over the domain, where the compensation
+// evaluates it, in ≥ 95 %).
 TEST(DecompositionTest, SmoothFieldsGiveAnIndependentResidualAndRecoverTheField) {
   ItemFourFigures f;
   MeasureSmoothFields({}, &f);
-  std::printf("smooth fields, n = 1000: independent %s, d_s within 0.3 sigma at points %s, on grid %s\n",
+  std::printf("smooth fields, n = 1000: d_u independent %s, d_s within 0.3 sigma at points %s, on grid %s\n",
               Rate(f.independent, kSeeds).c_str(), Rate(f.recovered_points, kSeeds).c_str(),
               Rate(f.recovered_grid, kSeeds).c_str());
-  std::printf("  seeds whose chosen residual is correlated: %s; the noise alone fails the same test in %s: %s\n",
-              Seeds(f.not_independent).c_str(), Rate(static_cast<int>(f.noise_not_independent.size()), kSeeds).c_str(),
-              Seeds(f.noise_not_independent).c_str());
-  std::printf("  grid RMS error / sigma: median %.3f, 95th %.3f, max %.3f; chosen step counts:",
-              f.grid_errors[kSeeds / 2], f.grid_errors[kSeeds * 95 / 100], f.grid_errors.back());
+  std::printf("  the field's own residual independent %s (the noise alone fails the same test in %s: %s); "
+              "filtered %d, at most %d vectors, d_f RMS at most %.3f sigma\n",
+              Rate(f.field_independent, kSeeds).c_str(),
+              Rate(static_cast<int>(f.noise_not_independent.size()), kSeeds).c_str(),
+              Seeds(f.noise_not_independent).c_str(), f.filtered, f.filter_vectors_max, f.fine_scale_rms_max);
+  std::printf("  seeds whose d_u is correlated: %s; grid RMS error / sigma: median %.3f, 95th %.3f, max %.3f; "
+              "chosen step counts:",
+              Seeds(f.not_independent).c_str(), f.grid_errors[kSeeds / 2], f.grid_errors[kSeeds * 95 / 100],
+              f.grid_errors.back());
   for (int c : f.model_counts) std::printf(" %d", c);
   std::printf("\n");
-  EXPECT_GE(f.independent, kSeeds * 95 / 100);
-  EXPECT_GE(f.recovered_points, kSeeds * 95 / 100);
+  EXPECT_EQ(f.independent, kSeeds);
+  EXPECT_EQ(f.recovered_points, kSeeds);
   EXPECT_GE(f.recovered_grid, kSeeds * 95 / 100);
-  // "Every seed" cannot hold at test level 0.01 (see noise_not_independent). What the guard must not
-  // do is veto a model the data support: the failures stay within two seeds of the oracle's count
-  // (measured: 4 against 4, three of them the same seeds).
-  EXPECT_LE(kSeeds - f.independent, static_cast<int>(f.noise_not_independent.size()) + 2);
+  // The field itself cannot be independent in every seed at test level 0.01 (see
+  // noise_not_independent, and decomposition.h for the seeds where no ladder model is both
+  // independent and within 0.3 σ). What the guard must not do is veto a model the data support: the
+  // field's failures stay within two seeds of the oracle's count (measured: 3 against 4).
+  EXPECT_LE(kSeeds - f.field_independent, static_cast<int>(f.noise_not_independent.size()) + 2);
+  // What the filter takes out is fine-scale and small: chance structure, not the field.
+  EXPECT_LE(f.fine_scale_rms_max, 0.25);
 }
 
 // Claim 3: on pure noise the constant model is chosen in ≥ 95 % of seeds (the Moran test at 0.01
@@ -260,7 +289,7 @@ TEST(DecompositionTest, FieldOfOneSigmaIsDetectedWithAThousandPoints) {
 // Disabled by default (about four times the three tests above); run with
 //   formloop_metrology_tests --gtest_also_run_disabled_tests --gtest_filter='*CvGuardStudy*'
 TEST(DecompositionTest, DISABLED_CvGuardStudy) {
-  std::printf("%-40s %12s %12s %12s %12s %10s %10s  %s\n", "guard", "independent", "d_s@points", "d_s@grid",
+  std::printf("%-40s %12s %12s %12s %12s %10s %10s  %s\n", "guard, field independent", "d_u indep.", "d_s@points", "d_s@grid",
               "noise->const", "detected", "grid_max", "seeds not independent");
   for (CvGuard guard : {CvGuard::kLowerHeldOutError, CvGuard::kOneStandardError, CvGuard::kOneStandardErrorFolds,
                         CvGuard::kIndependentWithinOneStandardError}) {
@@ -270,7 +299,8 @@ TEST(DecompositionTest, DISABLED_CvGuardStudy) {
     MeasureSmoothFields(options, &f);
     MeasurePureNoise(options, &f);
     MeasureDetection(options, &f);
-    std::printf("%-40s %12s %12s %12s %12s %10s %10.3f  %s (noise alone: %s)\n", CvGuardName(guard),
+    std::printf("%-40s %12s %12s %12s %12s %10s %10.3f  %s (noise alone: %s)\n",
+                (std::string(CvGuardName(guard)) + ", field " + Rate(f.field_independent, kSeeds)).c_str(),
                 Rate(f.independent, kSeeds).c_str(), Rate(f.recovered_points, kSeeds).c_str(),
                 Rate(f.recovered_grid, kSeeds).c_str(), Rate(f.constant_on_noise, kSeeds).c_str(),
                 Rate(f.detected, kSeeds).c_str(), f.grid_errors.back(), Seeds(f.not_independent).c_str(),
@@ -366,11 +396,25 @@ TEST(DecompositionTest, BadInputIsRefusedWithAClearMessage) {
   ASSERT_TRUE(short_ladder.ok()) << short_ladder.status().message();
   for (const auto& s : short_ladder->steps) EXPECT_LE(s.parameters, 12) << s.model;
   // The field needs more than a quadric; the report says why the ladder stopped and what is left.
-  EXPECT_FALSE(short_ladder->independent);
+  EXPECT_FALSE(short_ladder->field_independent);
   EXPECT_NE(short_ladder->stop_reason.find("bspline 4x4 model (16 parameters) needs 80 points; there are 60"),
             std::string::npos)
       << short_ladder->stop_reason;
   EXPECT_NE(short_ladder->stop_reason.find("leaves a spatially correlated residual"), std::string::npos);
+  // The filter takes the correlated rest out as d_f (at the points only, never compensated) and says so.
+  ASSERT_TRUE(short_ladder->filter.has_value());
+  EXPECT_GT(short_ladder->filter->vectors, 0);
+  EXPECT_GT(short_ladder->fine_scale_rms_um, 0);
+  EXPECT_NE(short_ladder->stop_reason.find("spatial filter"), std::string::npos) << short_ladder->stop_reason;
+  // Without the filter d_u stays correlated and the report says so.
+  DecompositionOptions no_filter;
+  no_filter.spatial_filter = false;
+  const auto unfiltered = Decompose(Sample(3, 60, field), kDomain, no_filter);
+  ASSERT_TRUE(unfiltered.ok());
+  EXPECT_FALSE(unfiltered->independent);
+  EXPECT_FALSE(unfiltered->filter.has_value());
+  EXPECT_EQ(unfiltered->systematic.name(), short_ladder->systematic.name());
+  EXPECT_EQ(unfiltered->systematic_mm, short_ladder->systematic_mm);
 
   auto with_nan = Sample(3, 100, field);
   with_nan[41].deviation_mm = std::nan("");
@@ -416,6 +460,47 @@ TEST(DecompositionTest, EqualDeviationsAreAConstantOffset) {
   EXPECT_TRUE(d->independent);
   EXPECT_NE(d->stop_reason.find("all deviations are equal"), std::string::npos);
   EXPECT_EQ(d->random_sigma_um, 0);
+}
+
+// Why the filter and not a richer field: on seeds 127, 145 and 164 of the smooth-field test no model
+// of the ladder, up to the 14 × 14 net (196 parameters, the most 1,000 points allow at 5 points per
+// parameter), is both independent (z ≤ 2.326) and within 0.3 σ RMS of the true field at the points.
+// (Seed 127's noise alone has z = 2.75.) Each model is fitted by least squares on its own.
+TEST(DecompositionTest, OnSomeSeedsNoLadderModelIsBothIndependentAndAccurate) {
+  for (int seed : {127, 145, 164}) {
+    Rng pick(static_cast<std::uint64_t>(seed) * 7919);
+    const SmoothField field(static_cast<std::uint64_t>(seed), kSigmaMm * pick.Uniform(1.0, 4.0));
+    std::vector<double> truth;
+    const auto deviations = Sample(static_cast<std::uint64_t>(seed), 1000, field, &truth);
+    const Eigen::Index n = static_cast<Eigen::Index>(truth.size());
+    Eigen::MatrixXd uv(2, n);
+    Eigen::VectorXd y(n);
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const auto k = static_cast<std::size_t>(i);
+      uv.col(i) << deviations[k].u, deviations[k].v;
+      y[i] = deviations[k].deviation_mm;
+    }
+    const auto w = KnnWeights(uv, 8, WeightStyle::kRowStandardised);
+    ASSERT_TRUE(w.ok());
+    std::printf("seed %d:", seed);
+    for (int rung = 0; rung <= 13; ++rung) {  // 0..2 polynomials, then nets 4..14
+      auto m = rung <= 2 ? FieldModel::Polynomial(rung, kDomain) : FieldModel::BSpline(rung + 1, kDomain);
+      ASSERT_TRUE(m.ok());
+      Eigen::MatrixXd x(n, m->parameters());
+      for (Eigen::Index i = 0; i < n; ++i) {
+        x.row(i) = m->Basis(deviations[static_cast<std::size_t>(i)].u, deviations[static_cast<std::size_t>(i)].v);
+      }
+      const auto r = ResidualMoranI(y, x, *w);
+      ASSERT_TRUE(r.ok());
+      const Eigen::VectorXd fit = y - r->residuals;
+      double e2 = 0;
+      for (Eigen::Index i = 0; i < n; ++i) e2 += std::pow(fit[i] - truth[static_cast<std::size_t>(i)], 2);
+      const double error = std::sqrt(e2 / static_cast<double>(n)) / kSigmaMm;
+      std::printf(" %s z %.2f err %.2f;", m->name().c_str(), r->z, error);
+      EXPECT_FALSE(r->z <= kMoranZCritical && error <= 0.3) << "seed " << seed << ", " << m->name();
+    }
+    std::printf("\n");
+  }
 }
 
 }  // namespace
