@@ -70,6 +70,9 @@ Status SphereCalibrationOptions::Validate() const {
     return Status::BadInput(Where{.field = "same_elevation_tolerance"}, "must be in (0, 0.5)");
   }
   if (max_iterations < 1) return Status::BadInput(Where{.field = "max_iterations"}, "must be >= 1");
+  if (!(amplitude_target_relative > 0 && amplitude_target_relative <= 1)) {
+    return Status::BadInput(Where{.field = "amplitude_target_relative"}, "must be in (0, 1]");
+  }
   return Status::Ok();
 }
 
@@ -366,6 +369,22 @@ Result<SphereCalibrationReport> CalibrateOnSphere(const ProbeLog& log, const Sph
     (b.is_sine ? it->sin_mm : it->cos_mm) = x(4 + t);
     (b.is_sine ? it->sin_se_mm : it->cos_se_mm) = se(4 + static_cast<int>(t));
   }
+  for (FittedLobingTerm& t : report.terms) {
+    if (t.k == 0) continue;
+    t.amplitude_mm = std::hypot(t.cos_mm, t.sin_mm);
+    if (t.amplitude_mm > 0) {
+      t.amplitude_se_mm = std::hypot(t.cos_mm * t.cos_se_mm, t.sin_mm * t.sin_se_mm) / t.amplitude_mm;
+    }
+    const double target_mm = options.amplitude_target_relative * t.amplitude_mm;
+    if (t.j != 0 || !(t.amplitude_mm > 3 * t.amplitude_se_mm) || 2 * t.amplitude_se_mm <= target_mm) continue;
+    const double ratio = 2 * t.amplitude_se_mm / target_mm;
+    t.points_for_target = 1 + static_cast<int>(std::ceil((n - 1) * ratio * ratio));
+    warn("the k = " + std::to_string(t.k) + " lobing amplitude " + FormatFixed(t.amplitude_mm * 1e3, 2) +
+         " µm is known to ±" + FormatFixed(2 * t.amplitude_se_mm * 1e3, 2) + " µm (k = 2), " +
+         FormatFixed(200 * t.amplitude_se_mm / t.amplitude_mm, 0) + " % of it; for ±" +
+         FormatFixed(100 * options.amplitude_target_relative, 0) + " % probe about " +
+         std::to_string(t.points_for_target) + " points (or repeat the pattern)");
+  }
   Status valid = profile.Validate();
   if (!valid.ok()) {
     return Status::BadInput(Where{.file = file}, "the calibrated pretravel is not plausible: " + valid.message(),
@@ -394,7 +413,9 @@ nlohmann::json SphereCalibrationReport::ToJson() const {
     if (t.k > 0) {
       term["sin_mm"] = t.sin_mm;
       term["sin_se_mm"] = t.sin_se_mm;
-      term["amplitude_mm"] = std::hypot(t.cos_mm, t.sin_mm);
+      term["amplitude_mm"] = t.amplitude_mm;
+      term["amplitude_se_mm"] = t.amplitude_se_mm;
+      if (t.points_for_target > 0) term["points_for_target"] = t.points_for_target;
     }
     terms_json.push_back(term);
   }

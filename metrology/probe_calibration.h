@@ -64,6 +64,10 @@ struct SphereCalibrationOptions {
   // identifiability of the elevation terms). 0.02 ≈ 1.1° at the equator.
   double same_elevation_tolerance = 0.02;
   int max_iterations = 50;  // Gauss-Newton steps; converges in 3-5 from the algebraic start
+  // Wanted relative expanded uncertainty (k = 2) of each fitted lobing amplitude (k ≥ 2, j = 0). When a
+  // significant amplitude (A > 3 se) is known less well, a warning gives the point count that would
+  // reach it (see FittedLobingTerm::points_for_target). 0.10 = 10 % of A.
+  double amplitude_target_relative = 0.10;
   Status Validate() const;
 };
 
@@ -82,6 +86,12 @@ struct FittedLobingTerm {
   int k = 0, j = 0;
   double cos_mm = 0, sin_mm = 0;
   double cos_se_mm = 0, sin_se_mm = 0;  // standard errors (sin_se_mm = 0 for k = 0)
+  // k > 0: amplitude A = √(c² + s²) and its standard error by the delta method, √((c·se_c)² + (s·se_s)²)/A
+  // (the c, s covariance neglected: the ring designs make it small), and the points that would bring
+  // 2·se to options.amplitude_target_relative · A: the variance falls as 1/(points off the pole), so
+  // 1 + ⌈(points − 1)(2·se / (target · A))²⌉ (0 when the target is already met).
+  double amplitude_mm = 0, amplitude_se_mm = 0;
+  int points_for_target = 0;
 };
 
 struct SphereCalibrationReport {

@@ -4,6 +4,7 @@
 // Every fixture is a seeded synthetic sphere log (GenerateSphereProbeLog) with a known true probe, so
 // recovered coefficients are compared with the truth, not with stored numbers.
 
+#include <algorithm>
 #include <cmath>
 #include <complex>
 #include <cstdio>
@@ -334,6 +335,90 @@ TEST(SphereCalibrationTest, TriLobeIsRecoveredWithinTenPercentWhereTheNoiseAllow
 }
 
 // Elevation-dependent lobing g_3(φ) = 1 − 0.6 sin φ is recovered with --elevation-degree 1 from 100 points.
+// Where the noise does not allow 10 %, the calibration says so and how many points would: at A = 2 µm
+// from 25 points the amplitude's expanded uncertainty is about 15 % of A; the advised count then
+// brings it within 10 %. At A = 10 µm from 25 points nothing is advised.
+TEST(SphereCalibrationTest, AdvisesThePointCountForATenPercentAmplitude) {
+  auto term3 = [](const SphereCalibrationReport& cal) {
+    for (const auto& t : cal.terms) {
+      if (t.k == 3 && t.j == 0) return t;
+    }
+    return FittedLobingTerm{};
+  };
+  SphereLogOptions o;
+  o.probe = TrueProbe(2.0, 0.7);
+  o.points = 25;
+  o.seed = 3;
+  auto cal = CalibrateOnSphere(*GenerateSphereProbeLog(o), CalibrationOptions());
+  ASSERT_TRUE(cal.ok());
+  const FittedLobingTerm t = term3(*cal);
+  EXPECT_NEAR(t.amplitude_mm, 2e-3, 0.5e-3);
+  EXPECT_GT(2 * t.amplitude_se_mm, 0.1 * t.amplitude_mm);
+  EXPECT_GE(t.points_for_target, 40);
+  EXPECT_LE(t.points_for_target, 90);
+  const bool warned = std::any_of(cal->warnings.begin(), cal->warnings.end(), [&](const std::string& w) {
+    return w.find("k = 3 lobing amplitude") != std::string::npos &&
+           w.find("probe about " + std::to_string(t.points_for_target) + " points") != std::string::npos;
+  });
+  EXPECT_TRUE(warned);
+  EXPECT_EQ(cal->ToJson()["fit"]["terms"].size(), cal->terms.size());
+
+  o.points = t.points_for_target;
+  auto more = CalibrateOnSphere(*GenerateSphereProbeLog(o), CalibrationOptions());
+  ASSERT_TRUE(more.ok());
+  const FittedLobingTerm t_more = term3(*more);
+  std::printf("A = 2 um: 25 points give +-%.3f um (k = 2); the advised %d points give +-%.3f um\n",
+              2e3 * t.amplitude_se_mm, t.points_for_target, 2e3 * t_more.amplitude_se_mm);
+  EXPECT_LE(2 * t_more.amplitude_se_mm, 0.11 * 2e-3);  // σ̂ itself varies by ±10 % or so
+
+  o.probe = TrueProbe(10.0, 0.7);
+  o.points = 25;
+  auto big = CalibrateOnSphere(*GenerateSphereProbeLog(o), CalibrationOptions());
+  ASSERT_TRUE(big.ok());
+  EXPECT_EQ(term3(*big).points_for_target, 0);
+  for (const auto& w : big->warnings) EXPECT_EQ(w.find("lobing amplitude"), std::string::npos) << w;
+}
+
+// The study behind the note on item 3 (run with --gtest_also_run_disabled_tests): for each point count
+// and amplitude, 500 seeds of random phase; the share of seeds whose amplitude |Â − A| and complex
+// coefficient |ĉ₃ − c₃| are within 10 % of A, the empirical RMS of the complex error per component
+// against the design's σ√(2/m) (m = points − 1 off the pole), and the share an efficient unbiased
+// estimator would reach, P(|N(0, se)| ≤ 0.1 A) with se = the RMS per component measured.
+TEST(SphereCalibrationTest, DISABLED_TriLobeRecoveryStudy) {
+  std::printf("%6s %6s %10s %10s %12s %12s %12s\n", "points", "A_um", "|dA|<=10%", "|dc|<=10%", "rms_comp_um",
+              "sqrt(2/m)s", "efficient");
+  for (int points : {25, 50, 100}) {
+    for (double amplitude_um : {2.0, 3.0, 5.0, 10.0}) {
+      int amp_ok = 0, complex_ok = 0;
+      double sum2 = 0;
+      const int seeds = 500;
+      for (int seed = 1; seed <= seeds; ++seed) {
+        Rng rng(50000 + static_cast<std::uint64_t>(seed));
+        const double phase = rng.Uniform(0, 2 * kPi);
+        SphereLogOptions o;
+        o.probe = TrueProbe(amplitude_um, phase);
+        o.points = points;
+        o.seed = static_cast<std::uint64_t>(seed) + 7000;
+        Result<ProbeLog> log = GenerateSphereProbeLog(o);
+        ASSERT_TRUE(log.ok());
+        Result<SphereCalibrationReport> cal = CalibrateOnSphere(*log, CalibrationOptions());
+        ASSERT_TRUE(cal.ok());
+        const double a_mm = amplitude_um * 1e-3;
+        const std::complex<double> dc = TriLobeAt(cal->profile.lobing, 0) - TriLobeAt(o.probe.lobing, 0);
+        sum2 += std::norm(dc) / 2;
+        amp_ok += std::abs(std::abs(TriLobeAt(cal->profile.lobing, 0)) - a_mm) <= 0.1 * a_mm;
+        complex_ok += std::abs(dc) <= 0.1 * a_mm;
+      }
+      const double rms_um = 1e3 * std::sqrt(sum2 / seeds);
+      const double design_um = 0.5 * std::sqrt(2.0 / (points - 1));
+      const double efficient = std::erf(0.1 * amplitude_um / (rms_um * std::sqrt(2.0)));
+      std::printf("%6d %6.1f %9.1f%% %9.1f%% %12.4f %12.4f %11.1f%%\n", points, amplitude_um, 100.0 * amp_ok / seeds,
+                  100.0 * complex_ok / seeds, rms_um, design_um, 100 * efficient);
+      std::fflush(stdout);
+    }
+  }
+}
+
 TEST(SphereCalibrationTest, ElevationDependentLobingIsRecoveredWithDegreeOne) {
   for (std::uint64_t seed = 1; seed <= 5; ++seed) {
     SphereLogOptions o;
