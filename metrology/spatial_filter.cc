@@ -76,7 +76,12 @@ Result<SpatialFilter> FilterResidual(const Eigen::VectorXd& y, const Eigen::Matr
   const FilterOperator op(q, weights);
 
   // Lanczos with full reorthogonalisation, started at e.
-  const int m_max = static_cast<int>(std::min<Eigen::Index>(options.krylov_dimension, n - p - 1));
+  const int m_max = static_cast<int>(std::min<Eigen::Index>(options.krylov_dimension, n - p - 4));
+  if (m_max < 1) {
+    filter.stop_reason = "no degrees of freedom left for a filter vector (n = " + std::to_string(n) +
+                         ", p = " + std::to_string(p) + ")";
+    return filter;
+  }
   Eigen::MatrixXd v(n, m_max);
   std::vector<double> alpha, beta;
   v.col(0) = e / e_norm;
