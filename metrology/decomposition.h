@@ -180,7 +180,7 @@ struct DecompositionOptions {
   // part" above); false leaves d_u correlated and says so.
   bool spatial_filter = true;
   SpatialFilterOptions filter;       // its z_critical is always kMoranZCritical
-  double coverage_factor = 2.0;      // k in form error = max|d_s| + k σ(d_u); 2 ≈ 95 % for normal d_u
+  double coverage_factor = 2.0;      // k in form error = max|d_s| + k σ (σ as below); 2 ≈ 95 % if normal
   std::optional<double> tolerance_mm;  // α; when given, Decompose also fills Decomposition::evaluation
   Status Validate() const;
 };
@@ -203,7 +203,7 @@ struct DecompositionStep {
 // §8: the decomposition measured against α.
 struct FormEvaluation {
   double tolerance_um = 0;   // α
-  double form_error_um = 0;  // max|d_s| + k σ(d_u)
+  double form_error_um = 0;  // max|d_s| + k · random_sigma_um
   bool within_tolerance = false;
   bool systematic_significant = false;  // non-constant model, or a constant offset beyond 2.576 standard errors
   bool compensate = false;              // out of tolerance and systematic_significant
@@ -231,9 +231,9 @@ struct Decomposition {
   double systematic_peak_um = 0, systematic_rms_um = 0;
   double random_rms_um = 0, random_peak_um = 0;
   double random_sigma_um = 0;  // sqrt(Σ (d_f + d_u)² / (n − p)): what compensating d_s leaves
-  double mean_offset_um = 0;   // mean deviation and its standard error σ(d_u)/√n
+  double mean_offset_um = 0;   // mean deviation and its standard error random_sigma_um/√n
   double mean_offset_se_um = 0;
-  double form_error_um = 0;  // max|d_s| + k σ(d_u)
+  double form_error_um = 0;  // max|d_s| + k · random_sigma_um
   double coverage_factor = 2.0;
   int cv_blocks = 0, cv_folds = 0;
   std::uint64_t cv_seed = 0;

@@ -406,6 +406,11 @@ TEST(DecompositionTest, BadInputIsRefusedWithAClearMessage) {
   EXPECT_GT(short_ladder->filter->vectors, 0);
   EXPECT_GT(short_ladder->fine_scale_rms_um, 0);
   EXPECT_NE(short_ladder->stop_reason.find("spatial filter"), std::string::npos) << short_ladder->stop_reason;
+  // What is left of a 5 σ field beyond a quadric is no chance structure, and the report says so.
+  EXPECT_GT(short_ladder->filter->z_before, kFineScaleChanceZ);
+  EXPECT_EQ(short_ladder->fine_scale_assessment.rfind("not chance", 0), 0u) << short_ladder->fine_scale_assessment;
+  EXPECT_EQ(FineScaleAssessment(2.5).rfind("consistent with chance", 0), 0u);
+  EXPECT_NE(FineScaleAssessment(2.5).find("0.0062"), std::string::npos) << FineScaleAssessment(2.5);
   // Without the filter d_u stays correlated and the report says so.
   DecompositionOptions no_filter;
   no_filter.spatial_filter = false;

@@ -132,29 +132,15 @@ TEST(SpatialFilterTest, ABudgetTooSmallSaysSo) {
   EXPECT_NE(f->stop_reason.find("budget of 1 filter vectors is spent"), std::string::npos) << f->stop_reason;
   EXPECT_GT(f->final.z, 2.326);
 
-  // Few degrees of freedom: 12 values with 6 columns leave n − p − 4 = 2 for filter vectors, with 9
-  // columns none; the filter stays within them and says why it stopped, it does not fail.
-  {
-    const Scene tiny = MakeScene(12, 33);
-    Eigen::MatrixXd x6(12, 6);
-    for (int i = 0; i < 12; ++i) {
-      const double u = tiny.uv(0, i), v = tiny.uv(1, i);
-      x6.row(i) << 1, u, v, u * u, u * v, v * v;
-    }
-    Eigen::MatrixXd x9(12, 9);
-    for (int i = 0; i < 12; ++i) {
-      const double u = tiny.uv(0, i), v = tiny.uv(1, i);
-      x9.row(i) << 1, u, v, u * u, u * v, v * v, u * u * u, u * u * v, u * v * v;
-    }
-    Eigen::VectorXd yt(12);
-    for (int i = 0; i < 12; ++i) yt[i] = (i % 2 == 0 ? 1.0 : -1.0) + 0.1 * i;
-    for (const Eigen::MatrixXd* x : {&x6, &x9}) {
-      auto small = FilterResidual(yt, *x, tiny.weights);
-      if (!small.ok()) continue;  // the residual Moran itself may refuse so few degrees of freedom
-      EXPECT_LE(small->vectors, std::max(0, 12 - static_cast<int>(x->cols()) - 4));
-      EXPECT_FALSE(small->stop_reason.empty());
-    }
-  }
+  // A budget of none leaves the residual as it was and says so.
+  o.max_vectors = 0;
+  auto none = FilterResidual(y, s.design, s.weights, o);
+  ASSERT_TRUE(none.ok());
+  EXPECT_EQ(none->vectors, 0);
+  EXPECT_FALSE(none->independent);
+  EXPECT_EQ(none->fitted, Eigen::VectorXd::Zero(800));
+  EXPECT_EQ(none->final.z, none->z_before);
+  EXPECT_NE(none->stop_reason.find("budget of 0 filter vectors is spent"), std::string::npos) << none->stop_reason;
 
   o.max_vectors = -1;
   auto bad = FilterResidual(y, s.design, s.weights, o);
