@@ -1,94 +1,9 @@
 #include "app/case_knowledge.h"
 
-#include <algorithm>
-#include <cmath>
-#include <map>
-
-#include <fmt/format.h>
-
+#include "planning/case_plan.h"
 #include "retrieval/starter.h"
 
 namespace formloop::app {
-namespace {
-
-double NumberAt(const nlohmann::json& j, std::initializer_list<const char*> path, double fallback) {
-  const nlohmann::json* node = &j;
-  for (const char* key : path) {
-    if (!node->is_object() || !node->contains(key)) return fallback;
-    node = &(*node)[key];
-  }
-  return node->is_number() ? node->get<double>() : fallback;
-}
-
-}  // namespace
-
-std::string ToolKey(double radius_mm) { return fmt::format("ball r{:g}", radius_mm); }
-
-nc::BallEndTool NearestTool(const PartSpec& part, double radius_mm) {
-  nc::BallEndTool best = part.toolpath.tool;
-  double best_gap = std::abs(best.radius_mm - radius_mm);
-  for (const auto& tool : part.tools) {
-    const double gap = std::abs(tool.radius_mm - radius_mm);
-    if (gap < best_gap - 1e-12 || (std::abs(gap - best_gap) <= 1e-12 && tool.radius_mm < best.radius_mm)) {
-      best = tool;
-      best_gap = gap;
-    }
-  }
-  return best;
-}
-
-nc::ToolpathOptions PlanFromCase(const kb::CaseRecord& record, const PartSpec& part, nlohmann::json* notes) {
-  nc::ToolpathOptions plan = part.toolpath;
-  const nlohmann::json& m = record.manufacturing;
-  nlohmann::json from_case = nlohmann::json::object();
-  if (m.contains("tools") && m["tools"].is_array() && !m["tools"].empty()) {
-    const double r = NumberAt(m["tools"][0], {"radius_mm"}, plan.tool.radius_mm);
-    plan.tool = NearestTool(part, r);
-    from_case["tool"] = {{"case_radius_mm", r}, {"magazine_tool", plan.tool.number},
-                         {"radius_mm", plan.tool.radius_mm}};
-  }
-  const double scallop = NumberAt(m, {"strategy", "scallop_um"}, -1);
-  if (scallop > 0) {
-    plan.scallop_um = scallop;
-    from_case["scallop_um"] = scallop;
-  }
-  const double angle = NumberAt(m, {"strategy", "raster_angle_deg"}, std::nan(""));
-  if (std::isfinite(angle)) {
-    plan.raster_angle_deg = angle;
-    from_case["raster_angle_deg"] = angle;
-  }
-  const double feed = NumberAt(m, {"feeds", "feed_mm_per_min"}, -1);
-  if (feed > 0) {
-    plan.feed_mm_per_min = std::min(feed, part.limits.max_feed_mm_per_min);
-    from_case["feed_mm_per_min"] = plan.feed_mm_per_min;
-  }
-  const double rpm = NumberAt(m, {"feeds", "spindle_rpm"}, -1);
-  if (rpm > 0) {
-    plan.spindle_rpm = std::min(rpm, part.limits.max_spindle_rpm);
-    from_case["spindle_rpm"] = plan.spindle_rpm;
-  }
-  if (notes != nullptr) {
-    *notes = {{"case", record.uid},
-              {"from_case", from_case},
-              {"kept_from_part", "chord tolerance, point spacing, leads, clearance, plunge feed, zig-zag"}};
-  }
-  return plan;
-}
-
-std::optional<sim::Model> LearnedModelOf(const kb::CaseRecord& record, const std::string& machine,
-                                         const std::string& tool_key, const std::string& material) {
-  const nlohmann::json models = record.simulation.value("effect_models", nlohmann::json::array());
-  if (!models.is_array()) return std::nullopt;
-  for (const auto& entry : models) {
-    if (!entry.is_object() || entry.value("machine", "") != machine || entry.value("tool", "") != tool_key ||
-        entry.value("material", "") != material || !entry.contains("model")) {
-      continue;
-    }
-    auto model = sim::Model::FromJson(entry["model"], "case " + record.uid + " learned model");
-    if (model.ok()) return std::move(model).value();
-  }
-  return std::nullopt;
-}
 
 retrieval::PartDescription DescriptionOf(const PartSpec& part, const nc::ToolpathOptions& plan) {
   retrieval::PartDescription d;
@@ -121,7 +36,7 @@ Result<kb::CaseRecord> MakeRetainedCase(const RetainInput& in) {
   const auto& d = in.features->descriptors;
   record.descriptor = std::vector<double>(d.data(), d.data() + d.size());
   record.concepts = in.features->Concepts();
-  const std::string tool = ToolKey(in.plan.tool.radius_mm);
+  const std::string tool = planning::ToolKey(in.plan.tool.radius_mm);
   if (in.learned) {
     nlohmann::json rows = nlohmann::json::array();
     for (const auto& e : in.learned->effects) {

@@ -1,7 +1,7 @@
 #pragma once
-// What the pipeline takes from a retrieved case and what it gives back (spec/case-library.md §1, §6):
-// the case's plan adapted to the new part, the learned model for this machine/tool/material, and the
-// case the finished run retains (new, or an update of the same part's case).
+// What the pipeline gives the case library (spec/case-library.md §1, §6): the part's retrieval
+// description and the case the finished run retains (new, or an update of the same part's case). What it
+// takes from a retrieved case (the plan, the learned model) is planning/case_plan.h.
 
 #include <optional>
 #include <string>
@@ -15,20 +15,6 @@
 #include "simulation/model.h"
 
 namespace formloop::app {
-
-// "ball r3" — the tool key of learned models.
-std::string ToolKey(double radius_mm);
-
-// The magazine tool nearest to `radius_mm` (the smaller one on a tie).
-nc::BallEndTool NearestTool(const PartSpec& part, double radius_mm);
-
-// The part's plan with the case's choices: tool (nearest in the magazine), scallop target, raster angle,
-// feed and spindle speed. `notes` lists what came from the case and what stayed the part's.
-nc::ToolpathOptions PlanFromCase(const kb::CaseRecord& record, const PartSpec& part, nlohmann::json* notes);
-
-// The case's learned model for machine / tool / material (simulation.effect_models[].model), if stored.
-std::optional<sim::Model> LearnedModelOf(const kb::CaseRecord& record, const std::string& machine,
-                                         const std::string& tool_key, const std::string& material);
 
 // The retrieval description of a part (retrieval::PartDescription) from its part file.
 retrieval::PartDescription DescriptionOf(const PartSpec& part, const nc::ToolpathOptions& plan);

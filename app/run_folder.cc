@@ -4,7 +4,9 @@
 #include <set>
 #include <string>
 
+#include "core/atomic_file.h"
 #include "core/json_io.h"
+#include "core/log.h"
 #include "core/point_io.h"
 #include "nc-gen/cutter_locations.h"
 #include "nc-gen/toolpath_io.h"
@@ -137,7 +139,93 @@ Result<PlanWithApproaches> ReadPlanCsv(const fs::path& path) {
   return out;
 }
 
+// "3/9: retrieval" -> "retrieval": the name the stage timer gets.
+std::string StageName(const std::string& stage) {
+  const auto colon = stage.find(':');
+  return colon == std::string::npos ? stage : stage.substr(colon + 2);
+}
+
 }  // namespace
+
+RunFolderWriter::RunFolderWriter(fs::path out, StageTimer on_stage)
+    : out_(std::move(out)), on_stage_(std::move(on_stage)) {
+  dir_ = out_;
+  dir_ += ".partial";
+  failed_ = out_;
+  failed_ += ".failed";
+}
+
+RunFolderWriter::~RunFolderWriter() {
+  if (logging_) log::StopFileLog();
+}
+
+Status RunFolderWriter::Open(bool force, const std::string& what) {
+  if (out_.empty()) return Status::BadInput(Where{.field = "--out"}, "no run folder given");
+  std::error_code ec;
+  if (fs::exists(out_, ec) && !force) {
+    return Status::BadInput(Where{.field = "--out"}, "run folder '" + out_.string() + "' already exists",
+                            "choose another folder or pass --force to replace it");
+  }
+  if (out_.has_parent_path() && !fs::exists(out_.parent_path(), ec)) {
+    FL_RETURN_IF_ERROR(MakeDirectories(out_.parent_path()));
+  }
+  if (fs::exists(dir_ / "status.json", ec)) {
+    auto previous = ReadJsonFile(dir_ / "status.json");
+    log::Warn("an incomplete run of '{}' was found in {} (stopped at: {}); starting it again", what, dir_.string(),
+              previous.ok() ? previous->value("stage", "?") : "?");
+  }
+  fs::remove_all(dir_, ec);
+  FL_RETURN_IF_ERROR(MakeDirectories(dir_));
+  FL_RETURN_IF_ERROR(log::StartFileLog(dir_ / "formloop.log"));
+  logging_ = true;
+  return Status::Ok();
+}
+
+std::string RunFolderWriter::Relative(const fs::path& path) const { return fs::relative(path, dir_).string(); }
+
+Status RunFolderWriter::Begin(const std::string& stage) {
+  EndStage();
+  stage_ = stage;
+  start_ = std::chrono::steady_clock::now();
+  return WriteJsonFile(dir_ / "status.json", {{"state", "incomplete"}, {"stage", stage}});
+}
+
+void RunFolderWriter::EndStage() {
+  if (stage_.empty()) return;
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  if (on_stage_) on_stage_(StageName(stage_), s);
+  stage_.clear();
+}
+
+Status RunFolderWriter::MakeFolder(const fs::path& relative) const { return MakeDirectories(dir_ / relative); }
+
+Status RunFolderWriter::WriteJson(const fs::path& relative, const Json& value) const {
+  if (relative.has_parent_path()) FL_RETURN_IF_ERROR(MakeFolder(relative.parent_path()));
+  return WriteJsonFile(dir_ / relative, value);
+}
+
+Status RunFolderWriter::WriteText(const fs::path& relative, std::string_view text) const {
+  if (relative.has_parent_path()) FL_RETURN_IF_ERROR(MakeFolder(relative.parent_path()));
+  return WriteFileAtomic(dir_ / relative, text);
+}
+
+Status RunFolderWriter::MarkComplete() const { return WriteJsonFile(dir_ / "status.json", {{"state", "complete"}}); }
+
+Status RunFolderWriter::Close(const Status& status, const std::string& what) {
+  if (logging_) log::StopFileLog();
+  logging_ = false;
+  std::error_code ec;
+  if (!status.ok()) {
+    fs::remove_all(failed_, ec);
+    fs::rename(dir_, failed_, ec);
+    return status.WithContext(what + " (log and partial outputs in " + failed_.string() + ")");
+  }
+  fs::remove_all(out_, ec);
+  fs::remove_all(failed_, ec);
+  fs::rename(dir_, out_, ec);
+  if (ec) return Status::IoError("cannot rename '" + dir_.string() + "' to '" + out_.string() + "': " + ec.message());
+  return Status::Ok();
+}
 
 Result<PlanWithApproaches> ReadPlanFile(const fs::path& path) {
   if (path.extension() == ".csv") return ReadPlanCsv(path);

@@ -375,6 +375,9 @@ Result<Compensation> WriteCompensatedProgram(const Toolpath& nominal, const std:
     std::filesystem::remove(side_path, ec);
     return s;
   }
+  compensation.program = std::move(program);
+  compensation.program_moves = std::move(moves);
+  compensation.check_max_disagreement_um = report.max_side_difference_um;
   return compensation;
 }
 

@@ -45,6 +45,12 @@ struct Compensation {
   std::vector<CompensationEntry> entries; // one per CL point
   double max_offset_um = 0;
   std::string source;                     // e.g. "systematic field (Legendre degree 2) from loop 0"
+  // Filled by WriteCompensatedProgram: the program as written, its moves as read back for the check,
+  // and the check's largest disagreement between a side-file offset and the offset recomputed from the
+  // two programs (µm; the program resolution limits it to about 0.1 µm).
+  std::string program;
+  std::vector<ProgramMove> program_moves;
+  double check_max_disagreement_um = 0;
 };
 
 // d_s(u, v) in mm at the CC point's parameters; loops pass the sum of every loop's field.
@@ -128,7 +134,7 @@ Result<CheckReport> CheckCompensation(const std::vector<ProgramMove>& nominal,
 // an offset above options.max_offset_um with SafetyLimit), the post of `dialect` (the nominal program
 // must be in the same dialect), read back both programs,
 // AssignProgramLines, CheckCompensation against the field; then the program and the side file are
-// written atomically (side file first; should the program then fail to write, the side file is
+// written atomically (the result carries the program, its moves and the check's largest disagreement) (side file first; should the program then fail to write, the side file is
 // removed). On any refusal or failed check neither file is written.
 Result<Compensation> WriteCompensatedProgram(const Toolpath& nominal, const std::string& nominal_program,
                                              const SystematicField& systematic, const std::string& source,

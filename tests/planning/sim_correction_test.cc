@@ -1,9 +1,9 @@
-// The simulation-correction loop (app/sim_correction.h): the plan GA against the brute-force oracle of
+// The simulation-correction loop (planning/sim_correction.h): the plan GA against the brute-force oracle of
 // spec/process-optimization.md §4.4, and the loop on a part whose concave region is tighter than the
 // case's tool, on a model whose systematic error exceeds the tolerance, and with a magazine that has no
 // gouge-free tool.
 
-#include "app/sim_correction.h"
+#include "planning/sim_correction.h"
 
 #include <cmath>
 #include <cstdio>
@@ -13,7 +13,7 @@
 #include "metrology/probe.h"
 #include "retrieval/starter.h"
 
-namespace formloop::app {
+namespace formloop::planning {
 namespace {
 
 // ---------------------------------------------------------------- the reference instance (§4.4)
@@ -240,4 +240,4 @@ TEST(SimCorrectionLoop, TravelLimitIsReportedAndNotCorrectable) {
 }
 
 }  // namespace
-}  // namespace formloop::app
+}  // namespace formloop::planning

@@ -1,0 +1,545 @@
+#include "app/pipeline_stages.h"
+
+#include <cmath>
+#include <memory>
+
+#include "app/case_knowledge.h"
+#include "app/machine_profile.h"
+#include "core/atomic_file.h"
+#include "core/log.h"
+#include "core/point_io.h"
+#include "core/random.h"
+#include "metrology/deviations.h"
+#include "metrology/morans_i.h"
+#include "metrology/spatial_weights.h"
+#include "nc-gen/cutter_locations.h"
+#include "nc-gen/moves.h"
+#include "nc-gen/toolpath_io.h"
+#include "planning/precompensation.h"
+#include "reconstruction/analytic_surface.h"
+#include "reconstruction/cad_io.h"
+#include "retrieval/retrieve.h"
+#include "retrieval/starter.h"
+#include "simulation/virtual_machine.h"
+
+namespace formloop::app::stages {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+const char* const kVersion = "0.2.0";
+
+namespace {
+
+Result<Machine> ResolveMachine(const PartSpec& part, const RunOptions& options, const fs::path& data_dir,
+                               const RunFolderWriter& folder) {
+  Machine m;
+  m.name = part.machine_name;
+  m.probe = part.true_probe;
+  if (!options.measured.empty()) {
+    if (!options.machine.empty()) {
+      return Status::BadInput(Where{.field = "--machine"}, "cannot be combined with --measured",
+                              "give either a virtual machine or measured probe logs");
+    }
+    m.virtual_machine = false;
+    FL_RETURN_IF_ERROR(folder.MakeFolder(fs::path("inputs") / "measured"));
+    for (std::size_t k = 0; k < options.measured.size(); ++k) {
+      FL_ASSIGN_OR_RETURN(std::string text, ReadFile(options.measured[k]));
+      const fs::path copy = fs::path("inputs") / "measured" / ("loop-" + std::to_string(k) + ".csv");
+      FL_RETURN_IF_ERROR(folder.WriteText(copy, text));
+      m.measured.push_back(folder.Path(copy).string());
+    }
+    return m;
+  }
+  const std::string spec = options.machine.empty() ? "virtual" : options.machine;
+  if (spec == "virtual" && !part.effects_given) {
+    // The part's machine by name: its profile in data/machines/.
+    return ResolveMachine(part, RunOptions{.machine = "virtual:" + part.machine_name}, data_dir, folder);
+  }
+  if (spec == "virtual") {
+    m.model = part.effects.ToModel();
+    FL_RETURN_IF_ERROR(folder.WriteJson(
+        fs::path("inputs") / "machine_profile.json",
+        MachineProfile{m.name, "the part file's machine.effects", m.model, m.probe}.ToJson()));
+    return m;
+  }
+  if (spec.rfind("virtual:", 0) != 0) {
+    return Status::BadInput(Where{.field = "--machine"}, "unknown machine '" + spec + "'",
+                            "use virtual, virtual:PROFILE or --measured LOG.csv");
+  }
+  FL_ASSIGN_OR_RETURN(MachineProfile profile, ReadMachineProfile(spec.substr(8), data_dir));
+  m.name = profile.name;
+  m.model = profile.model;
+  if (profile.probe) m.probe = *profile.probe;
+  FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("inputs") / "machine_profile.json", profile.ToJson()));
+  return m;
+}
+
+// Spatial lag and LISA cluster of the deviations (k-NN in (u, v), row-standardised), for the report.
+Status AddLocalMoran(const std::vector<metrology::Deviation>& deviations, int k, std::uint64_t seed,
+                     PointSet* points) {
+  Eigen::VectorXd d(static_cast<Eigen::Index>(deviations.size()));
+  for (std::size_t i = 0; i < deviations.size(); ++i) d(static_cast<Eigen::Index>(i)) = deviations[i].deviation_mm * 1e3;
+  FL_ASSIGN_OR_RETURN(metrology::SpatialWeights w, metrology::UvKnnWeights(deviations, k));
+  metrology::LocalMoranOptions lo;
+  lo.permutations = 199;
+  lo.seed = seed;
+  FL_ASSIGN_OR_RETURN(metrology::LocalMoranResult lisa, metrology::LocalMoranI(d, w, lo));
+  std::vector<double> lag(deviations.size()), cluster(deviations.size());
+  for (std::size_t i = 0; i < deviations.size(); ++i) {
+    lag[i] = lisa.lag(static_cast<Eigen::Index>(i));
+    cluster[i] = static_cast<double>(static_cast<int>(lisa.cluster[i]));
+  }
+  points->SetScalar("lag_um", std::move(lag));
+  points->SetScalar("lisa", std::move(cluster));
+  return Status::Ok();
+}
+
+}  // namespace
+
+Result<Inputs> ResolveInputs(const PartSpec& given, const RunOptions& options, const fs::path& data_dir,
+                             const RunFolderWriter& folder) {
+  FL_RETURN_IF_ERROR(folder.MakeFolder("inputs"));
+  Inputs in;
+  FL_ASSIGN_OR_RETURN(in.machine, ResolveMachine(given, options, data_dir, folder));
+  // Learned models are keyed by the machine the part is really cut on.
+  in.part = given;
+  in.part.machine_name = in.machine.name;
+  FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("inputs") / "part.json", in.part.ToJson()));
+  FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("inputs") / "options.json",
+                                      {{"kb", options.kb},
+                                       {"machine", options.machine},
+                                       {"measured", options.measured},
+                                       {"retain", options.retain},
+                                       {"learn", options.learn}}));
+  Rng seeds(in.part.seed);
+  in.fit_seed = seeds.Fork();
+  in.machine_seed = seeds.Fork();
+  in.plan_seed = seeds.Fork();
+  in.analysis_seed = seeds.Fork();
+  return in;
+}
+
+Result<Surface> BuildSurface(const PartSpec& part, std::uint64_t seed, const RunFolderWriter& folder) {
+  Surface s;
+  FL_RETURN_IF_ERROR(folder.MakeFolder("surface"));
+  const fs::path samples_path = folder.Path(fs::path("surface") / "samples.csv");
+  if (part.surface_kind.empty()) {
+    FL_ASSIGN_OR_RETURN(std::unique_ptr<recon::AnalyticSurface> reference,
+                        recon::MakeReferenceSurface(part.surface_reference));
+    FL_RETURN_IF_ERROR(
+        WritePoints(samples_path, recon::SampleGridPoints(*reference, part.fit_samples_u, part.fit_samples_v)));
+    FL_ASSIGN_OR_RETURN(s.q, recon::FitAnalytic(*reference, part.fit_samples_u, part.fit_samples_v, part.fit,
+                                                part.fit_check_points, seed, &s.report));
+    s.description = {{"reference", reference->name()}, {"description", reference->description()}};
+  } else {
+    FL_ASSIGN_OR_RETURN(const retrieval::StarterHeight height,
+                        retrieval::StarterHeightOf(part.surface_kind, part.surface_params));
+    FL_ASSIGN_OR_RETURN(const recon::GridSamples g,
+                        retrieval::StarterGrid(part.surface_kind, part.surface_params, part.surface_samples));
+    PointSet samples;
+    samples.points = g.points;
+    FL_RETURN_IF_ERROR(WritePoints(samples_path, samples));
+    FL_ASSIGN_OR_RETURN(s.q, recon::FitGrid(g, part.fit, &s.report));
+    Rng rng(seed);
+    double sum2 = 0;
+    for (int k = 0; k < part.fit_check_points; ++k) {
+      const double u = g.domain.u_min + g.domain.u_span() * rng.Uniform();
+      const double v = g.domain.v_min + g.domain.v_span() * rng.Uniform();
+      const Eigen::Vector3d p = s.q.Point(u, v);
+      const double e = std::abs(p.z() - height.z(p.x(), p.y()));
+      sum2 += e * e;
+      if (e > s.report.check_max_mm) {
+        s.report.check_max_mm = e;
+        s.report.check_max_at = p;
+      }
+    }
+    s.report.n_check = part.fit_check_points;
+    s.report.check_rms_mm = part.fit_check_points > 0 ? std::sqrt(sum2 / part.fit_check_points) : 0.0;
+    s.description = {{"kind", part.surface_kind},
+                     {"params", part.surface_params},
+                     {"check", "vertical distance to z = f(x, y) at random points"}};
+  }
+  s.description["fit"] = s.report.ToJson();
+  s.description["bspline"] = {{"u_degree", s.q.u_degree()},
+                              {"v_degree", s.q.v_degree()},
+                              {"u_poles", s.q.u_poles()},
+                              {"v_poles", s.q.v_poles()}};
+  FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("surface") / "surface.json", s.description));
+  FL_RETURN_IF_ERROR(recon::WriteStep(folder.Path(fs::path("surface") / "Q.step"), s.q, part.name));
+  return s;
+}
+
+Result<Retrieved> Retrieve(const PartSpec& part, const recon::BSplineSurface& q, const RunOptions& options,
+                           const fs::path& data_dir, const RunFolderWriter& folder) {
+  Retrieved r;
+  if (options.kb.empty()) {
+    r.report = {{"route",
+                 {{"name", "default"},
+                  {"similarity", nullptr},
+                  {"flag_engineer", true},
+                  {"rule", "no case library given (--kb): the default plan, flagged"}}},
+                {"ranked", json::array()}};
+    FL_RETURN_IF_ERROR(folder.WriteJson("retrieval.json", r.report));
+    return r;
+  }
+  FL_ASSIGN_OR_RETURN(retrieval::FacetTaxonomies tax, retrieval::FacetTaxonomies::Load(data_dir / "taxonomies"));
+  retrieval::FeatureOptions fo;
+  fo.taxonomies = std::make_shared<const retrieval::FacetTaxonomies>(std::move(tax));
+  auto extracted = retrieval::ExtractFeatures(DescriptionOf(part, part.toolpath), q, fo);
+  if (!extracted.ok()) {
+    return extracted.status().WithContext(
+        "the part's retrieval description (material, shape_family, finish_ra_um, machine.class in the part file)");
+  }
+  const retrieval::PartFeatures& features = *extracted;
+  r.features = features;
+  FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(options.kb));
+  std::shared_ptr<const retrieval::RetrievalModel> model = options.retrieval_model;
+  if (!model) {
+    FL_ASSIGN_OR_RETURN(retrieval::RetrievalModel loaded, retrieval::RetrievalModel::Load(*library, *fo.taxonomies));
+    model = std::make_shared<const retrieval::RetrievalModel>(std::move(loaded));
+  }
+  retrieval::RetrieveOptions ro;
+  FL_ASSIGN_OR_RETURN(retrieval::RetrievalResult result, model->Retrieve(features, ro));
+  r.report = result.ToJson();
+  r.report["query"]["concepts"] = features.Concepts();
+  r.report["library"] = options.kb;
+  r.route = result.route;
+  r.similarity = result.best_similarity;
+  if (!result.ranked.empty()) {
+    FL_ASSIGN_OR_RETURN(kb::CaseRecord best, library->GetCase(result.ranked.front().uid));
+    r.best = std::move(best);
+  }
+  if (auto own = library->GetCase(part.name); own.ok()) r.own = std::move(own).value();
+  FL_RETURN_IF_ERROR(folder.WriteJson("retrieval.json", r.report));
+  return r;
+}
+
+Result<planning::PlanChoice> ChoosePlan(const Inputs& in, const Retrieved& retrieved, const recon::BSplineSurface& q,
+                                        bool learn, const RunFolderWriter& folder) {
+  const PartSpec& part = in.part;
+  planning::PlanRequest request;
+  request.surface = &q;
+  request.part = {.plan = part.toolpath, .magazine = part.tools, .limits = part.limits};
+  request.flutes = part.flutes;
+  request.material = part.material;
+  request.machine = in.machine.name;
+  request.tolerance_mm = part.tolerance_mm;
+  request.coverage_factor = part.analysis.coverage_factor;
+  request.probe_inset_fraction = part.probe_inset_fraction;
+  request.route = retrieved.route;
+  request.best = retrieved.best ? &*retrieved.best : nullptr;
+  request.similarity = retrieved.similarity;
+  request.learn = learn;
+  request.seed = in.plan_seed;
+  FL_ASSIGN_OR_RETURN(planning::PlanChoice choice, planning::ChoosePlan(request));
+  if (choice.correction) FL_RETURN_IF_ERROR(folder.WriteJson("sim_correction.json", choice.correction->ToJson()));
+  return choice;
+}
+
+Result<Programs> WritePrograms(const PartSpec& part, const recon::BSplineSurface& q, const nc::ToolpathOptions& plan,
+                               const RunFolderWriter& folder) {
+  Programs p;
+  FL_ASSIGN_OR_RETURN(p.nominal, nc::PlanRaster(q, plan));
+  p.post.limits = part.limits;
+  p.post.title = "formloop " + std::string(kVersion) + " part " + part.name + " loop 0, nominal";
+  FL_ASSIGN_OR_RETURN(const nc::MoveList moves, nc::BuildMoveList(p.nominal));
+  FL_ASSIGN_OR_RETURN(p.program.text, nc::Post(moves, part.dialect, p.post));
+  p.extension = std::string(nc::FindPost(part.dialect)->FileExtension());
+  p.program.path = fs::path("toolpath") / ("program" + p.extension);
+  FL_RETURN_IF_ERROR(folder.WriteText(p.program.path, p.program.text));
+  FL_RETURN_IF_ERROR(nc::WriteToolpathFile(folder.Path(fs::path("toolpath") / "toolpath.csv"), p.nominal));
+  FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("toolpath") / "toolpath.json", p.nominal.ReportJson()));
+  log::Info("      {} passes, {} CL points, {:.0f} s cutting", p.nominal.passes, p.nominal.points.size(),
+            p.nominal.total_time_s);
+  FL_ASSIGN_OR_RETURN(p.probing_plan,
+                      metrology::PlanProbingGrid(q, part.probe_nu, part.probe_nv, part.probe_inset_fraction));
+  FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("toolpath") / "probing_plan.json", p.probing_plan.ToJson()));
+  nc::ProbeProgramOptions probe_options = part.probe_program;
+  probe_options.post = p.post;
+  probe_options.post.title = "formloop " + std::string(kVersion) + " probing program for part " + part.name;
+  probe_options.safe_z_mm = p.nominal.safe_z_mm + part.probe.ball_radius_mm + part.probe_program.clearance_mm;
+  FL_ASSIGN_OR_RETURN(const std::string probe_program, nc::PostProbing(p.probing_plan, part.dialect, probe_options));
+  FL_RETURN_IF_ERROR(folder.WriteText(fs::path("toolpath") / ("probe" + p.extension), probe_program));
+  // The nominal program as written: what the first cycle cuts (unless pre-compensated).
+  FL_ASSIGN_OR_RETURN(p.program.moves,
+                      nc::ReadProgram(p.program.text, part.dialect, folder.Path(p.program.path).string()));
+  return p;
+}
+
+double CompensatedField::operator()(double u, double v) const {
+  double sum = 0;
+  for (const auto& t : terms) sum += t(u, v);
+  return sum;
+}
+
+Result<FirstCut> Precompensate(const PartSpec& part, const recon::BSplineSurface& q, const planning::PlanChoice& choice,
+                               const Programs& programs, const std::string& case_uid, std::uint64_t seed,
+                               const RunFolderWriter& folder) {
+  FirstCut cut;
+  cut.program = programs.program;
+  const nc::ToolpathOptions& plan = choice.plan;
+  json plan_json = choice.report;
+  plan_json["toolpath"] = {{"tool_number", plan.tool.number},
+                           {"tool_radius_mm", plan.tool.radius_mm},
+                           {"scallop_um", plan.scallop_um},
+                           {"raster_angle_deg", plan.raster_angle_deg},
+                           {"feed_mm_per_min", plan.feed_mm_per_min},
+                           {"spindle_rpm", plan.spindle_rpm}};
+  if (choice.learned && choice.precompensation_scale > 0) {
+    FL_ASSIGN_OR_RETURN(planning::PredictedField predicted,
+                        planning::PredictLearnedField(q, programs.nominal, *choice.learned, seed));
+    json pre = predicted.report;
+    const double scale = choice.precompensation_scale;
+    cut.field.terms.push_back([field = predicted.field, scale](double u, double v) { return scale * field(u, v); });
+    nc::PostOptions post = programs.post;
+    post.title = "formloop " + std::string(kVersion) + " part " + part.name + " loop 0, pre-compensated";
+    const fs::path path = fs::path("toolpath") / ("program_precompensated" + programs.extension);
+    FL_ASSIGN_OR_RETURN(nc::Compensation pc,
+                        nc::WriteCompensatedProgram(programs.nominal, programs.program.text, cut.field,
+                                                    "learned model of case " + case_uid, part.compensation, post,
+                                                    folder.Path(path),
+                                                    folder.Path(fs::path("toolpath") / "precompensation_side.csv"),
+                                                    part.dialect));
+    cut.program = {std::move(pc.program), path, std::move(pc.program_moves)};
+    cut.precompensation_scale = scale;
+    pre["scale"] = scale;
+    pre["max_offset_um"] = pc.max_offset_um;
+    pre["program"] = path.string();
+    plan_json["precompensation"] = pre;
+    log::Info("[precompensation] learned model of case {}: predicted peak {:.1f} um, scale {:.2f}, max offset {:.1f} um",
+              case_uid, pre["predicted_peak_um"].get<double>(), scale, pc.max_offset_um);
+  } else {
+    plan_json["precompensation"] = nullptr;
+  }
+  FL_RETURN_IF_ERROR(folder.WriteJson("plan.json", plan_json));
+  return cut;
+}
+
+Result<Machined> MachineCycle(const Inputs& in, const Program& program, double tool_radius_mm,
+                              const metrology::ProbingPlan& plan, int loop, const RunFolderWriter& folder) {
+  const fs::path loop_dir = RunFolderWriter::LoopDir(loop);
+  FL_RETURN_IF_ERROR(folder.MakeFolder(loop_dir));
+  Machined out;
+  out.cutter_locations = nc::CutterLocationsOfProgram(program.moves, tool_radius_mm);
+  const Machine& machine = in.machine;
+  if (machine.virtual_machine) {
+    log::Info("[machine] loop {}: virtual machine '{}' cuts {}", loop, machine.name, program.path.string());
+    sim::VirtualMachineOptions vm;
+    vm.tool_radius_mm = tool_radius_mm;
+    vm.model = machine.model;
+    vm.true_probe = machine.probe;
+    vm.seed = in.machine_seed + static_cast<std::uint64_t>(loop);
+    FL_ASSIGN_OR_RETURN(sim::VirtualMachineResult machined, sim::MachineAndProbe(out.cutter_locations, plan, vm));
+    FL_RETURN_IF_ERROR(metrology::WriteProbeLog(folder.Path(loop_dir / "probe_log.csv"), machined.log));
+    FL_RETURN_IF_ERROR(folder.WriteJson(loop_dir / "machine.json", {{"machine", machine.name},
+                                                                    {"program", program.path.string()},
+                                                                    {"cutter_locations", out.cutter_locations.size()},
+                                                                    {"points", machined.log.records.size()}}));
+  } else {
+    const std::string& measured = machine.measured[static_cast<std::size_t>(loop)];
+    FL_ASSIGN_OR_RETURN(std::string text, ReadFile(measured));
+    FL_RETURN_IF_ERROR(folder.WriteText(loop_dir / "probe_log.csv", text));
+    FL_RETURN_IF_ERROR(folder.WriteJson(
+        loop_dir / "machine.json",
+        {{"machine", machine.name}, {"measured", measured}, {"program", program.path.string()}}));
+  }
+  // The analysis reads the log back from disk, as it would a real machine's.
+  FL_ASSIGN_OR_RETURN(out.log, metrology::ReadProbeLog(folder.Path(loop_dir / "probe_log.csv")));
+  return out;
+}
+
+Result<Analysed> AnalyseCycle(const PartSpec& part, const recon::BSplineSurface& q, const metrology::ProbingPlan& plan,
+                              const metrology::ProbeLog& log, int loop, bool another_loop_allowed, std::uint64_t seed,
+                              const RunFolderWriter& folder) {
+  const fs::path loop_dir = RunFolderWriter::LoopDir(loop);
+  FL_ASSIGN_OR_RETURN(std::vector<metrology::Deviation> deviations,
+                      metrology::ComputeDeviations(q, plan, log, part.probe));
+  FL_ASSIGN_OR_RETURN(metrology::Decomposition decomposition,
+                      metrology::Decompose(deviations, q.domain(), part.analysis));
+  PointSet points = metrology::DeviationsToPoints(deviations);
+  std::vector<double> ds_um, df_um, du_um;
+  for (std::size_t i = 0; i < deviations.size(); ++i) {
+    ds_um.push_back(decomposition.systematic_mm[i] * 1e3);
+    df_um.push_back(decomposition.fine_scale_mm[i] * 1e3);
+    du_um.push_back(decomposition.random_mm[i] * 1e3);
+  }
+  points.SetScalar("systematic_um", std::move(ds_um));
+  points.SetScalar("fine_scale_um", std::move(df_um));
+  points.SetScalar("random_um", std::move(du_um));
+  FL_RETURN_IF_ERROR(AddLocalMoran(deviations, part.analysis.neighbours, seed, &points));
+  FL_RETURN_IF_ERROR(WritePoints(folder.Path(loop_dir / "deviations.csv"), points, {.precision = 6}));
+  FL_RETURN_IF_ERROR(WritePoints(folder.Path(loop_dir / "deviations.ply"), points));
+
+  FL_ASSIGN_OR_RETURN(const metrology::FormEvaluation evaluation,
+                      metrology::EvaluateForm(decomposition, part.tolerance_mm));
+  const metrology::DecompositionStep& chosen = decomposition.steps[static_cast<std::size_t>(decomposition.chosen_step)];
+  Analysed r;
+  LoopSummary& ls = r.summary;
+  ls.index = loop;
+  ls.form_error_um = decomposition.form_error_um;
+  ls.systematic_peak_um = decomposition.systematic_peak_um;
+  ls.random_sigma_um = decomposition.random_sigma_um;
+  ls.raw_moran_z = decomposition.raw.z_normality;
+  ls.field_degree = decomposition.systematic.degree();
+  ls.within_tolerance = evaluation.within_tolerance;
+  ls.chosen_model = decomposition.systematic.name();
+  ls.residual_moran_z = decomposition.residual_moran_z;
+  ls.field_residual_moran_z = chosen.residual_moran_z;
+  ls.fine_scale_rms_um = decomposition.fine_scale_rms_um;
+  ls.residual_independent = decomposition.independent;
+  ls.systematic_significant = evaluation.systematic_significant;
+  ls.compensation_advised = evaluation.compensate;
+  const bool compensate = evaluation.compensate && another_loop_allowed;
+  if (ls.within_tolerance) {
+    ls.decision = "within tolerance: done";
+  } else if (!evaluation.compensate) {
+    ls.decision = "out of tolerance but the error is random (constant model, offset not significant): "
+                  "compensation cannot help";
+  } else if (!compensate) {
+    ls.decision = "out of tolerance after the last allowed loop (" + evaluation.decision + ")";
+  } else {
+    ls.decision = evaluation.decision;
+  }
+  log::Info("      deviation rms {:.2f} um; raw Moran z {:.2f}; model {} (residual z {:.2f}); d_s peak {:.2f} um;"
+            " sigma(d_u) {:.2f} um; form error {:.2f} um vs tolerance {:.1f} um",
+            decomposition.deviation_rms_um, decomposition.raw.z_normality, ls.chosen_model, ls.residual_moran_z,
+            decomposition.systematic_peak_um, decomposition.random_sigma_um, decomposition.form_error_um,
+            part.tolerance_mm * 1e3);
+  log::Info("      decision: {}", ls.decision);
+  json analysis = decomposition.ToJson();
+  analysis["tolerance_um"] = part.tolerance_mm * 1e3;
+  analysis["within_tolerance"] = ls.within_tolerance;
+  analysis["evaluation"] = evaluation.ToJson();
+  analysis["decision"] = ls.decision;
+  analysis["compensate"] = compensate;
+  analysis["decision_rule"] =
+      "the decomposition's evaluation (spec/metrology.md §8): compensate by -d_s when the form error "
+      "max|d_s| + k*sigma(d_u) exceeds the tolerance and d_s is significant (a non-constant model chosen by the "
+      "residual-Moran ladder, or |mean| > 2.576 standard errors), while another loop is allowed";
+  FL_RETURN_IF_ERROR(folder.WriteJson(loop_dir / "analysis.json", analysis));
+  if (compensate) r.systematic = decomposition.systematic;
+  return r;
+}
+
+Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSplineSurface& q,
+                                          const Machined& machined, double tool_radius_mm,
+                                          const metrology::ProbingPlan& plan, const planning::PlanChoice& choice,
+                                          const std::string& case_uid, const RunFolderWriter& folder) {
+  sim::ProbeDataInput input;
+  input.surface = &q;
+  input.cutter_locations = &machined.cutter_locations;
+  input.tool_radius_mm = tool_radius_mm;
+  input.plan = &plan;
+  input.measured = &machined.log;
+  input.probe = part.probe;
+  const sim::Model baseline = choice.learned ? *choice.learned : sim::Model{};
+  FL_ASSIGN_OR_RETURN(sim::Diagnosis d, sim::Diagnose(input, baseline, sim::DiagnoseOptions{}));
+  const fs::path dir = RunFolderWriter::LoopDir(0) / "diagnosis";
+  json dj = d.ToJson();
+  dj["baseline"] = choice.learned ? "learned model of case " + case_uid : "no effects (no learned model)";
+  FL_RETURN_IF_ERROR(folder.WriteJson(dir / "diagnosis.json", dj));
+  FL_RETURN_IF_ERROR(sim::WriteModel(folder.Path(dir / "model.json"), d.extended));
+  log::Info("[diagnosis] {}", d.Summary());
+  return d;
+}
+
+Result<Program> CompensateCycle(const PartSpec& part, const Programs& programs, const CompensatedField& field, int loop,
+                                const RunFolderWriter& folder) {
+  const fs::path loop_dir = RunFolderWriter::LoopDir(loop);
+  const std::string source = "sum of the pre-compensation and the systematic fields of loops 0.." + std::to_string(loop);
+  nc::PostOptions post = programs.post;
+  post.title = "formloop " + std::string(kVersion) + " part " + part.name + " loop " + std::to_string(loop + 1) +
+               ", mirror-compensated";
+  const fs::path path = loop_dir / ("program_compensated" + programs.extension);
+  FL_ASSIGN_OR_RETURN(nc::Compensation compensation,
+                      nc::WriteCompensatedProgram(programs.nominal, programs.program.text, field, source,
+                                                  part.compensation, post, folder.Path(path),
+                                                  folder.Path(loop_dir / "compensation_side.csv"), part.dialect));
+  FL_RETURN_IF_ERROR(folder.WriteJson(loop_dir / "compensation.json",
+                                      {{"source", compensation.source},
+                                       {"cl_points", compensation.entries.size()},
+                                       {"max_offset_um", compensation.max_offset_um},
+                                       {"side_file_check_max_disagreement_um", compensation.check_max_disagreement_um},
+                                       {"program", path.string()}}));
+  log::Info("      compensated program written: max offset {:.2f} um; side-file check {:.3f} um",
+            compensation.max_offset_um, compensation.check_max_disagreement_um);
+  return Program{std::move(compensation.program), path, std::move(compensation.program_moves)};
+}
+
+Result<std::optional<kb::CaseRecord>> PrepareRetain(const PartSpec& part, const RunOptions& options,
+                                                    const Retrieved& retrieved, const nc::ToolpathOptions& plan,
+                                                    const std::optional<sim::Diagnosis>& diagnosis,
+                                                    RunSummary* summary, const RunFolderWriter& folder) {
+  if (options.kb.empty() || !options.retain) return std::optional<kb::CaseRecord>();
+  RetainInput in;
+  in.part = &part;
+  in.features = &*retrieved.features;
+  in.plan = plan;
+  in.outcome = {{"route", summary->route},
+                {"similarity", summary->similarity},
+                {"retrieved_case", summary->case_uid},
+                {"within_tolerance", summary->within_tolerance},
+                {"loops", summary->loops.size()},
+                {"form_error_first_um", summary->loops.front().form_error_um},
+                {"form_error_final_um", summary->loops.back().form_error_um},
+                {"random_sigma_um", summary->loops.back().random_sigma_um},
+                {"causes", summary->causes},
+                {"precompensated", summary->precompensated}};
+  for (std::size_t k = 0; k + 1 < summary->loops.size(); ++k) {
+    in.compensation_loops.push_back({{"loop", k + 1},
+                                     {"form_error_before_um", summary->loops[k].form_error_um},
+                                     {"form_error_after_um", summary->loops[k + 1].form_error_um}});
+  }
+  if (diagnosis && !diagnosis->extended.effects.empty()) {
+    in.learned = diagnosis->extended;
+    in.learned_provenance = {{"part", part.name},
+                             {"run", options.out.string()},
+                             {"data", "loop-0/probe_log.csv"},
+                             {"points", diagnosis->n},
+                             {"heldout_rms_before_um", diagnosis->heldout_rms_before_um},
+                             {"heldout_rms_after_um", diagnosis->heldout_rms_after_um}};
+  }
+  if (retrieved.own) in.existing = &*retrieved.own;
+  // A part cut on the virtual machine can be run again (the leave-one-out of app/route_calibration.h); a
+  // measured one cannot.
+  if (options.measured.empty()) in.rerun = {{"part", part.ToJson()}, {"machine", options.machine}};
+  FL_ASSIGN_OR_RETURN(kb::CaseRecord record, MakeRetainedCase(in));
+  FL_RETURN_IF_ERROR(folder.WriteJson("retain.json", {{"library", options.kb},
+                                                      {"action", retrieved.own ? "update" : "add"},
+                                                      {"uid", record.uid},
+                                                      {"learned_model", in.learned ? in.learned->ToJson() : json(nullptr)},
+                                                      {"case", record.ToJson()}}));
+  summary->retained = (retrieved.own ? "updated " : "added ") + record.uid;
+  return std::optional<kb::CaseRecord>(std::move(record));
+}
+
+Status CommitRetained(const std::string& kb_path, const kb::CaseRecord& record) {
+  FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(kb_path));
+  FL_ASSIGN_OR_RETURN(long long changes_before, library->ChangeCounter());
+  FL_RETURN_IF_ERROR(library->AddCase(record, /*replace=*/true));
+  auto inserted = retrieval::InsertCaseIntoGhsom(*library, record, changes_before);
+  if (!inserted.ok()) log::Warn("case {} not inserted into the GHSOM: {}", record.uid, inserted.status().ToString());
+  log::Info("[retain] case {} stored in {}", record.uid, kb_path);
+  return Status::Ok();
+}
+
+json LoopJson(const LoopSummary& l) {
+  return {{"loop", l.index},
+          {"form_error_um", l.form_error_um},
+          {"systematic_peak_um", l.systematic_peak_um},
+          {"random_sigma_um", l.random_sigma_um},
+          {"raw_moran_z", l.raw_moran_z},
+          {"systematic_field_degree", l.field_degree},
+          {"within_tolerance", l.within_tolerance},
+          {"compensated_after", l.compensated},
+          {"chosen_model", l.chosen_model},
+          {"residual_moran_z", l.residual_moran_z},
+          {"residual_independent", l.residual_independent},
+          {"field_residual_moran_z", l.field_residual_moran_z},
+          {"fine_scale_rms_um", l.fine_scale_rms_um},
+          {"systematic_significant", l.systematic_significant},
+          {"compensation_advised", l.compensation_advised},
+          {"decision", l.decision}};
+}
+
+}  // namespace formloop::app::stages

@@ -1,0 +1,157 @@
+#pragma once
+// The stages of `formloop run` (app/pipeline.h), each a function with a typed result, in the order
+// RunStages calls them. Each writes its own files into the run folder through RunFolderWriter and
+// nothing else; the decisions behind them live in the layers below (retrieval/, planning/, nc-gen/,
+// simulation/, metrology/). Internal to the app: the tests drive the pipeline through RunPart.
+
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "app/part.h"
+#include "app/pipeline.h"
+#include "app/run_folder.h"
+#include "core/status.h"
+#include "kb/library.h"
+#include "metrology/decomposition.h"
+#include "metrology/probe.h"
+#include "nc-gen/compensation.h"
+#include "nc-gen/post.h"
+#include "nc-gen/toolpath.h"
+#include "planning/case_plan.h"
+#include "reconstruction/bspline_surface.h"
+#include "retrieval/features.h"
+#include "simulation/diagnose.h"
+#include "simulation/model.h"
+
+namespace formloop::app::stages {
+
+// formloop's version as programs and summary.json name it.
+extern const char* const kVersion;
+
+// The machine a part is cut on: a virtual machine with its true effects, or a real one's probe logs.
+struct Machine {
+  bool virtual_machine = true;
+  std::string name;
+  sim::Model model;                   // the profile's true effects (virtual)
+  metrology::ProbeModel probe;        // the probe the machine really has (virtual)
+  std::vector<std::string> measured;  // copies of the measured logs in inputs/measured (real machine)
+};
+
+// 1. Inputs: the machine resolved, the resolved part (machine_name = the machine really used) and the
+// options written to inputs/; the seeds of the stages forked from the part's seed.
+struct Inputs {
+  PartSpec part;
+  Machine machine;
+  std::uint64_t fit_seed = 0, machine_seed = 0, plan_seed = 0, analysis_seed = 0;
+};
+Result<Inputs> ResolveInputs(const PartSpec& given, const RunOptions& options, const std::filesystem::path& data_dir,
+                             const RunFolderWriter& folder);
+
+// 2. The ideal surface Q: a reference surface or a parametric kind fitted as a B-spline, checked against
+// its defining function at random points not used in the fit (surface/).
+struct Surface {
+  recon::BSplineSurface q;
+  recon::FitReport report;
+  nlohmann::json description;
+};
+Result<Surface> BuildSurface(const PartSpec& part, std::uint64_t seed, const RunFolderWriter& folder);
+
+// 3. Retrieval from the case library and the route (retrieval.json).
+struct Retrieved {
+  std::optional<retrieval::PartFeatures> features;
+  std::optional<kb::CaseRecord> best;
+  std::optional<kb::CaseRecord> own;  // the part's own case (same uid), for an update
+  std::string route = "default";
+  double similarity = -1;
+  nlohmann::json report = nlohmann::json::object();
+};
+Result<Retrieved> Retrieve(const PartSpec& part, const recon::BSplineSurface& q, const RunOptions& options,
+                           const std::filesystem::path& data_dir, const RunFolderWriter& folder);
+
+// 4. The plan by route (planning::ChoosePlan; sim_correction.json on the simulate route).
+Result<planning::PlanChoice> ChoosePlan(const Inputs& in, const Retrieved& retrieved, const recon::BSplineSurface& q,
+                                        bool learn, const RunFolderWriter& folder);
+
+// A program as written into the run folder, with its moves as read back from its text.
+struct Program {
+  std::string text;
+  std::filesystem::path path;  // relative to the run folder
+  std::vector<nc::ProgramMove> moves;
+};
+
+// 5. Tool path, the nominal program, the probing plan and the probing program (toolpath/).
+struct Programs {
+  nc::Toolpath nominal;
+  nc::PostOptions post;
+  std::string extension;  // of the dialect's programs
+  Program program;
+  metrology::ProbingPlan probing_plan;
+};
+Result<Programs> WritePrograms(const PartSpec& part, const recon::BSplineSurface& q, const nc::ToolpathOptions& plan,
+                               const RunFolderWriter& folder);
+
+// The sum of the fields compensated so far (mm): the pre-compensation and one term per loop.
+struct CompensatedField {
+  std::vector<std::function<double(double, double)>> terms;
+  double operator()(double u, double v) const;
+};
+
+// 6. Pre-compensation by the case's learned model when the plan asks for it; the program the first
+// cycle cuts; plan.json.
+struct FirstCut {
+  CompensatedField field;
+  Program program;  // the pre-compensated program, or the nominal one
+  double precompensation_scale = 0;
+};
+Result<FirstCut> Precompensate(const PartSpec& part, const recon::BSplineSurface& q, const planning::PlanChoice& choice,
+                               const Programs& programs, const std::string& case_uid, std::uint64_t seed,
+                               const RunFolderWriter& folder);
+
+// 7a. One cycle's machining: the virtual machine cuts `program` and probes, or the cycle's measured log
+// is taken (loop-K/probe_log.csv, machine.json). Returns the log as read back, as a real machine's would be.
+struct Machined {
+  metrology::ProbeLog log;
+  std::vector<sim::CutterLocation> cutter_locations;  // of the program cut
+};
+Result<Machined> MachineCycle(const Inputs& in, const Program& program, double tool_radius_mm,
+                          const metrology::ProbingPlan& plan, int loop, const RunFolderWriter& folder);
+
+// 7b. The cycle's analysis (deviations.csv|.ply, analysis.json) and its compensation decision.
+struct Analysed {
+  LoopSummary summary;
+  std::optional<metrology::FieldModel> systematic;  // when the cycle is to be compensated
+};
+Result<Analysed> AnalyseCycle(const PartSpec& part, const recon::BSplineSurface& q, const metrology::ProbingPlan& plan,
+                         const metrology::ProbeLog& log, int loop, bool another_loop_allowed, std::uint64_t seed,
+                         const RunFolderWriter& folder);
+
+// 7c. Loop 0: what the simulation (the case's model) gets wrong on this part, and the extended model
+// (loop-0/diagnosis/).
+Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSplineSurface& q, const Machined& machined,
+                                double tool_radius_mm, const metrology::ProbingPlan& plan,
+                                const planning::PlanChoice& choice, const std::string& case_uid,
+                                const RunFolderWriter& folder);
+
+// 7d. The mirror-compensated program of the next cycle from the sum of the fields so far
+// (loop-K/program_compensated.*, compensation_side.csv, compensation.json).
+Result<Program> CompensateCycle(const PartSpec& part, const Programs& programs, const CompensatedField& field, int loop,
+                           const RunFolderWriter& folder);
+
+// 8. The case the library will hold (retain.json); committed by RunPart after everything else is written.
+Result<std::optional<kb::CaseRecord>> PrepareRetain(const PartSpec& part, const RunOptions& options,
+                                                    const Retrieved& retrieved, const nc::ToolpathOptions& plan,
+                                                    const std::optional<sim::Diagnosis>& diagnosis,
+                                                    RunSummary* summary, const RunFolderWriter& folder);
+
+// One transaction for the case, then the GHSOM insertion (a failure there leaves it stale, not wrong).
+Status CommitRetained(const std::string& kb_path, const kb::CaseRecord& record);
+
+// A cycle as summary.json gives it.
+nlohmann::json LoopJson(const LoopSummary& loop);
+
+}  // namespace formloop::app::stages
