@@ -5,12 +5,14 @@
 //       --ball-radius R] [--register tx,ty,tz,rx,ry,rz] [--tolerance-um A] [--knn K] [--max-distance-mm D]
 //       --out DIR
 //
-// writes DIR/analysis.json, DIR/deviations.ply and DIR/inputs/ (the options as JSON and copies of the
-// input files up to 16 MB). Everything is computed before DIR is created, so bad input leaves no DIR
+// runs the one analysis of a probe log (metrology/probe_log_analysis.h, the same as each cycle of
+// `formloop run`) and writes DIR/analysis.json, DIR/deviations.csv and .ply (the per-point table, the same
+// columns as a run's loop-K/deviations.*) and DIR/inputs/ (the options as JSON and copies of the input
+// files up to 16 MB); `formloop report DIR` draws it. Everything is computed before DIR is created, so bad input leaves no DIR
 // (or an existing DIR untouched); each file is written atomically and analysis.json last, so a DIR with
 // analysis.json is complete. Points whose foot point on Q is farther than --max-distance-mm, or whose
 // foot point is held at the edge of Q (the deviation is then not a normal distance), are listed under
-// "flagged_points" and left out of the statistics and of deviations.ply.
+// "flagged_points" and left out of the statistics and of deviations.csv|.ply.
 //
 //   formloop analyse moran --points F.csv --value COL [--regressors COL,COL...]
 //       (--knn K [--coords u,v | x,y,z] | --weights W.gal [--id COL] | --delaunay [--coords u,v] | --band D)
@@ -33,7 +35,6 @@
 #include <set>
 #include <sstream>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 #include <Eigen/Core>
@@ -46,13 +47,11 @@
 #include "core/log.h"
 #include "core/point_io.h"
 #include "metrology/decomposition.h"
-#include "metrology/deviations.h"
 #include "metrology/morans_i.h"
 #include "metrology/probe.h"
-#include "metrology/registration.h"
+#include "metrology/probe_log_analysis.h"
 #include "metrology/spatial_weights.h"
 #include "reconstruction/cad_io.h"
-#include "reconstruction/foot_point.h"
 
 namespace formloop::app {
 namespace {
@@ -397,35 +396,6 @@ Status ValidatePartArgs(const PartArgs& a) {
   return Status::Ok();
 }
 
-// One probe record on its way through compensation, registration and projection.
-struct Measured {
-  const metrology::ProbeRecord* record = nullptr;
-  Eigen::Vector3d contact = Eigen::Vector3d::Zero();  // compensated (and registered) contact point
-  const metrology::ProbePoint* planned = nullptr;     // with --plan
-  recon::FootPoint foot;
-  std::string flag;  // empty = used
-};
-
-Status ProjectAll(const recon::FootPointProjector& projector, double max_distance_mm, std::vector<Measured>* points) {
-  for (Measured& m : *points) {
-    Result<recon::FootPoint> foot = m.planned != nullptr
-                                        ? projector.ProjectFrom(m.contact, m.planned->u, m.planned->v)
-                                        : projector.Project(m.contact);
-    if (!foot.ok()) {
-      return foot.status().WithContext("probe log line " + std::to_string(m.record->line) + " (id " +
-                                       std::to_string(m.record->id) + ")");
-    }
-    m.foot = foot.value();
-    m.flag.clear();
-    if (!(m.foot.distance_mm <= max_distance_mm)) {
-      m.flag = "farther from Q than the search distance";
-    } else if (m.foot.on_boundary) {
-      m.flag = "beyond the edge of Q (foot point held at the boundary; not a normal deviation)";
-    }
-  }
-  return Status::Ok();
-}
-
 Status CopyInput(const std::string& from, const fs::path& to, nlohmann::json* copies) {
   constexpr std::uintmax_t kMaxCopyBytes = 16u << 20;
   std::error_code ec;
@@ -443,7 +413,8 @@ Status CopyInput(const std::string& from, const fs::path& to, nlohmann::json* co
 
 Status RunPartAnalysis(const PartArgs& args) {
   FL_RETURN_IF_ERROR(ValidatePartArgs(args));
-  FL_ASSIGN_OR_RETURN(const metrology::DofMask dofs, metrology::ParseDofMask(args.register_dofs, "--register"));
+  metrology::ProbeLogAnalysisOptions options;
+  FL_ASSIGN_OR_RETURN(options.registration, metrology::ParseDofMask(args.register_dofs, "--register"));
 
   // 1. Inputs: Q, the log, the probe model, the plan.
   FL_ASSIGN_OR_RETURN(const recon::CadFace face,
@@ -458,178 +429,24 @@ Status RunPartAnalysis(const PartArgs& args) {
   }
   FL_RETURN_IF_ERROR(probe.Validate());
   std::optional<metrology::ProbingPlan> plan;
-  std::vector<std::int64_t> not_measured;
   if (!args.plan.empty()) {
     FL_ASSIGN_OR_RETURN(const PlanWithApproaches read_plan, ReadPlanFile(args.plan));
     plan = read_plan.plan;
-    FL_ASSIGN_OR_RETURN(not_measured, metrology::CheckProbeLogAgainstPlan(log, *plan));
   }
 
-  // 2. Probe compensation along each record's own approach direction.
-  std::unordered_map<std::int64_t, const metrology::ProbePoint*> planned;
-  if (plan) {
-    for (const auto& p : plan->points) planned[p.id] = &p;
-  }
-  std::vector<Measured> measured(log.records.size());
-  for (std::size_t i = 0; i < log.records.size(); ++i) {
-    measured[i].record = &log.records[i];
-    measured[i].contact = metrology::ContactPoint(log.records[i], probe);
-    if (plan) measured[i].planned = planned.at(log.records[i].id);
-  }
-
-  // 3. Foot points; far points are flagged. Registration (when asked for) uses the points not flagged,
-  // then every point is moved and projected again.
-  FL_ASSIGN_OR_RETURN(const recon::FootPointProjector projector, recon::FootPointProjector::Build(q));
-  FL_RETURN_IF_ERROR(ProjectAll(projector, args.max_distance_mm, &measured));
-  nlohmann::json registration_json = {{"enabled", false}, {"note", "off (default): deviations in the machine frame"}};
-  if (std::any_of(dofs.begin(), dofs.end(), [](bool b) { return b; })) {
-    std::vector<Eigen::Vector3d> near;
-    for (const Measured& m : measured) {
-      if (m.flag.empty()) near.push_back(m.contact);
-    }
-    metrology::RegistrationOptions ro;
-    ro.dofs = dofs;
-    ro.max_distance_mm = args.max_distance_mm;
-    FL_ASSIGN_OR_RETURN(const metrology::RegistrationReport report, metrology::RegisterToSurface(near, projector, ro));
-    for (Measured& m : measured) m.contact = report.part_from_machine * m.contact;
-    FL_RETURN_IF_ERROR(ProjectAll(projector, args.max_distance_mm, &measured));
-    registration_json = report.ToJson();
-    log::Info("analyse: registered {} points ({}), rms {:.2f} -> {:.2f} um", report.points,
-              metrology::DofMaskToString(dofs), report.rms_before_mm * 1e3, report.rms_after_mm * 1e3);
-  }
-
-  std::vector<metrology::Deviation> deviations;
-  std::vector<const Measured*> used;
-  nlohmann::json flagged = nlohmann::json::array();
-  for (const Measured& m : measured) {
-    if (!m.flag.empty()) {
-      flagged.push_back({{"id", m.record->id},
-                         {"line", m.record->line},
-                         {"distance_mm", m.foot.distance_mm},
-                         {"deviation_um", m.foot.deviation_mm * 1e3},
-                         {"u", m.foot.u},
-                         {"v", m.foot.v},
-                         {"reason", m.flag}});
-      continue;
-    }
-    metrology::Deviation d;
-    d.id = m.record->id;
-    d.u = m.foot.u;
-    d.v = m.foot.v;
-    d.contact = m.contact;
-    d.foot = m.foot.foot;
-    d.normal = m.foot.normal;
-    d.deviation_mm = m.foot.deviation_mm;
-    d.on_boundary = m.foot.on_boundary;
-    deviations.push_back(d);
-    used.push_back(&m);
-  }
-  if (!flagged.empty()) {
-    log::Warn("analyse: {} of {} points flagged (beyond {} mm of Q or past its edge) and left out; see "
-              "flagged_points in analysis.json",
-              flagged.size(), measured.size(), args.max_distance_mm);
-  }
-
-  // 4. Decomposition (raw Moran, the ladder, d_s, d_u, the evaluation against alpha).
-  metrology::DecompositionOptions options;
-  options.neighbours = args.knn;
-  options.max_control_net = args.max_control_net;
-  options.coverage_factor = args.coverage_factor;
-  if (!std::isnan(args.tolerance_um)) options.tolerance_mm = args.tolerance_um * 1e-3;
-  FL_RETURN_IF_ERROR(options.Validate());
-  Result<metrology::Decomposition> decomposed = metrology::Decompose(deviations, q.domain(), options);
-  if (!decomposed.ok()) {
-    return decomposed.status().WithContext("analyse " + args.probe_log + " (" + std::to_string(deviations.size()) +
-                                           " points used, " + std::to_string(flagged.size()) + " flagged)");
-  }
-  const metrology::Decomposition& dec = decomposed.value();
-
-  // 5. Local Moran of the deviations on the same k-NN weights in (u, v).
-  const long n = static_cast<long>(deviations.size());
-  Eigen::VectorXd y(n);
-  for (long i = 0; i < n; ++i) y[i] = deviations[static_cast<std::size_t>(i)].deviation_mm;
-  FL_ASSIGN_OR_RETURN(const SpatialWeights weights, metrology::UvKnnWeights(deviations, args.knn));
-  FL_ASSIGN_OR_RETURN(const metrology::LocalMoranResult lisa,
-                      metrology::LocalMoranI(y, weights,
-                                             {.islands = IslandPolicy::kRefuse,
-                                              .permutations = args.lisa_permutations,
-                                              .seed = args.seed,
-                                              .alpha = args.alpha}));
-
-  // 5b. Local Moran of the random part d_u on the same weights: where the ladder's residual still
-  // clusters. d_u is a least-squares residual, so its values are not exchangeable in the strict
-  // sense; the conditional-randomisation p-values are the usual screening approximation (as for the
-  // raw deviations) and the global residual test of the ladder is the exact one. When d_u is
-  // identically zero (the model reproduces every point) there is nothing to map.
-  Eigen::VectorXd y_random(n);
-  for (long i = 0; i < n; ++i) y_random[i] = dec.random_mm[static_cast<std::size_t>(i)];
-  std::optional<metrology::LocalMoranResult> lisa_random;
-  if ((y_random.array() - y_random.mean()).square().sum() > 0) {
-    FL_ASSIGN_OR_RETURN(lisa_random, metrology::LocalMoranI(y_random, weights,
-                                                            {.islands = IslandPolicy::kRefuse,
-                                                             .permutations = args.lisa_permutations,
-                                                             .seed = args.seed,
-                                                             .alpha = args.alpha}));
-  }
-
-  // 6. Per-point summary.
-  double sum = 0, sum2 = 0;
-  long peak = 0;
-  for (long i = 0; i < n; ++i) {
-    sum += y[i];
-    sum2 += y[i] * y[i];
-    if (std::abs(y[i]) > std::abs(y[peak])) peak = i;
-  }
-  const Measured& pm = *used[static_cast<std::size_t>(peak)];
-  const metrology::Deviation& pd = deviations[static_cast<std::size_t>(peak)];
-  nlohmann::json summary = {
-      {"n_records", measured.size()},
-      {"n_used", n},
-      {"n_flagged", flagged.size()},
-      {"mean_um", sum / static_cast<double>(n) * 1e3},
-      {"rms_um", std::sqrt(sum2 / static_cast<double>(n)) * 1e3},
-      {"max_abs_um", std::abs(y[peak]) * 1e3},
-      {"max_abs_at",
-       {{"id", pd.id},
-        {"line", pm.record->line},
-        {"deviation_um", pd.deviation_mm * 1e3},
-        {"u", pd.u},
-        {"v", pd.v},
-        {"contact_mm", {pd.contact.x(), pd.contact.y(), pd.contact.z()}}}}};
-
-  // 7. The output, all computed before anything is written.
-  PointSet points = metrology::DeviationsToPoints(deviations);
-  points.scalars.clear();
-  std::vector<double> u_col, v_col, dev_col, ds_col, df_col, du_col, lisa_col, cluster_col, lisa_random_col,
-      cluster_random_col;
-  for (long i = 0; i < n; ++i) {
-    const auto k = static_cast<std::size_t>(i);
-    u_col.push_back(deviations[k].u);
-    v_col.push_back(deviations[k].v);
-    dev_col.push_back(deviations[k].deviation_mm * 1e3);
-    ds_col.push_back(dec.systematic_mm[k] * 1e3);
-    df_col.push_back(dec.fine_scale_mm[k] * 1e3);
-    du_col.push_back(dec.random_mm[k] * 1e3);
-    lisa_col.push_back(std::isfinite(lisa.i[i]) ? lisa.i[i] : 0.0);
-    cluster_col.push_back(static_cast<double>(static_cast<int>(lisa.cluster[k])));
-    if (lisa_random) {
-      lisa_random_col.push_back(std::isfinite(lisa_random->i[i]) ? lisa_random->i[i] : 0.0);
-      cluster_random_col.push_back(static_cast<double>(static_cast<int>(lisa_random->cluster[k])));
-    } else {
-      lisa_random_col.push_back(0.0);
-      cluster_random_col.push_back(static_cast<double>(static_cast<int>(metrology::LisaCluster::kNotSignificant)));
-    }
-  }
-  points.SetScalar("u", std::move(u_col));
-  points.SetScalar("v", std::move(v_col));
-  points.SetScalar("deviation", std::move(dev_col));
-  points.SetScalar("systematic", std::move(ds_col));
-  points.SetScalar("fine_scale", std::move(df_col));
-  points.SetScalar("random", std::move(du_col));
-  points.SetScalar("local_moran", std::move(lisa_col));
-  points.SetScalar("lisa_cluster", std::move(cluster_col));
-  points.SetScalar("local_moran_random", std::move(lisa_random_col));
-  points.SetScalar("lisa_cluster_random", std::move(cluster_random_col));
+  // 2.–5. The one analysis of a probe log (metrology/probe_log_analysis.h).
+  options.decomposition.neighbours = args.knn;
+  options.decomposition.max_control_net = args.max_control_net;
+  options.decomposition.coverage_factor = args.coverage_factor;
+  if (!std::isnan(args.tolerance_um)) options.decomposition.tolerance_mm = args.tolerance_um * 1e-3;
+  options.max_distance_mm = args.max_distance_mm;
+  options.lisa_permutations = args.lisa_permutations;
+  options.lisa_alpha = args.alpha;
+  options.lisa_seed = args.seed;
+  FL_ASSIGN_OR_RETURN(const metrology::ProbeLogAnalysis result,
+                      metrology::AnalyseProbeLog(q, log, probe, plan ? &*plan : nullptr, options));
+  const metrology::Decomposition& dec = result.decomposition;
+  const PointSet points = result.PerPointTable();
   FL_RETURN_IF_ERROR(points.Validate("analyse deviations"));
 
   nlohmann::json probe_json = metrology::ProbeProfileToJson(probe);
@@ -649,16 +466,19 @@ Status RunPartAnalysis(const PartArgs& args) {
                         {"probe_log", {{"file", args.probe_log}, {"records", log.records.size()}}},
                         {"plan", plan ? nlohmann::json{{"file", args.plan},
                                                        {"points", plan->points.size()},
-                                                       {"not_measured_ids", not_measured}}
+                                                       {"not_measured_ids", result.not_measured}}
                                       : nlohmann::json(nullptr)},
                         {"approach", plan ? "from the log; foot-point search started at the planned (u, v)"
                                           : "from the log; foot points by global search on Q (no plan)"},
                         {"options", args.ToJson()}};
   analysis["probe"] = probe_json;
-  analysis["registration"] = registration_json;
+  analysis["registration"] = result.registration
+                                 ? result.registration->ToJson()
+                                 : nlohmann::json{{"enabled", false},
+                                                  {"note", "off (default): deviations in the machine frame"}};
   analysis["search_distance_mm"] = args.max_distance_mm;
-  analysis["flagged_points"] = flagged;
-  analysis["deviations"] = summary;
+  analysis["flagged_points"] = result.FlaggedJson();
+  analysis["deviations"] = result.DeviationSummaryJson();
   analysis["raw_moran"] = dec.raw.ToJson();
   analysis["raw_moran"]["weights"] = {{"kind", "knn"}, {"k", args.knn}, {"coords", "u,v"}, {"style", "W"}};
   const bool systematic_detected = dec.raw.z_normality > metrology::kMoranZCritical;
@@ -672,34 +492,9 @@ Status RunPartAnalysis(const PartArgs& args) {
   analysis["random_rms_um"] = dec.random_rms_um;
   analysis["random_sigma_um"] = dec.random_sigma_um;
   analysis["form_error_um"] = dec.form_error_um;
-  analysis["lisa"] = lisa.SummaryJson();
+  analysis["lisa"] = result.lisa.SummaryJson();
   analysis["lisa"]["of"] = "the deviations, k-NN weights in (u, v), row-standardised";
-  if (lisa_random) {
-    analysis["lisa_random"] = lisa_random->SummaryJson();
-    analysis["lisa_random"]["of"] =
-        "the random part d_u (the residual of the field and, when it ran, the spatial filter), same k-NN weights in (u, v), row-standardised";
-    analysis["lisa_random"]["note"] =
-        "d_u is a least-squares residual: its p-values are a screening approximation; the ladder's residual Moran "
-        "z (Cliff-Ord) is the exact global test";
-    nlohmann::json significant = nlohmann::json::array();
-    for (long i = 0; i < n; ++i) {
-      const auto k = static_cast<std::size_t>(i);
-      const metrology::LisaCluster c = lisa_random->cluster[k];
-      if (c == metrology::LisaCluster::kNotSignificant || c == metrology::LisaCluster::kIsland) continue;
-      significant.push_back({{"id", deviations[k].id},
-                             {"u", deviations[k].u},
-                             {"v", deviations[k].v},
-                             {"random_um", dec.random_mm[k] * 1e3},
-                             {"I_i", lisa_random->i[i]},
-                             {"z", lisa_random->z[i]},
-                             {"p", lisa_random->permutations > 0 ? lisa_random->p_sim[i] : lisa_random->p_analytical[i]},
-                             {"cluster", metrology::LisaClusterName(c)}});
-    }
-    analysis["lisa_random"]["significant_points"] = significant;
-  } else {
-    analysis["lisa_random"] = {{"of", "the random part d_u"},
-                               {"note", "d_u is identically zero (the model reproduces every point): nothing to map"}};
-  }
+  analysis["lisa_random"] = result.LisaRandomJson();
   if (dec.evaluation) {
     analysis["evaluation"] = dec.evaluation->ToJson();
     analysis["compensate"] = dec.evaluation->compensate;
@@ -708,23 +503,13 @@ Status RunPartAnalysis(const PartArgs& args) {
     analysis["compensate"] = nullptr;
     analysis["evaluation_note"] = "no --tolerance-um: form error reported, no decision";
   }
-  analysis["outputs"] = {
-      {"deviations.ply",
-       {{"vertices", n},
-        {"position", "compensated contact point (mm; registered when registration is on)"},
-        {"normal", "unit normal of Q at the foot point"},
-        {"scalars",
-         {{"u", "foot-point parameter"},
-          {"v", "foot-point parameter"},
-          {"deviation", "signed normal deviation, um (positive = material left)"},
-          {"systematic", "d_s at the point, um"},
-          {"fine_scale", "d_f at the point, um: correlated structure finer than the field, taken out by the spatial "
-                         "filter when the field's residual is correlated (0 otherwise); never compensated"},
-          {"random", "d_u = deviation - d_s - d_f, um"},
-          {"local_moran", "local Moran I_i of the deviations (dimensionless)"},
-          {"lisa_cluster", "LISA cluster of the deviations: 0 not significant, 1 HH, 2 LH, 3 LL, 4 HL, 5 island"},
-          {"local_moran_random", "local Moran I_i of the random part d_u (dimensionless; 0 when d_u is all zero)"},
-          {"lisa_cluster_random", "LISA cluster of d_u, same codes as lisa_cluster"}}}}}};
+  const long n = static_cast<long>(result.deviations.size());
+  nlohmann::json columns = {{"position", "compensated contact point (mm; registered when registration is on)"},
+                            {"normal", "unit normal of Q at the foot point"},
+                            {"scalars", metrology::ProbeLogAnalysis::PerPointColumns()}};
+  analysis["outputs"] = {{"deviations.ply", {{"vertices", n}}}, {"deviations.csv", {{"rows", n}}}};
+  analysis["outputs"]["deviations.ply"].update(columns);
+  analysis["outputs"]["deviations.csv"].update(columns);
 
   // 8. Write: inputs, points, then analysis.json last.
   const fs::path dir(args.out);
@@ -744,10 +529,11 @@ Status RunPartAnalysis(const PartArgs& args) {
   FL_RETURN_IF_ERROR(WriteJsonFile(dir / "inputs" / "options.json", options_json));
   analysis["inputs"]["copies"] = copies;
   FL_RETURN_IF_ERROR(WritePoints(dir / "deviations.ply", points));
+  FL_RETURN_IF_ERROR(WritePoints(dir / "deviations.csv", points, {.precision = 6}));
   FL_RETURN_IF_ERROR(WriteJsonFile(dir / "analysis.json", analysis));
   log::Info("analyse: {} points ({} flagged), rms {:.2f} um, raw Moran z {:.2f}; model {}, d_s rms {:.2f} um, "
             "d_u rms {:.2f} um -> {}",
-            n, flagged.size(), std::sqrt(sum2 / static_cast<double>(n)) * 1e3, dec.raw.z_normality,
+            n, result.flagged.size(), analysis["deviations"]["rms_um"].get<double>(), dec.raw.z_normality,
             dec.systematic.name(), dec.systematic_rms_um, dec.random_rms_um, dir.string());
   return Status::Ok();
 }
@@ -792,7 +578,7 @@ void AddAnalyseCommand(CLI::App& root, CommandAction* action) {
       ->capture_default_str();
   analyse->add_option("--alpha", part->alpha, "LISA significance level")->capture_default_str();
   analyse->add_option("--seed", part->seed, "seed of the LISA permutations")->capture_default_str();
-  analyse->add_option("--out", part->out, "output folder: analysis.json, deviations.ply, inputs/");
+  analyse->add_option("--out", part->out, "output folder: analysis.json, deviations.csv|.ply, inputs/");
 
   auto args = std::make_shared<MoranArgs>();
   CLI::App* moran = analyse->add_subcommand(

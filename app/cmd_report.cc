@@ -1,5 +1,5 @@
-// `formloop report RUN_DIR [--out FILE]`: the self-contained report.html of a run folder
-// (app/report.h). Prints {"report": FILE} on stdout (stdout carries only JSON).
+// `formloop report DIR [--out FILE]`: the self-contained report.html of a run folder or of an `analyse`
+// folder (app/report.h). Prints {"report": FILE} on stdout (stdout carries only JSON).
 
 #include <iostream>
 #include <memory>
@@ -34,9 +34,11 @@ void AddReportCommand(CLI::App& root, CommandAction* action) {
   auto args = std::make_shared<ReportArgs>();
   CLI::App* cmd = root.add_subcommand(
       "report",
-      "Write a self-contained HTML report of a run folder: verdict, retrieval, plan, loop history, deviation maps "
+      "Write a self-contained HTML report of a run folder or an analyse folder: verdict, retrieval, plan, loop history, deviation maps "
       "before/after, Moran scatter and LISA clusters, diagnosis. Pictures are embedded; nothing is fetched.");
-  cmd->add_option("RUN_DIR", args->run_dir, "a `formloop run` folder (holds summary.json)")->required();
+  cmd->add_option("RUN_DIR", args->run_dir,
+                  "a `formloop run` folder (holds summary.json) or a `formloop analyse` folder (holds analysis.json)")
+      ->required();
   cmd->add_option("--out", args->out, "HTML file to write; default: RUN_DIR/report.html");
   cmd->callback([args, action] { *action = [args] { return RunReport(*args); }; });
 }

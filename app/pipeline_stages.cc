@@ -9,9 +9,7 @@
 #include "core/log.h"
 #include "core/point_io.h"
 #include "core/random.h"
-#include "metrology/deviations.h"
-#include "metrology/morans_i.h"
-#include "metrology/spatial_weights.h"
+#include "metrology/probe_log_analysis.h"
 #include "nc-gen/cutter_locations.h"
 #include "nc-gen/moves.h"
 #include "nc-gen/toolpath_io.h"
@@ -72,26 +70,6 @@ Result<Machine> ResolveMachine(const PartSpec& part, const RunOptions& options, 
   if (profile.probe) m.probe = *profile.probe;
   FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("inputs") / "machine_profile.json", profile.ToJson()));
   return m;
-}
-
-// Spatial lag and LISA cluster of the deviations (k-NN in (u, v), row-standardised), for the report.
-Status AddLocalMoran(const std::vector<metrology::Deviation>& deviations, int k, std::uint64_t seed,
-                     PointSet* points) {
-  Eigen::VectorXd d(static_cast<Eigen::Index>(deviations.size()));
-  for (std::size_t i = 0; i < deviations.size(); ++i) d(static_cast<Eigen::Index>(i)) = deviations[i].deviation_mm * 1e3;
-  FL_ASSIGN_OR_RETURN(metrology::SpatialWeights w, metrology::UvKnnWeights(deviations, k));
-  metrology::LocalMoranOptions lo;
-  lo.permutations = 199;
-  lo.seed = seed;
-  FL_ASSIGN_OR_RETURN(metrology::LocalMoranResult lisa, metrology::LocalMoranI(d, w, lo));
-  std::vector<double> lag(deviations.size()), cluster(deviations.size());
-  for (std::size_t i = 0; i < deviations.size(); ++i) {
-    lag[i] = lisa.lag(static_cast<Eigen::Index>(i));
-    cluster[i] = static_cast<double>(static_cast<int>(lisa.cluster[i]));
-  }
-  points->SetScalar("lag_um", std::move(lag));
-  points->SetScalar("lisa", std::move(cluster));
-  return Status::Ok();
 }
 
 }  // namespace
@@ -352,26 +330,19 @@ Result<Analysed> AnalyseCycle(const PartSpec& part, const recon::BSplineSurface&
                               const metrology::ProbeLog& log, int loop, bool another_loop_allowed, std::uint64_t seed,
                               const RunFolderWriter& folder) {
   const fs::path loop_dir = RunFolderWriter::LoopDir(loop);
-  FL_ASSIGN_OR_RETURN(std::vector<metrology::Deviation> deviations,
-                      metrology::ComputeDeviations(q, plan, log, part.probe));
-  FL_ASSIGN_OR_RETURN(metrology::Decomposition decomposition,
-                      metrology::Decompose(deviations, q.domain(), part.analysis));
-  PointSet points = metrology::DeviationsToPoints(deviations);
-  std::vector<double> ds_um, df_um, du_um;
-  for (std::size_t i = 0; i < deviations.size(); ++i) {
-    ds_um.push_back(decomposition.systematic_mm[i] * 1e3);
-    df_um.push_back(decomposition.fine_scale_mm[i] * 1e3);
-    du_um.push_back(decomposition.random_mm[i] * 1e3);
-  }
-  points.SetScalar("systematic_um", std::move(ds_um));
-  points.SetScalar("fine_scale_um", std::move(df_um));
-  points.SetScalar("random_um", std::move(du_um));
-  FL_RETURN_IF_ERROR(AddLocalMoran(deviations, part.analysis.neighbours, seed, &points));
+  metrology::ProbeLogAnalysisOptions options;
+  options.decomposition = part.analysis;
+  options.decomposition.tolerance_mm = part.tolerance_mm;
+  options.lisa_permutations = 199;  // cluster map of the report
+  options.lisa_seed = seed;
+  FL_ASSIGN_OR_RETURN(const metrology::ProbeLogAnalysis analysed,
+                      metrology::AnalyseProbeLog(q, log, part.probe, &plan, options));
+  const metrology::Decomposition& decomposition = analysed.decomposition;
+  const PointSet points = analysed.PerPointTable();
   FL_RETURN_IF_ERROR(WritePoints(folder.Path(loop_dir / "deviations.csv"), points, {.precision = 6}));
   FL_RETURN_IF_ERROR(WritePoints(folder.Path(loop_dir / "deviations.ply"), points));
 
-  FL_ASSIGN_OR_RETURN(const metrology::FormEvaluation evaluation,
-                      metrology::EvaluateForm(decomposition, part.tolerance_mm));
+  const metrology::FormEvaluation& evaluation = *decomposition.evaluation;
   const metrology::DecompositionStep& chosen = decomposition.steps[static_cast<std::size_t>(decomposition.chosen_step)];
   Analysed r;
   LoopSummary& ls = r.summary;
@@ -412,6 +383,7 @@ Result<Analysed> AnalyseCycle(const PartSpec& part, const recon::BSplineSurface&
   analysis["evaluation"] = evaluation.ToJson();
   analysis["decision"] = ls.decision;
   analysis["compensate"] = compensate;
+  if (!analysed.flagged.empty()) analysis["flagged_points"] = analysed.FlaggedJson();
   analysis["decision_rule"] =
       "the decomposition's evaluation (spec/metrology.md §8): compensate by -d_s when the form error "
       "max|d_s| + k*sigma(d_u) exceeds the tolerance and d_s is significant (a non-constant model chosen by the "

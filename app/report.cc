@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <string_view>
 #include <utility>
@@ -37,6 +38,7 @@ struct LoopData {
 };
 
 struct RunData {
+  bool analysis_folder = false;  // a `formloop analyse` folder: one cycle, no run-only sections
   Json summary;
   OptionalJson retrieval, plan, sim_correction, diagnosis, retain;
   std::vector<LoopData> loops;  // loop-0, loop-1, ... as long as the folders exist
@@ -65,39 +67,6 @@ Status CheckSummary(const Json& summary, const std::string& source) {
                             "write the per-loop records as an array \"loops\": [...]");
   }
   return Status::Ok();
-}
-
-Result<RunData> LoadRun(const fs::path& run_dir) {
-  const fs::path summary_path = run_dir / "summary.json";
-  std::error_code ec;
-  if (!fs::exists(summary_path, ec)) {
-    return Status::BadInput(Where{.file = summary_path.string()}, "the run folder has no summary.json",
-                            "give the folder written by `formloop run` (it holds summary.json)");
-  }
-  Result<Json> summary = ReadJsonFile(summary_path);
-  if (!summary.ok()) return Status::BadInput(summary.status().message());
-  FL_RETURN_IF_ERROR(CheckSummary(*summary, summary_path.string()));
-  RunData run{.summary = std::move(summary).value()};
-  run.retrieval = ReadOptionalJson(run_dir / "retrieval.json");
-  run.plan = ReadOptionalJson(run_dir / "plan.json");
-  run.sim_correction = ReadOptionalJson(run_dir / "sim_correction.json");
-  run.diagnosis = ReadOptionalJson(run_dir / "loop-0" / "diagnosis" / "diagnosis.json");
-  run.retain = ReadOptionalJson(run_dir / "retain.json");
-  for (int k = 0; fs::is_directory(run_dir / ("loop-" + std::to_string(k)), ec); ++k) {
-    const fs::path dir = run_dir / ("loop-" + std::to_string(k));
-    LoopData loop{.loop = k};
-    if (fs::exists(dir / "deviations.csv", ec)) {
-      Result<PointSet> points = ReadCsv(dir / "deviations.csv");
-      if (points.ok() && points->FindScalar("deviation_um") != nullptr) {
-        loop.points = std::move(points).value();
-      } else {
-        loop.points_note = points.ok() ? "deviations.csv has no deviation_um column" : points.status().message();
-      }
-    }
-    loop.analysis = ReadOptionalJson(dir / "analysis.json");
-    run.loops.push_back(std::move(loop));
-  }
-  return run;
 }
 
 // ---- Text and number formatting (locale-free) ----
@@ -146,6 +115,84 @@ std::string Scalar(const Json& value) {
 
 std::string StringOr(const Json& value, const std::string& fallback) {
   return value.is_string() ? value.get<std::string>() : fallback;
+}
+
+// ---- Reading the folder ----
+
+LoopData ReadLoop(const fs::path& dir, int k) {
+  std::error_code ec;
+  LoopData loop{.loop = k};
+  if (fs::exists(dir / "deviations.csv", ec)) {
+    Result<PointSet> points = ReadCsv(dir / "deviations.csv");
+    if (points.ok() && points->FindScalar("deviation_um") != nullptr) {
+      loop.points = std::move(points).value();
+    } else {
+      loop.points_note = points.ok() ? "deviations.csv has no deviation_um column" : points.status().message();
+    }
+  }
+  loop.analysis = ReadOptionalJson(dir / "analysis.json");
+  return loop;
+}
+
+// A `formloop analyse` folder read as a run of one cycle: the summary from its analysis.json.
+Result<RunData> LoadAnalysis(const fs::path& dir, const Json& analysis, const std::string& source) {
+  if (!analysis.is_object() || !analysis.contains("decomposition") || !analysis["decomposition"].is_object()) {
+    return Status::BadInput(Where{.file = source, .field = "decomposition"}, "missing or not an object",
+                            "point `formloop report` at a folder written by `formloop analyse`");
+  }
+  const Json& evaluation = Member(analysis, "evaluation");
+  const Json& dec = analysis["decomposition"];
+  Json loop = {{"loop", 0},
+               {"form_error_um", Member(analysis, "form_error_um")},
+               {"systematic_peak_um", Member(analysis, "systematic_peak_um")},
+               {"random_sigma_um", Member(analysis, "random_sigma_um")},
+               {"raw_moran_z", Member(Member(analysis, "raw_moran"), "z_normality")},
+               {"chosen_model", Member(analysis, "chosen_model")},
+               {"residual_moran_z", Member(dec, "residual_moran_z")},
+               {"within_tolerance", Member(evaluation, "within_tolerance")},
+               {"decision", evaluation.is_object() ? Member(evaluation, "decision") : Json("no tolerance given")}};
+  const Json& inputs = Member(analysis, "inputs");
+  RunData run{.analysis_folder = true};
+  run.summary = {{"part", "analysis of " + StringOr(Member(Member(inputs, "probe_log"), "file"), "a probe log")},
+                 {"surface", Member(Member(inputs, "surface"), "file")},
+                 {"tolerance_um", Member(evaluation, "tolerance_um")},
+                 {"loops", Json::array({loop})},
+                 {"within_tolerance", Member(evaluation, "within_tolerance")}};
+  LoopData only = ReadLoop(dir, 0);
+  only.analysis = {analysis, ""};
+  run.loops.push_back(std::move(only));
+  return run;
+}
+
+Result<RunData> LoadRun(const fs::path& run_dir) {
+  const fs::path summary_path = run_dir / "summary.json";
+  const fs::path analysis_path = run_dir / "analysis.json";
+  std::error_code ec;
+  if (!fs::exists(summary_path, ec) && fs::exists(analysis_path, ec)) {
+    Result<Json> analysis = ReadJsonFile(analysis_path);
+    if (!analysis.ok()) return Status::BadInput(analysis.status().message());
+    if (Member(*analysis, "format") == Json("formloop part analysis")) {
+      return LoadAnalysis(run_dir, *analysis, analysis_path.string());
+    }
+  }
+  if (!fs::exists(summary_path, ec)) {
+    return Status::BadInput(Where{.file = summary_path.string()}, "the run folder has no summary.json",
+                            "give the folder written by `formloop run` (it holds summary.json) or by `formloop "
+                            "analyse` (it holds analysis.json)");
+  }
+  Result<Json> summary = ReadJsonFile(summary_path);
+  if (!summary.ok()) return Status::BadInput(summary.status().message());
+  FL_RETURN_IF_ERROR(CheckSummary(*summary, summary_path.string()));
+  RunData run{.summary = std::move(summary).value()};
+  run.retrieval = ReadOptionalJson(run_dir / "retrieval.json");
+  run.plan = ReadOptionalJson(run_dir / "plan.json");
+  run.sim_correction = ReadOptionalJson(run_dir / "sim_correction.json");
+  run.diagnosis = ReadOptionalJson(run_dir / "loop-0" / "diagnosis" / "diagnosis.json");
+  run.retain = ReadOptionalJson(run_dir / "retain.json");
+  for (int k = 0; fs::is_directory(run_dir / ("loop-" + std::to_string(k)), ec); ++k) {
+    run.loops.push_back(ReadLoop(run_dir / ("loop-" + std::to_string(k)), k));
+  }
+  return run;
 }
 
 // ---- HTML building blocks ----
@@ -250,7 +297,9 @@ std::vector<double> Column(const PointSet& points, const std::string& name) {
 
 std::vector<int> Clusters(const PointSet& points) {
   std::vector<int> out;
-  if (const std::vector<double>* lisa = points.FindScalar("lisa")) {
+  const std::vector<double>* lisa = points.FindScalar("lisa_cluster");
+  if (lisa == nullptr) lisa = points.FindScalar("lisa");  // run folders written before the one analysis
+  if (lisa != nullptr) {
     for (double v : *lisa) out.push_back(static_cast<int>(std::lround(v)));
   }
   return out;
@@ -264,7 +313,16 @@ double MaxAbs(const std::vector<double>& values) {
 
 // ---- Sections ----
 
+// The tolerance α in µm; NaN when none was given (an `analyse` folder without --tolerance-um).
+double ToleranceUm(const Json& summary) {
+  const Json& t = Member(summary, "tolerance_um");
+  return t.is_number() ? t.get<double>() : std::numeric_limits<double>::quiet_NaN();
+}
+
 std::string VerdictText(const Json& summary) {
+  if (!Member(summary, "tolerance_um").is_number()) {
+    return "No tolerance given: form error " + Num(Member(Member(summary, "loops").back(), "form_error_um"), 2) + " µm";
+  }
   if (Member(summary, "within_tolerance") != Json(true)) return "NOT within tolerance";
   const Json& n = Member(summary, "loops_to_tolerance");
   const long loops = n.is_number() ? n.get<long>() : static_cast<long>(Member(summary, "loops").size());
@@ -290,10 +348,15 @@ void HeaderSection(std::string& html, const RunData& run) {
   const Json route = RouteOf(run);
   const std::string route_name = StringOr(Member(route, "name"), "not recorded");
   const Json& loops = Member(s, "loops");
-  html += fmt::format("<header>\n<h1>Run report: {}</h1>\n", Esc(StringOr(Member(s, "part"), "")));
-  html += fmt::format("<p class=\"verdict {}\">{}</p>\n", ok ? "ok" : "bad", Esc(VerdictText(s)));
-  html += fmt::format("<p><span class=\"badge route-{0}\">route: {0}</span>{1}</p>\n", Esc(route_name),
-                      Member(route, "flag_engineer") == Json(true) ? " <span class=\"badge flag\">engineer review</span>" : "");
+  html += fmt::format("<header>\n<h1>{} report: {}</h1>\n", run.analysis_folder ? "Analysis" : "Run",
+                      Esc(StringOr(Member(s, "part"), "")));
+  const bool has_tolerance = Member(s, "tolerance_um").is_number();
+  html += fmt::format("<p class=\"verdict {}\">{}</p>\n", !has_tolerance ? "na" : ok ? "ok" : "bad", Esc(VerdictText(s)));
+  if (!run.analysis_folder) {
+    html += fmt::format("<p><span class=\"badge route-{0}\">route: {0}</span>{1}</p>\n", Esc(route_name),
+                        Member(route, "flag_engineer") == Json(true) ? " <span class=\"badge flag\">engineer review</span>"
+                                                                     : "");
+  }
   const Json last = loops.empty() ? Json() : loops.back();
   html += Table({"surface", "form tolerance α", "loops run", "final form error", "fit check max"},
                 {{Esc(StringOr(Member(s, "surface"), "—")), Num(Member(s, "tolerance_um"), 2) + " µm",
@@ -374,13 +437,14 @@ Status LoopHistorySection(std::string& html, const RunData& run) {
   html += Table({"loop", "form error (µm)", "d<sub>s</sub> peak (µm)", "σ(d<sub>u</sub>) (µm)", "raw Moran z",
                  "chosen model", "residual Moran z", "within tolerance", "decision"},
                 rows);
-  const double tol = Member(run.summary, "tolerance_um").get<double>();
+  const double tol = ToleranceUm(run.summary);
   FL_ASSIGN_OR_RETURN(std::string figure,
                       Figure(DrawBars(labels, errors, tol, "TOLERANCE " + FormatFixed(tol, 1) + " µm", "FORM ERROR (µm)",
                                       "FORM ERROR PER LOOP"),
                              "Bar chart of the form error of each loop with the tolerance as a dashed line",
-                             "Form error per loop (µm). Green bars are within the tolerance α = " + FormatFixed(tol, 2) +
-                                 " µm (dashed red line), orange bars are not."));
+                             std::isfinite(tol) ? "Form error per loop (µm). Green bars are within the tolerance α = " +
+                                                      FormatFixed(tol, 2) + " µm (dashed red line), orange bars are not."
+                                                : std::string("Form error per loop (µm); no tolerance was given.")));
   html += figure;
   CloseSection(html);
   return Status::Ok();
@@ -435,7 +499,8 @@ Status DeviationFigures(std::string& html, const LoopData& first, const LoopData
                              "Histogram of the deviations before and after compensation with the tolerance limits",
                              "Distribution of the deviations (µm), loop " + std::to_string(first.loop) + " (orange)" +
                                  (last.loop != first.loop ? " and loop " + std::to_string(last.loop) + " (purple)" : "") +
-                                 "; dashed lines at ±α = ±" + FormatFixed(tol, 2) + " µm."));
+                                 (std::isfinite(tol) ? "; dashed lines at ±α = ±" + FormatFixed(tol, 2) + " µm."
+                                                     : std::string("; no tolerance was given."))));
   html += hist;
   return Status::Ok();
 }
@@ -459,7 +524,7 @@ Status DeviationsSection(std::string& html, const RunData& run) {
   html += Table({"loop", "points", "mean (µm)", "rms (µm)", "min (µm)", "max (µm)"}, rows);
   if (last->loop == 0) html += "<p>Only loop 0 has deviations, so there is no after-compensation map.</p>\n";
   FL_RETURN_IF_ERROR(
-      DeviationFigures(html, run.loops.front(), *last, Member(run.summary, "tolerance_um").get<double>()));
+      DeviationFigures(html, run.loops.front(), *last, ToleranceUm(run.summary)));
   CloseSection(html);
   return Status::Ok();
 }
@@ -635,22 +700,32 @@ Result<std::string> RenderRunReport(const fs::path& run_dir) {
   html += kScript;
   html += "</head>\n<body>\n";
   HeaderSection(html, run);
-  RetrievalSection(html, run);
-  GenericSection(html, "plan", "Plan", "The process plan the run used (tool, feeds, step-over, probing ...).", run.plan,
-                 "Plan (plan.json)");
-  GenericSection(html, "sim-correction", "Simulation correction",
-                 "Defects the virtual machine predicted for the plan before and after correction, the plan chosen "
-                 "and why.",
-                 run.sim_correction, "Simulation correction (sim_correction.json)");
+  if (!run.analysis_folder) {
+    RetrievalSection(html, run);
+    GenericSection(html, "plan", "Plan", "The process plan the run used (tool, feeds, step-over, probing ...).",
+                   run.plan, "Plan (plan.json)");
+    GenericSection(html, "sim-correction", "Simulation correction",
+                   "Defects the virtual machine predicted for the plan before and after correction, the plan chosen "
+                   "and why.",
+                   run.sim_correction, "Simulation correction (sim_correction.json)");
+  }
   FL_RETURN_IF_ERROR(LoopHistorySection(html, run));
   FL_RETURN_IF_ERROR(DeviationsSection(html, run));
   FL_RETURN_IF_ERROR(SpatialSection(html, run));
-  DiagnosisSection(html, run);
-  GenericSection(html, "retain", "Retain", "What this run stores back into the case library for future parts.",
-                 run.retain, "Retain (retain.json)");
-  html += "<footer>formloop " + Esc(StringOr(Member(run.summary, "formloop_version"), "unknown version")) +
-          " — report of part <code>" + Esc(StringOr(Member(run.summary, "part"), "?")) +
-          "</code> (the report names no folder, so the same run gives the same bytes wherever it is written)</footer>\n";
+  if (!run.analysis_folder) {
+    DiagnosisSection(html, run);
+    GenericSection(html, "retain", "Retain", "What this run stores back into the case library for future parts.",
+                   run.retain, "Retain (retain.json)");
+  }
+  if (run.analysis_folder) {
+    html += "<footer>formloop analyse — report of the <code>" + Esc(StringOr(Member(run.summary, "part"), "?")) +
+            "</code> (the report names no folder, so the same analysis gives the same bytes wherever it is "
+            "written)</footer>\n";
+  } else {
+    html += "<footer>formloop " + Esc(StringOr(Member(run.summary, "formloop_version"), "unknown version")) +
+            " — report of part <code>" + Esc(StringOr(Member(run.summary, "part"), "?")) +
+            "</code> (the report names no folder, so the same run gives the same bytes wherever it is written)</footer>\n";
+  }
   html += "</body>\n</html>\n";
   return html;
 }

@@ -2,7 +2,8 @@
 // The per-run report: one self-contained report.html for a process engineer (issue 8).
 //
 // Reads a run folder written by `formloop run` (and the optional files of `retrieve`, `diagnose`,
-// simulation correction and retain) and renders: the verdict, retrieval, plan, simulation
+// simulation correction and retain), or a folder written by `formloop analyse` (analysis.json and
+// deviations.csv: one cycle, drawn like a run's loop 0, without the run-only sections), and renders: the verdict, retrieval, plan, simulation
 // correction, loop history, deviations before/after, spatial analysis, diagnosis and retain. Pictures
 // are PNGs drawn by app/report_charts.h and embedded as data: URIs; CSS is inline; the only script is
 // a few lines that record in <body data-images-loaded="loaded/total"> how many pictures decoded, so a
@@ -11,8 +12,9 @@
 // Run folder (extra keys are ignored):
 //   summary.json                     required: part, surface, tolerance_um, loops[], verdict, route (optional)
 //   retrieval.json, plan.json, sim_correction.json, retain.json      optional
-//   loop-K/deviations.csv            per loop: x, y, deviation_um, systematic_um, random_um, optional
-//                                    lag_um (spatial lag of the centred deviation, µm) and lisa (0..5)
+//   loop-K/deviations.csv            per loop: the per-point table of metrology/probe_log_analysis.h
+//                                    (x, y, deviation_um, systematic_um, random_um, lag_um, lisa_cluster
+//                                    0..5; "lisa" in folders written before it)
 //   loop-K/analysis.json             raw_moran {I, z_normality, ...}, chosen_model, decision
 //   loop-0/diagnosis/diagnosis.json  optional: causes, unexplained, gain
 // A missing or unreadable optional file leaves its section saying "not available".

@@ -246,7 +246,9 @@ Canvas DrawClusterMap(const std::vector<double>& x_mm, const std::vector<double>
 }
 
 Canvas DrawHistogram(const std::vector<HistogramSeries>& series, double tolerance_um, const std::string& title) {
-  double lo = -std::abs(tolerance_um), hi = std::abs(tolerance_um);
+  const bool has_tolerance = std::isfinite(tolerance_um);
+  double lo = has_tolerance ? -std::abs(tolerance_um) : std::numeric_limits<double>::infinity();
+  double hi = has_tolerance ? std::abs(tolerance_um) : -std::numeric_limits<double>::infinity();
   for (const HistogramSeries& s : series) {
     for (double v : s.values_um) lo = std::min(lo, v), hi = std::max(hi, v);
   }
@@ -276,6 +278,7 @@ Canvas DrawHistogram(const std::vector<HistogramSeries>& series, double toleranc
     }
   }
   for (double t : {-std::abs(tolerance_um), std::abs(tolerance_um)}) {
+    if (!has_tolerance) break;
     c.Line(f.Px(t), f.top, f.Px(t), f.top + f.height, kLimitRed, 2, 5);
     c.Text(static_cast<int>(f.Px(t)) + (t < 0 ? -4 : 4), f.top + 4, t < 0 ? "-TOL" : "+TOL", kLimitRed, 1,
            t < 0 ? TextAlign::kRight : TextAlign::kLeft);
@@ -322,7 +325,8 @@ Canvas DrawMoranScatter(const std::vector<double>& z, const std::vector<double>&
 
 Canvas DrawBars(const std::vector<std::string>& labels, const std::vector<double>& values, double limit,
                 const std::string& limit_label, const std::string& y_label, const std::string& title) {
-  double top_value = std::max(limit, 0.0);
+  const bool has_limit = std::isfinite(limit);
+  double top_value = has_limit ? std::max(limit, 0.0) : 0.0;
   for (double v : values) top_value = std::max(top_value, v);
   Frame f{70, 40, 480, 280, 0, 1, 0, top_value > 0 ? top_value * 1.15 : 1};
   Canvas c(600, f.top + f.height + 50);
@@ -335,12 +339,14 @@ Canvas DrawBars(const std::vector<std::string>& labels, const std::vector<double
     const int x0 = static_cast<int>(std::lround(f.left + (i + 0.2) * slot_px));
     const int x1 = static_cast<int>(std::lround(f.left + (i + 0.8) * slot_px));
     const int y0 = static_cast<int>(std::lround(f.Py(std::max(values[i], 0.0))));
-    c.FillRect(x0, y0, x1, f.top + f.height, values[i] <= limit ? HexColour(0x4daf4a) : HexColour(0xff7f00));
+    c.FillRect(x0, y0, x1, f.top + f.height, !has_limit || values[i] <= limit ? HexColour(0x4daf4a) : HexColour(0xff7f00));
     c.Text((x0 + x1) / 2, y0 - 11, FormatFixed(values[i], 1), kInk, 1, TextAlign::kCentre);
     c.Text((x0 + x1) / 2, f.top + f.height + 8, i < labels.size() ? labels[i] : "", kInk, 1, TextAlign::kCentre);
   }
-  c.Line(f.left, f.Py(limit), f.left + f.width, f.Py(limit), kLimitRed, 2, 6);
-  c.Text(f.left + f.width - 4, static_cast<int>(f.Py(limit)) - 11, limit_label, kLimitRed, 1, TextAlign::kRight);
+  if (has_limit) {
+    c.Line(f.left, f.Py(limit), f.left + f.width, f.Py(limit), kLimitRed, 2, 6);
+    c.Text(f.left + f.width - 4, static_cast<int>(f.Py(limit)) - 11, limit_label, kLimitRed, 1, TextAlign::kRight);
+  }
   // Left axis only: the categories are labelled under the bars.
   for (double t : yt) {
     const int py = static_cast<int>(std::lround(f.Py(t)));

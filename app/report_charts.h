@@ -33,7 +33,7 @@ struct HistogramSeries {
   Rgb colour;
 };
 // Histograms on shared bins (bars of the series side by side in each bin), with dashed lines at
-// ±tolerance_um.
+// ±tolerance_um (none when tolerance_um is NaN: no tolerance given).
 Canvas DrawHistogram(const std::vector<HistogramSeries>& series, double tolerance_um, const std::string& title);
 
 // Moran scatter plot (Anselin 1996): x = standardised value z_i, y = standardised spatial lag,
@@ -43,7 +43,7 @@ Canvas DrawMoranScatter(const std::vector<double>& z, const std::vector<double>&
                         double moran_i, const std::string& title);
 
 // Bars per category (e.g. form error per loop) with a dashed horizontal line at limit; bars above
-// the limit are drawn in a warning colour.
+// the limit are drawn in a warning colour. A NaN limit (none given) draws no line and no warning.
 Canvas DrawBars(const std::vector<std::string>& labels, const std::vector<double>& values, double limit,
                 const std::string& limit_label, const std::string& y_label, const std::string& title);
 

@@ -435,6 +435,11 @@ nlohmann::json ResidualMoranResult::ToJson() const {
           {"islands", islands.ToJson()}};
 }
 
+Result<Eigen::VectorXd> SpatialLag(const Eigen::VectorXd& values, const SpatialWeights& weights) {
+  FL_ASSIGN_OR_RETURN(const CentredValues centred, CentreValues(values, weights, IslandPolicy::kRefuse, 0, "spatial lag"));
+  return Eigen::VectorXd(centred.w() * centred.z);
+}
+
 nlohmann::json LocalMoranResult::SummaryJson() const {
   nlohmann::json counts = nlohmann::json::object();
   for (LisaCluster c : {LisaCluster::kHighHigh, LisaCluster::kLowLow, LisaCluster::kHighLow, LisaCluster::kLowHigh,

@@ -159,6 +159,10 @@ struct LocalMoranResult {
 Result<LocalMoranResult> LocalMoranI(const Eigen::VectorXd& values, const SpatialWeights& weights,
                                      const LocalMoranOptions& options = {});
 
+// The spatial lag of the centred values, Σ_j w_ij (y_j − ȳ), one per row, in the values' unit: the
+// y-axis of the Moran scatter plot (LocalMoranResult::lag of the same values). Islands are refused.
+Result<Eigen::VectorXd> SpatialLag(const Eigen::VectorXd& values, const SpatialWeights& weights);
+
 // Upper-tail probability of the standard normal.
 double NormalUpperTail(double z);
 

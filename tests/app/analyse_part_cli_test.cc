@@ -188,13 +188,13 @@ TEST_F(AnalysePartCliTest, WithPlanFindsTheFieldAndAdvisesCompensationBelowIt) {
   auto ply = ReadPly(fs::path(out) / "deviations.ply");
   ASSERT_TRUE(ply.ok()) << ply.status().ToString();
   EXPECT_EQ(ply->size(), 898u);
-  for (const char* name : {"u", "v", "deviation", "systematic", "random", "local_moran"}) {
+  for (const char* name : {"u", "v", "deviation_um", "systematic_um", "random_um", "local_moran", "lag_um"}) {
     EXPECT_NE(ply->FindScalar(name), nullptr) << name;
   }
   // deviation = systematic + random at every point (um).
-  const auto& dev = *ply->FindScalar("deviation");
-  const auto& ds = *ply->FindScalar("systematic");
-  const auto& du = *ply->FindScalar("random");
+  const auto& dev = *ply->FindScalar("deviation_um");
+  const auto& ds = *ply->FindScalar("systematic_um");
+  const auto& du = *ply->FindScalar("random_um");
   for (std::size_t i = 0; i < dev.size(); ++i) EXPECT_NEAR(dev[i], ds[i] + du[i], 1e-9);
   // LISA of the random part d_u beside that of the raw deviations (issue 5, "left for later").
   for (const char* name : {"lisa_cluster", "local_moran_random", "lisa_cluster_random"}) {
@@ -298,7 +298,7 @@ void ReadDeviationsAndAzimuths(const std::string& dir, std::vector<double>* thet
   auto ply = ReadPly(fs::path(dir) / "deviations.ply");
   ASSERT_TRUE(ply.ok()) << ply.status().ToString();
   ASSERT_TRUE(ply->has_normals());
-  const auto& dev = *ply->FindScalar("deviation");
+  const auto& dev = *ply->FindScalar("deviation_um");
   theta->clear();
   dev_um->clear();
   for (std::size_t i = 0; i < ply->size(); ++i) {

@@ -1,10 +1,14 @@
 // The end-to-end run: every stage writes its report, the loop reaches tolerance, runs repeat
 // byte for byte, bad parts are refused before anything is written, and the binary behaves.
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include <unistd.h>
 
@@ -121,6 +125,74 @@ TEST_F(RunTest, SameInputsGiveByteIdenticalOutputs) {
     ++compared;
   }
   EXPECT_GE(compared, 18);
+}
+
+// `formloop run` and `formloop analyse` call the one analysis of a probe log: on the run's own loop-0
+// log, with the part's analysis settings, they give the same per-point table (same columns; the same
+// values apart from the LISA clusters, whose permutations are seeded differently, within 1e-5 of the
+// 6-decimal text: analyse reads Q back from surface/Q.step, the run keeps the fitted surface in memory)
+// and the same decision; and `formloop report` draws the analyse folder like a run's loop 0.
+TEST_F(RunTest, RunAndAnalyseGiveTheSamePerPointTable) {
+  const auto part = ReadPart(kDemo);
+  ASSERT_TRUE(part.ok());
+  RunOptions options;
+  options.out = dir_ / "run";
+  ASSERT_TRUE(RunPart(*part, options).ok());
+  const fs::path run = options.out;
+  const fs::path out = dir_ / "analyse";
+  std::string stdout_text, stderr_text;
+  const std::string args = "analyse --surface " + (run / "surface" / "Q.step").string() + " --probe-log " +
+                           (run / "loop-0" / "probe_log.csv").string() + " --plan " +
+                           (run / "toolpath" / "probing_plan.json").string() +
+                           " --ball-radius 1 --knn 8 --max-control-net 8 --coverage-factor 2 --tolerance-um 10"
+                           " --lisa-permutations 199 --out " + out.string();
+  ASSERT_EQ(testing::RunFormloop(args, &stdout_text, &stderr_text), 0) << stderr_text;
+  const std::string run_csv = Slurp(run / "loop-0" / "deviations.csv");
+  const std::string analyse_csv = Slurp(out / "deviations.csv");
+  auto lines = [](const std::string& text) {
+    std::vector<std::vector<std::string>> rows;
+    std::istringstream in(text);
+    for (std::string line; std::getline(in, line);) {
+      std::vector<std::string> cells;
+      std::istringstream cs(line);
+      for (std::string cell; std::getline(cs, cell, ',');) cells.push_back(cell);
+      rows.push_back(cells);
+    }
+    return rows;
+  };
+  const auto a = lines(run_csv), b = lines(analyse_csv);
+  ASSERT_EQ(a.size(), 401u);
+  ASSERT_EQ(b.size(), a.size());
+  ASSERT_EQ(a.front(), b.front());  // the same columns in the same order
+  const std::vector<std::string>& header = a.front();
+  int compared = 0;
+  for (std::size_t c = 0; c < header.size(); ++c) {
+    if (header[c] == "lisa_cluster" || header[c] == "lisa_cluster_random") continue;
+    for (std::size_t r = 1; r < a.size(); ++r) {
+      const double x = std::stod(a[r][c]), y = std::stod(b[r][c]);
+      ASSERT_LE(std::abs(x - y), 1e-5 * std::max(1.0, std::abs(x))) << header[c] << " row " << r;
+    }
+    ++compared;
+  }
+  EXPECT_EQ(compared, 20);  // x, y, z, nx, ny, nz, id and 13 scalars
+  const auto run_analysis = ReadJsonFile(run / "loop-0" / "analysis.json");
+  const auto analyse_analysis = ReadJsonFile(out / "analysis.json");
+  ASSERT_TRUE(run_analysis.ok() && analyse_analysis.ok());
+  const auto& e1 = (*run_analysis)["evaluation"];
+  const auto& e2 = (*analyse_analysis)["evaluation"];
+  EXPECT_EQ(e1["decision"], e2["decision"]);
+  EXPECT_EQ(e1["compensate"], e2["compensate"]);
+  EXPECT_NEAR(e1["form_error_um"].get<double>(), e2["form_error_um"].get<double>(), 1e-5);
+  EXPECT_EQ((*run_analysis)["chosen_model"], (*analyse_analysis)["chosen_model"]);
+
+  ASSERT_EQ(testing::RunFormloop("report " + out.string(), &stdout_text, &stderr_text), 0) << stderr_text;
+  const std::string html = Slurp(out / "report.html");
+  EXPECT_NE(html.find("Analysis report: analysis of"), std::string::npos);
+  for (const char* section : {"id=\"loops\"", "id=\"deviations\"", "id=\"spatial\""}) {
+    EXPECT_NE(html.find(section), std::string::npos) << section;
+  }
+  EXPECT_EQ(html.find("id=\"retrieval\""), std::string::npos);  // run-only sections are left out
+  EXPECT_EQ(html.find("not available"), std::string::npos);     // every picture of loop 0 is drawn
 }
 
 TEST_F(RunTest, BadPartsAreRefusedWithTheFieldAndNothingIsWritten) {

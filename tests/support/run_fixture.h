@@ -99,7 +99,7 @@ inline double WriteFixtureLoop(const std::filesystem::path& dir, int loop, const
   }
   const double sd = std::sqrt(var / d.size()), moran_i = cross / var;
   *moran_z = (moran_i + 1.0 / (d.size() - 1)) / 0.035;  // rough, only shown in the report
-  std::string csv = "x,y,z,nx,ny,nz,id,u,v,deviation_um,systematic_um,random_um,lag_um,lisa\n";
+  std::string csv = "x,y,z,nx,ny,nz,id,u,v,deviation_um,systematic_um,random_um,lag_um,lisa_cluster\n";
   for (std::size_t k = 0; k < d.size(); ++k) {
     const int lisa = loop == 0 ? Quadrant((d[k] - mean) / sd, lag[k] / sd) : 0;
     csv += FormatExact(x[k]) + "," + FormatExact(y[k]) + ",0,0,0,1," + std::to_string(k) + "," + FormatExact(x[k] / 100) +
