@@ -40,5 +40,7 @@ void AddSimulateCommand(CLI::App& root, CommandAction* action);
 void AddDiagnoseCommand(CLI::App& root, CommandAction* action);
 // `report` (app/cmd_report.cc).
 void AddReportCommand(CLI::App& root, CommandAction* action);
+// `link emulate|collect|write|program|check|selftest` (app/cmd_link.cc).
+void AddLinkCommand(CLI::App& root, CommandAction* action);
 
 }  // namespace formloop::app

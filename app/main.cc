@@ -37,6 +37,7 @@ int main(int argc, char** argv) {
   app::AddSimulateCommand(app, &action);
   app::AddDiagnoseCommand(app, &action);
   app::AddReportCommand(app, &action);
+  app::AddLinkCommand(app, &action);
 
   try {
     app.parse(argc, argv);

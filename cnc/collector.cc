@@ -237,14 +237,18 @@ class Collector {
     return o;
   }
 
+  // A write the controller refused (an error code) was not applied and is made again at once, up to
+  // kRefusedRetries times; a write whose outcome is unknown (connection lost) is not repeated: the
+  // caller reads the block and decides afresh.
+  static constexpr int kRefusedRetries = 20;
   bool Write(int address, const std::vector<double>& values, const char* what) {
-    ++report_.counters.writes;
-    const Status s = t_.WriteRange(address, values);
-    if (!s.ok()) {
+    for (int attempt = 0;; ++attempt) {
+      ++report_.counters.writes;
+      const Status s = t_.WriteRange(address, values);
+      if (s.ok()) return true;
       CallFailed(s, what);
-      return false;
+      if (s.code() == StatusCode::kIoError || attempt >= kRefusedRetries) return false;
     }
-    return true;
   }
   bool WriteEmpty() {
     if (block_.layout == Layout::kPacked) return Write(block_.data(), {kEmptyData}, "data reset");
@@ -398,6 +402,7 @@ class Collector {
       }
     }
     if (!JournalOk(journal_.AddPoint(point))) return Outcome::kFatal;
+    stored_here_.insert(std::make_pair(o.qv(), i));
     ++report_.counters.points_stored;
     if (progress_ != nullptr) progress_->Advance();
     Hook(CollectorStep::kAfterPersist);
@@ -431,7 +436,10 @@ class Collector {
   // for the data to appear, and only then hands back again.
   Outcome AcknowledgeStored(const Observation& o, const Session& s, int i) {
     const auto key = std::make_pair(s.q, i);
-    if (o.data_empty) {
+    // Stored by this process and never handed back: the machine cannot have seen an acknowledgement
+    // of i, so it cannot be repeating it; hand back at once.
+    const bool unambiguous = stored_here_.count(key) != 0 && hand_back_sent_.count(key) == 0;
+    if (o.data_empty && !unambiguous) {
       if (settle_q_ != s.q || settle_id_ != i || settle_generation_ != acks_) {
         settle_q_ = s.q;
         settle_id_ = i;
@@ -476,6 +484,7 @@ class Collector {
                                          " attempts at point " + std::to_string(i));
       }
     }
+    hand_back_sent_.insert(std::make_pair(o.qv(), i));  // from here on it may have landed
     if (!WriteControl(abort ? AbortWord() : MeasuringWord(i))) return Outcome::kAgain;
     acked_.insert(std::make_pair(o.qv(), i));
     ++acks_;
@@ -533,6 +542,7 @@ class Collector {
   bool connected_ = false, had_connection_ = false;
   double backoff_s_ = 0.5;
   std::set<std::pair<double, int>> acked_;
+  std::set<std::pair<double, int>> stored_here_, hand_back_sent_;
   long acks_ = 0;
   double settle_q_ = std::numeric_limits<double>::quiet_NaN();
   int settle_id_ = -1;

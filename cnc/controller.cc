@@ -314,8 +314,10 @@ void Controller::WriteVariable(int number, MacroValue value) {
       }
     }
   }
-  // Visibility.
-  const double delay = options_.faults.visibility_max_s > 0 ? rng_.Uniform(0, options_.faults.visibility_max_s) : 0.0;
+  // Visibility: the delay is drawn for the block's addresses (what the API side watches); the
+  // program's scratch variables are committed in order with them.
+  const bool in_block = number >= block_.base && number < block_.base + block_.size();
+  const double delay = in_block && options_.faults.visibility_max_s > 0 ? rng_.Uniform(0, options_.faults.visibility_max_s) : 0.0;
   double t_visible = scheduler_->now_s() + delay;
   if (reorder) {
     ++fault_counts_["reorder"];
@@ -467,7 +469,7 @@ void Controller::Submit(const ApiRequest& request, std::function<void(const ApiR
       }
       double stored = std::round(request.value / entry.resolution_mm) * entry.resolution_mm;
       const auto mismatch = options_.faults.offset_mismatch.find(request.offset);
-      if (mismatch != options_.faults.offset_mismatch.end()) {
+      if (mismatch != options_.faults.offset_mismatch.end() && mismatch_used_.insert(request.offset).second) {
         stored += mismatch->second;
         ++fault_counts_["offset_mismatch"];
       }

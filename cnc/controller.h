@@ -28,7 +28,7 @@
 //              a third party writing into the block while the collector holds the token, a data word
 //              that is not a whole number, deviations ≥ 0.1 mm (the program writes OVERFLOW), vacant or
 //              stale values at start
-//   offsets    writes refused for named offsets, a stored value that differs from the written one
+//   offsets    writes refused for named offsets, a first write that stores another value than written
 
 #include <array>
 #include <cstdint>
@@ -96,7 +96,7 @@ struct ControllerFaults {
   };
   std::vector<Deviation> deviations;  // replaces the generated deviation (e.g. 0.15 mm: OVERFLOW)
   std::set<std::string> offset_reject;
-  std::map<std::string, double> offset_mismatch;  // stored = written + this
+  std::map<std::string, double> offset_mismatch;  // the first write stores written + this
   Status Validate() const;
 };
 
@@ -233,6 +233,7 @@ class Controller final : public MachineEnvironment {
   std::uint64_t pending_seq_ = 0;
   double last_visible_t_ = 0;
   std::map<std::string, OffsetEntry> offsets_;
+  std::set<std::string> mismatch_used_;
   std::map<std::int64_t, int> probe_index_;  // key of a probe end point → plan index
   std::vector<std::vector<std::array<double, 3>>> truth_;  // per run (lazily), per point
   std::vector<HandoverRecord> record_;

@@ -311,7 +311,10 @@ std::string Title(const MachineProgramOptions& o, std::size_t points) {
 
 Status MachineProgramOptions::Validate() const {
   FL_RETURN_IF_ERROR(probe.Validate());
-  if (!(dwell_s > 0 && dwell_s <= 1)) return Status::BadInput("dwell_s must be in (0, 1] s");
+  // The programs state the dwell in whole milliseconds (Fanuc G04 X takes 0.001 s steps).
+  if (!(dwell_s >= 0.001 && dwell_s <= 1 && std::fabs(dwell_s * 1000 - std::round(dwell_s * 1000)) < 1e-9)) {
+    return Status::BadInput("dwell_s must be a whole number of milliseconds in [0.001, 1] s");
+  }
   for (const auto& [name, t] : {std::pair<const char*, double>{"arm_timeout_s", arm_timeout_s},
                                 {"ack_timeout_s", ack_timeout_s},
                                 {"finish_timeout_s", finish_timeout_s}}) {
