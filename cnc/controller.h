@@ -41,6 +41,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "cnc/api.h"
 #include "cnc/clock.h"
 #include "cnc/handshake.h"
 #include "cnc/machine_program.h"
@@ -136,22 +137,6 @@ struct HandoverRecord {
   bool corrupted = false;
 };
 
-struct ApiRequest {
-  enum class Op { kReadRange, kWriteRange, kReadOffset, kWriteOffset };
-  Op op = Op::kReadRange;
-  int start = 0;
-  int count = 0;
-  std::vector<double> values;
-  std::string offset;
-  double value = 0;
-};
-struct ApiResponse {
-  bool ok = true;
-  std::string error;  // "EW_BUSY: ...": the controller refused the call
-  std::vector<MacroValue> values;
-  double value = 0;
-};
-enum class Disposition { kAnswer, kDropConnection, kHalfOpen };
 
 class Controller final : public MachineEnvironment {
  public:

@@ -85,7 +85,7 @@ Status TcpTransport::Connect() {
   return Status::Ok();
 }
 
-Status TcpTransport::Call(const ApiRequest& request, ApiResponse* response) {
+Result<ApiResponse> TcpTransport::Call(const ApiRequest& request) {
   if (fd_ < 0) return Status::IoError("not connected to " + Describe());
   const std::uint64_t seq = ++seq_;
   const std::string out = EncodeRequest(seq, request);
@@ -115,8 +115,7 @@ Status TcpTransport::Call(const ApiRequest& request, ApiResponse* response) {
       const Status s = DecodeResponse(line, request, &got, &answer);
       if (got != seq) continue;
       if (!s.ok()) return fail(s.message());
-      *response = std::move(answer);
-      return Status::Ok();
+      return answer;
     }
     pollfd p{fd_, POLLIN, 0};
     const int ready = ::poll(&p, 1, RemainingMs(deadline));
@@ -131,47 +130,6 @@ Status TcpTransport::Call(const ApiRequest& request, ApiResponse* response) {
     }
     inbox_.append(buffer, static_cast<std::size_t>(n));
   }
-}
-
-Result<std::vector<MacroValue>> TcpTransport::ReadRange(int start, int count) {
-  ApiRequest r;
-  r.op = ApiRequest::Op::kReadRange;
-  r.start = start;
-  r.count = count;
-  ApiResponse a;
-  FL_RETURN_IF_ERROR(Call(r, &a));
-  if (!a.ok) return Status::Failed(a.error);
-  return std::move(a.values);
-}
-
-Status TcpTransport::WriteRange(int start, const std::vector<double>& values) {
-  ApiRequest r;
-  r.op = ApiRequest::Op::kWriteRange;
-  r.start = start;
-  r.values = values;
-  ApiResponse a;
-  FL_RETURN_IF_ERROR(Call(r, &a));
-  return a.ok ? Status::Ok() : Status::Failed(a.error);
-}
-
-Result<double> TcpTransport::ReadOffset(const OffsetAddress& offset) {
-  ApiRequest r;
-  r.op = ApiRequest::Op::kReadOffset;
-  r.offset = offset.ToString();
-  ApiResponse a;
-  FL_RETURN_IF_ERROR(Call(r, &a));
-  if (!a.ok) return Status::Failed(a.error);
-  return a.value;
-}
-
-Status TcpTransport::WriteOffset(const OffsetAddress& offset, double value_mm) {
-  ApiRequest r;
-  r.op = ApiRequest::Op::kWriteOffset;
-  r.offset = offset.ToString();
-  r.value = value_mm;
-  ApiResponse a;
-  FL_RETURN_IF_ERROR(Call(r, &a));
-  return a.ok ? Status::Ok() : Status::Failed(a.error);
 }
 
 }  // namespace formloop::cnc

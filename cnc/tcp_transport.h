@@ -7,12 +7,9 @@
 #include <cstdint>
 #include <string>
 
-#include "cnc/transport.h"
+#include "cnc/api.h"
 
 namespace formloop::cnc {
-
-struct ApiRequest;
-struct ApiResponse;
 
 struct TcpTransportOptions {
   double connect_timeout_s = 2.0;
@@ -22,7 +19,7 @@ struct TcpTransportOptions {
 // "HOST:PORT" with HOST a dotted IPv4 address or "localhost".
 Status ParseAddress(const std::string& text, std::string* host, int* port);
 
-class TcpTransport final : public MacroTransport {
+class TcpTransport final : public RequestTransport {
  public:
   TcpTransport(std::string host, int port, TcpTransportOptions options = {});
   ~TcpTransport() override;
@@ -31,14 +28,10 @@ class TcpTransport final : public MacroTransport {
 
   Status Connect() override;
   void Disconnect() override;
-  Result<std::vector<MacroValue>> ReadRange(int start, int count) override;
-  Status WriteRange(int start, const std::vector<double>& values) override;
-  Result<double> ReadOffset(const OffsetAddress& offset) override;
-  Status WriteOffset(const OffsetAddress& offset, double value_mm) override;
   std::string Describe() const override { return host_ + ":" + std::to_string(port_); }
 
  private:
-  Status Call(const ApiRequest& request, ApiResponse* response);
+  Result<ApiResponse> Call(const ApiRequest& request) override;
   std::string host_;
   int port_;
   TcpTransportOptions options_;

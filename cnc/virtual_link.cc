@@ -33,41 +33,7 @@ Result<ApiResponse> VirtualLink::Call(const ApiRequest& request) {
     connected_ = false;
     return Status::IoError("no answer within the call timeout (half-open connection or latency spike)");
   }
-  if (!answer->first.ok) return Status::Failed(answer->first.error);
   return answer->first;
-}
-
-Result<std::vector<MacroValue>> VirtualLink::ReadRange(int start, int count) {
-  ApiRequest r;
-  r.op = ApiRequest::Op::kReadRange;
-  r.start = start;
-  r.count = count;
-  FL_ASSIGN_OR_RETURN(ApiResponse a, Call(r));
-  return std::move(a.values);
-}
-
-Status VirtualLink::WriteRange(int start, const std::vector<double>& values) {
-  ApiRequest r;
-  r.op = ApiRequest::Op::kWriteRange;
-  r.start = start;
-  r.values = values;
-  return Call(r).status();
-}
-
-Result<double> VirtualLink::ReadOffset(const OffsetAddress& offset) {
-  ApiRequest r;
-  r.op = ApiRequest::Op::kReadOffset;
-  r.offset = offset.ToString();
-  FL_ASSIGN_OR_RETURN(ApiResponse a, Call(r));
-  return a.value;
-}
-
-Status VirtualLink::WriteOffset(const OffsetAddress& offset, double value_mm) {
-  ApiRequest r;
-  r.op = ApiRequest::Op::kWriteOffset;
-  r.offset = offset.ToString();
-  r.value = value_mm;
-  return Call(r).status();
 }
 
 }  // namespace formloop::cnc

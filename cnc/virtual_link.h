@@ -15,21 +15,17 @@ struct VirtualLinkOptions {
   double connect_time_s = 0.001;
 };
 
-class VirtualLink final : public MacroTransport {
+class VirtualLink final : public RequestTransport {
  public:
   VirtualLink(Controller* controller, EventScheduler* scheduler, VirtualLinkOptions options = {})
       : controller_(controller), scheduler_(scheduler), options_(options) {}
   Status Connect() override;
   void Disconnect() override { connected_ = false; }
-  Result<std::vector<MacroValue>> ReadRange(int start, int count) override;
-  Status WriteRange(int start, const std::vector<double>& values) override;
-  Result<double> ReadOffset(const OffsetAddress& offset) override;
-  Status WriteOffset(const OffsetAddress& offset, double value_mm) override;
   std::string Describe() const override { return "virtual controller"; }
   long calls() const { return calls_; }
 
  private:
-  Result<ApiResponse> Call(const ApiRequest& request);
+  Result<ApiResponse> Call(const ApiRequest& request) override;
   Controller* controller_;
   EventScheduler* scheduler_;
   VirtualLinkOptions options_;
