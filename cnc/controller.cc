@@ -467,10 +467,15 @@ void Controller::Submit(const ApiRequest& request, std::function<void(const ApiR
                           FormatExact(entry.min_mm) + ", " + FormatExact(entry.max_mm) + "]";
         return;
       }
-      double stored = std::round(request.value / entry.resolution_mm) * entry.resolution_mm;
+      // The controller keeps whole resolution steps (0.001 mm steps: integer µm), read back as the
+      // double nearest to that decimal.
+      const double steps_per_mm = std::round(1.0 / entry.resolution_mm);
+      double stored = std::fabs(steps_per_mm * entry.resolution_mm - 1.0) < 1e-12
+                          ? std::round(request.value * steps_per_mm) / steps_per_mm
+                          : std::round(request.value / entry.resolution_mm) * entry.resolution_mm;
       const auto mismatch = options_.faults.offset_mismatch.find(request.offset);
       if (mismatch != options_.faults.offset_mismatch.end() && mismatch_used_.insert(request.offset).second) {
-        stored += mismatch->second;
+        stored = std::round((stored + mismatch->second) * steps_per_mm) / steps_per_mm;
         ++fault_counts_["offset_mismatch"];
       }
       entry.value_mm = stored;

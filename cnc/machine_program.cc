@@ -83,12 +83,17 @@ class Emitter {
     Line(Var(var) + " = " + (simple ? expr : "[" + expr + "]"));
   }
   void AssignS(int k, const std::string& expr) { Assign(ScratchBase(d_) + k, expr); }
-  // Reads block address base+offset into scratch k.
+  // Reads block address base+offset into scratch k. LinuxCNC: M66 waits for the motion queue to run
+  // empty, so the read happens after the dwell before it. Sinumerik: STOPRE stops the preprocessing,
+  // which would otherwise run through the wait loop ahead of the main run with a stale value. Fanuc
+  // buffers one NC block ahead: the read after G04 runs while that dwell executes, one dwell early,
+  // which only shifts the look and leaves the loop's timing as it is.
   void ReadBlock(int offset, int k) {
     if (d_ == Dialect::kLinuxCnc) {
       Line("M66 E" + Int(block_.base + offset) + " L0");
       AssignS(k, "#5399");
     } else {
+      if (d_ == Dialect::kSinumerik) Line("STOPRE");
       AssignS(k, Var(block_.base + offset));
     }
   }

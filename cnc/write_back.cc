@@ -242,7 +242,9 @@ Result<WriteBackReport> WriteBack(MacroTransport& t, const WritePlan& plan, bool
     if (!s.ok() && s.code() == StatusCode::kIoError && t.Connect().ok()) s = t.WriteOffset(w.address, w.previous_mm);
     const auto back = ReadOffsetRetry(t, w.address);
     if (back.ok()) report.items[k].rolled_back_read_mm = *back;
-    report.items[k].rolled_back = s.ok() && back.ok() && std::fabs(*back - w.previous_mm) <= w.resolution_mm / 2;
+    // What counts is the value read back: an offset whose write was refused still holds its previous value.
+    report.items[k].rolled_back = back.ok() && std::fabs(*back - w.previous_mm) <= w.resolution_mm / 2;
+    if (!s.ok() && report.items[k].rolled_back) report.items[k].note += " (its rollback write was refused; it reads the previous value)";
     if (!report.items[k].rolled_back) {
       rollback_ok = false;
       report.reasons.push_back("ROLLBACK_FAILED: " + w.address.ToString() + " could not be set back to " + FormatExact(w.previous_mm) +
