@@ -15,6 +15,9 @@
 //     reads a machine-side program with formloop's reader of that dialect (every line checked).
 //   formloop link selftest --address HOST:PORT
 //     the commissioning self-test of the PACKED layout (§7.2).
+//   formloop link alarm --address HOST:PORT --code N
+//     writes the alarm request A (the measuring program raises DIMENSION NG at its next start while
+//     A > 0); --code 0 clears it once the operator has acknowledged (§7.5).
 
 #include <atomic>
 #include <csignal>
@@ -383,6 +386,29 @@ Status SelfTestCommand(const SelfTestArgs& a) {
   return r.passed ? Status::Ok() : Status::Failed("link selftest: " + r.message);
 }
 
+struct AlarmArgs {
+  std::string address;
+  BlockArgs block;
+  int code = 0;
+};
+
+// A has a single writer, the collector side, and lies outside the critical section (R3): written and
+// read back, whatever the token does.
+Status AlarmCommand(const AlarmArgs& a) {
+  std::string host;
+  int port = 0;
+  FL_RETURN_IF_ERROR(ParseAddress(a.address, &host, &port));
+  if (a.code < 0 || a.code > 9999) return Status::BadInput(Where{.field = "--code"}, "must be 0 (clear) .. 9999");
+  FL_ASSIGN_OR_RETURN(const BlockLayout block, a.block.Block());
+  TcpTransport transport(host, port);
+  FL_RETURN_IF_ERROR(transport.Connect());
+  FL_RETURN_IF_ERROR(transport.Write(block.alarm(), a.code));
+  FL_ASSIGN_OR_RETURN(const auto back, transport.ReadRange(block.alarm(), 1));
+  const bool ok = back.size() == 1 && back[0] && *back[0] == a.code;
+  FL_RETURN_IF_ERROR(Print({{"address", block.alarm()}, {"alarm_request", a.code}, {"read_back_ok", ok}}, "link alarm"));
+  return ok ? Status::Ok() : Status::Failed("link alarm: the alarm request did not read back as written");
+}
+
 // ---- write ---------------------------------------------------------------------------------------
 
 struct WriteArgs {
@@ -584,6 +610,13 @@ void AddLinkCommand(CLI::App& root, CommandAction* action) {
   check->add_option("--r-last", k->r_last, "Sinumerik: highest R parameter (MD28050 - 1)")->capture_default_str();
   check->add_option("--ports", k->ports, "LinuxCNC: motion.num_aio")->capture_default_str();
   check->callback([action, k] { *action = [k] { return CheckCommand(*k); }; });
+
+  auto al = std::make_shared<AlarmArgs>();
+  CLI::App* alarm = link->add_subcommand("alarm", "Write the alarm request A (0 clears it): the measuring program alarms at its next start while A > 0.");
+  alarm->add_option("--address", al->address, "controller HOST:PORT")->required();
+  alarm->add_option("--code", al->code, "alarm code, 1..9999; 0 clears")->required();
+  al->block.Add(alarm);
+  alarm->callback([action, al] { *action = [al] { return AlarmCommand(*al); }; });
 
   auto s = std::make_shared<SelfTestArgs>();
   CLI::App* selftest = link->add_subcommand("selftest", "Commissioning self-test: can the data word carry 36 bits exactly?");

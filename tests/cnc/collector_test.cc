@@ -444,6 +444,23 @@ TEST_F(CollectorTest, VacantOrStaleValuesAtStart) {
   EXPECT_NE(r2->fatal.find("reset the block (C = 0)"), std::string::npos) << r2->fatal;
 }
 
+// An NG result: the collector side writes the alarm request A; the program raises DIMENSION NG at its
+// next start and measures nothing until A is cleared.
+TEST_F(CollectorTest, TheAlarmRequestStopsTheNextCycle) {
+  for (const Dialect d : {Dialect::kFanuc, Dialect::kLinuxCnc, Dialect::kSinumerik}) {
+    ControllerOptions co = Basic(d, 5);
+    VirtualBench probe(co);
+    co.initial_values[probe.controller->block().alarm()] = 7;
+    VirtualBench bench(co);
+    bench.Drain(5);
+    ASSERT_EQ(bench.controller->alarms().size(), 1u) << DialectName(d);
+    const auto& alarm = bench.controller->alarms()[0];
+    EXPECT_NE(alarm.text.find("DIMENSION NG"), std::string::npos) << alarm.text;
+    EXPECT_TRUE(bench.controller->record().empty());
+    EXPECT_FALSE(bench.controller->Peek(bench.controller->block().run_counter()).has_value());  // before M0
+  }
+}
+
 TEST_F(CollectorTest, TheProgramAlarmsWhenNoCollectorArmsOrTheCollectorStopsAnswering) {
   ControllerOptions co = Basic(Dialect::kSinumerik, 10, 1, 2);
   co.program.arm_timeout_s = 5;

@@ -17,6 +17,8 @@
 
 #include <gtest/gtest.h>
 
+#include "cnc/controller.h"
+#include "core/json_io.h"
 #include "core/point_io.h"
 #include "core/random.h"
 #include "tests/cnc/process_support.h"
@@ -219,8 +221,52 @@ TEST_F(LinkProcessTest, WriteBackRefusesRollsBackAndWrites) {
   EXPECT_EQ(r["outcome"], "WRITTEN");
   EXPECT_NEAR(offset(r, "T3.radius_wear")["read_back_mm"].get<double>(), 0.095, 1e-12);
   EXPECT_NEAR(offset(r, "T5.length_wear")["read_back_mm"].get<double>(), -0.025, 1e-12);
+  // The alarm request and the self-test through the CLI against the same controller.
+  for (const char* code : {"5", "0"}) {
+    const pid_t p = SpawnFormloop({"link", "alarm", "--address", address, "--code", code, "--quiet"}, dir_ / "alarm.out", dir_ / "alarm.err");
+    guard.pids.push_back(p);
+    EXPECT_EQ(WaitFor(p, 30), 0);
+  }
+  const pid_t self = SpawnFormloop({"link", "selftest", "--address", address, "--quiet"}, dir_ / "selftest.out", dir_ / "selftest.err");
+  guard.pids.push_back(self);
+  EXPECT_EQ(WaitFor(self, 30), 0);
+  EXPECT_TRUE(nlohmann::json::parse(*ReadFile(dir_ / "selftest.out"))["passed"].get<bool>());
   ::kill(emulator, SIGTERM);
   EXPECT_NE(WaitFor(emulator, 10), -1);
+  const auto summary = nlohmann::json::parse(*ReadFile(dir_ / "emulate.out"));
+  EXPECT_TRUE(summary["stopped_by_signal"].get<bool>());
+  EXPECT_NEAR(summary["offsets_mm"]["T3.radius_wear"].get<double>(), 0.095, 1e-12);
+}
+
+// `link program` writes the machine side for a plan file and `link check` reads it back; a broken line
+// is an error naming the file and the line (exit 2).
+TEST_F(LinkProcessTest, ProgramAndCheckCommands) {
+  ProcessGuard guard;
+  const auto plan = dir_ / "plan.json";
+  ASSERT_TRUE(WriteJsonFile(plan, SyntheticPlan(12).ToJson()).ok());
+  const auto run = [&](const std::vector<std::string>& args) {
+    const pid_t p = SpawnFormloop(args, dir_ / "cmd.out", dir_ / "cmd.err");
+    guard.pids.push_back(p);
+    return WaitFor(p, 60);
+  };
+  for (const std::string dialect : {"fanuc", "linuxcnc", "sinumerik"}) {
+    const auto out = dir_ / dialect;
+    ASSERT_EQ(run({"link", "program", "--plan", plan.string(), "--dialect", dialect, "--out", out.string(), "--quiet"}), 0) << dialect;
+    std::vector<std::string> check = {"link", "check", "--dialect", dialect};
+    for (const char* name : {"measure.nc", "measure.ngc", "FL_MEASURE.MPF", "FL_SEND.SPF"}) {
+      if (std::filesystem::exists(out / name)) check.push_back((out / name).string());
+    }
+    EXPECT_EQ(run(check), 0) << dialect;
+  }
+  auto text = *ReadFile(dir_ / "fanuc" / "measure.nc");
+  const auto at = text.find("#902=#165+1");
+  const long line = 1 + std::count(text.begin(), text.begin() + static_cast<long>(at), '\n');
+  text.replace(at, 11, "#902=#165+");
+  ASSERT_TRUE(WriteFileAtomic(dir_ / "broken.nc", text).ok());
+  std::filesystem::remove(dir_ / "cmd.err");
+  EXPECT_EQ(run({"link", "check", "--dialect", "fanuc", (dir_ / "broken.nc").string()}), 2);
+  const auto err = *ReadFile(dir_ / "cmd.err");
+  EXPECT_NE(err.find("broken.nc:" + std::to_string(line) + ":"), std::string::npos) << err;
 }
 
 // A third party writes an illegal control word mid-run: the collector exits 1 naming PROTOCOL_ERROR and
