@@ -19,17 +19,16 @@
 //     writes the alarm request A (the measuring program raises DIMENSION NG at its next start while
 //     A > 0); --code 0 clears it once the operator has acknowledged (§7.5).
 
+#include <unistd.h>
+
 #include <atomic>
 #include <csignal>
 #include <iostream>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 #include <vector>
-
-#include <unistd.h>
-
-#include <nlohmann/json.hpp>
 
 #include "app/command.h"
 #include "app/run_folder.h"
@@ -137,7 +136,8 @@ Result<ControllerOptions> EmulatorOptions(const EmulateArgs& a) {
     return Status::BadInput(Where{.field = "--precision"}, "'" + a.precision + "'", "use double or digits8");
   }
   if (a.jitter_ms > a.latency_ms) {
-    return Status::BadInput(Where{.field = "--jitter-ms"}, "must not exceed --latency-ms (uniform in latency ± jitter)");
+    return Status::BadInput(Where{.field = "--jitter-ms"},
+                            "must not exceed --latency-ms (uniform in latency ± jitter)");
   }
   if (a.latency_dist == "uniform") {
     o.latency.base_s = (a.latency_ms - a.jitter_ms) * 1e-3;
@@ -180,7 +180,8 @@ Result<ControllerOptions> EmulatorOptions(const EmulateArgs& a) {
     ControllerFaults::Deviation dev;
     FL_RETURN_IF_ERROR(ToInt(p[0], "--deviation", &dev.at.run));
     FL_RETURN_IF_ERROR(ToInt(p[1], "--deviation", &dev.at.point));
-    if (p[2].size() != 1 || p[2][0] < 'X' || p[2][0] > 'Z') return Status::BadInput(Where{.field = "--deviation"}, "axis must be X, Y or Z");
+    if (p[2].size() != 1 || p[2][0] < 'X' || p[2][0] > 'Z')
+      return Status::BadInput(Where{.field = "--deviation"}, "axis must be X, Y or Z");
     dev.axis = p[2][0] - 'X';
     FL_RETURN_IF_ERROR(ToNumber(p[3], "--deviation", &dev.value_mm));
     f.deviations.push_back(dev);
@@ -234,10 +235,12 @@ Status Emulate(const EmulateArgs& a) {
   FL_ASSIGN_OR_RETURN(auto server, EmulatorServer::Start(options, so));
   const std::string address = a.host + ":" + std::to_string(server->port());
   if (!a.ready_file.empty()) {
-    FL_RETURN_IF_ERROR(WriteJsonFile(a.ready_file, {{"address", address}, {"port", server->port()}, {"pid", ::getpid()}}));
+    FL_RETURN_IF_ERROR(
+        WriteJsonFile(a.ready_file, {{"address", address}, {"port", server->port()}, {"pid", ::getpid()}}));
   }
-  log::Info("link emulate: {} controller on {}, {} runs of {} points, block {}{} ({})", a.dialect, address, a.runs, a.points,
-            a.dialect == "sinumerik" ? "R" : (a.dialect == "linuxcnc" ? "E" : "#"), server->controller().block().base, a.layout);
+  log::Info("link emulate: {} controller on {}, {} runs of {} points, block {}{} ({})", a.dialect, address, a.runs,
+            a.points, a.dialect == "sinumerik" ? "R" : (a.dialect == "linuxcnc" ? "E" : "#"),
+            server->controller().block().base, a.layout);
   g_stop = false;
   std::signal(SIGTERM, OnStopSignal);
   std::signal(SIGINT, OnStopSignal);
@@ -245,7 +248,8 @@ Status Emulate(const EmulateArgs& a) {
   const Controller& c = server->controller();
   if (!a.record.empty()) FL_RETURN_IF_ERROR(c.WriteRecord(a.record));
   nlohmann::json alarms = nlohmann::json::array();
-  for (const auto& al : c.alarms()) alarms.push_back({{"run", al.run}, {"number", al.number}, {"text", al.text}, {"where", al.where}});
+  for (const auto& al : c.alarms())
+    alarms.push_back({{"run", al.run}, {"number", al.number}, {"text", al.text}, {"where", al.where}});
   nlohmann::json faults = nlohmann::json::object();
   for (const auto& [name, count] : c.fault_counts()) faults[name] = count;
   nlohmann::json offsets = nlohmann::json::object();
@@ -265,8 +269,11 @@ Status Emulate(const EmulateArgs& a) {
                             {"stopped_by_signal", g_stop.load()}},
                            "link emulate"));
   if (c.runs_completed() < options.runs || !c.alarms().empty()) {
-    return Status::Failed("link emulate: " + std::to_string(c.runs_completed()) + " of " + std::to_string(options.runs) +
-                          " runs completed" + (c.alarms().empty() ? "" : ", the program stopped in alarm " + std::to_string(c.alarms()[0].number) + " " + c.alarms()[0].text));
+    return Status::Failed("link emulate: " + std::to_string(c.runs_completed()) + " of " +
+                          std::to_string(options.runs) + " runs completed" +
+                          (c.alarms().empty() ? ""
+                                              : ", the program stopped in alarm " +
+                                                    std::to_string(c.alarms()[0].number) + " " + c.alarms()[0].text));
   }
   return Status::Ok();
 }
@@ -284,9 +291,11 @@ struct BlockArgs {
     return p.Block();
   }
   void Add(CLI::App* app) {
-    app->add_option("--dialect", dialect, "controller dialect: where the block lives by default (fanuc #900, linuxcnc E0, sinumerik R90)")
+    app->add_option("--dialect", dialect,
+                    "controller dialect: where the block lives by default (fanuc #900, linuxcnc E0, sinumerik R90)")
         ->capture_default_str();
-    app->add_option("--layout", layout, "block layout: packed (C, D, Q, A) or split (C, v_x, v_y, v_z, Q, A)")->capture_default_str();
+    app->add_option("--layout", layout, "block layout: packed (C, D, Q, A) or split (C, v_x, v_y, v_z, Q, A)")
+        ->capture_default_str();
     app->add_option("--base", base, "first address of the block (-1: the dialect's default)")->capture_default_str();
   }
 };
@@ -349,7 +358,8 @@ Status CollectCommand(const CollectArgs& a) {
   o.journal = a.journal.empty() ? a.out + ".journal" : a.journal;
   o.fsync = !a.no_fsync;
   o.progress = true;
-  if (std::filesystem::path(a.out) == o.journal) return Status::BadInput(Where{.field = "--journal"}, "must differ from --out");
+  if (std::filesystem::path(a.out) == o.journal)
+    return Status::BadInput(Where{.field = "--journal"}, "must differ from --out");
   TcpTransport transport(host, port, TcpTransportOptions{2.0, a.call_timeout_s});
   RealClock clock;
   FL_ASSIGN_OR_RETURN(const CollectorReport report, Collect(transport, clock, o));
@@ -359,10 +369,12 @@ Status CollectCommand(const CollectArgs& a) {
   json["out"] = a.out;
   json["journal"] = o.journal.string();
   const auto& c = report.counters;
-  log::Info("link collect: {} points in {:.2f} s ({:.1f} points/s by this process); retries: {} reads and {} writes in all, {} refused "
-            "calls, {} lost connections, {} reconnects, {} lost writes made again",
-            report.points_total(), report.elapsed_s, report.points_per_s(), c.reads, c.writes, c.api_errors, c.connection_errors,
-            c.reconnects, c.lost_writes);
+  log::Info(
+      "link collect: {} points in {:.2f} s ({:.1f} points/s by this process); retries: {} reads and {} writes in all, "
+      "{} refused "
+      "calls, {} lost connections, {} reconnects, {} lost writes made again",
+      report.points_total(), report.elapsed_s, report.points_per_s(), c.reads, c.writes, c.api_errors,
+      c.connection_errors, c.reconnects, c.lost_writes);
   FL_RETURN_IF_ERROR(Print(json, "link collect"));
   if (!report.ok) return Status::Failed("link collect: " + report.fatal);
   return Status::Ok();
@@ -405,7 +417,8 @@ Status AlarmCommand(const AlarmArgs& a) {
   FL_RETURN_IF_ERROR(transport.Write(block.alarm(), a.code));
   FL_ASSIGN_OR_RETURN(const auto back, transport.ReadRange(block.alarm(), 1));
   const bool ok = back.size() == 1 && back[0] && *back[0] == a.code;
-  FL_RETURN_IF_ERROR(Print({{"address", block.alarm()}, {"alarm_request", a.code}, {"read_back_ok", ok}}, "link alarm"));
+  FL_RETURN_IF_ERROR(
+      Print({{"address", block.alarm()}, {"alarm_request", a.code}, {"read_back_ok", ok}}, "link alarm"));
   return ok ? Status::Ok() : Status::Failed("link alarm: the alarm request did not read back as written");
 }
 
@@ -461,7 +474,9 @@ Status ProgramCommand(const ProgramArgs& a) {
   o.probe.post.title = a.title;
   o.probe.post.decimals = a.decimals >= 0 ? a.decimals : (o.dialect == Dialect::kFanuc ? 3 : 4);
   FL_ASSIGN_OR_RETURN(const MachineProgram program, WriteMachineProgram(plan.plan, o));
-  FL_RETURN_IF_ERROR(ReadMacroProgram(o.dialect, program.files).status().WithContext("link program: the written program does not read back"));
+  FL_RETURN_IF_ERROR(ReadMacroProgram(o.dialect, program.files)
+                         .status()
+                         .WithContext("link program: the written program does not read back"));
   FL_RETURN_IF_ERROR(MakeDirectories(a.out));
   nlohmann::json files = nlohmann::json::array();
   for (const auto& f : program.files) {
@@ -494,58 +509,76 @@ Status CheckCommand(const CheckArgs& a) {
   limits.sinumerik_r_last = a.r_last;
   limits.linuxcnc_ports = a.ports;
   FL_ASSIGN_OR_RETURN(const MacroCode code, ReadMacroProgram(d, files, limits));
-  return Print({{"ok", true}, {"dialect", a.dialect}, {"instructions", code.instrs.size()}, {"points", code.marks.size()}}, "link check");
+  return Print(
+      {{"ok", true}, {"dialect", a.dialect}, {"instructions", code.instrs.size()}, {"points", code.marks.size()}},
+      "link check");
 }
 
 }  // namespace
 
 void AddLinkCommand(CLI::App& root, CommandAction* action) {
   CLI::App* link = root.add_subcommand(
-      "link", "The machine link: macro-variable handshake, emulated controller, collection, confirmed offset write-back.");
+      "link",
+      "The machine link: macro-variable handshake, emulated controller, collection, confirmed offset write-back.");
   link->require_subcommand(1);
 
   auto e = std::make_shared<EmulateArgs>();
   CLI::App* emulate = link->add_subcommand(
-      "emulate", "Run an emulated controller (macro memory, offsets, the measuring program, latency, faults) on a TCP port.");
+      "emulate",
+      "Run an emulated controller (macro memory, offsets, the measuring program, latency, faults) on a TCP port.");
   emulate->add_option("--port", e->port, "TCP port; 0 = a free one (written to --ready-file)")->required();
   emulate->add_option("--host", e->host, "address to listen on")->capture_default_str();
   emulate->add_option("--ready-file", e->ready_file, "JSON file written once the port is open: {address, port, pid}");
   emulate->add_option("--record", e->record, "CSV of every point the program handed over (the emulator's own record)");
-  emulate->add_option("--dialect", e->dialect, "machine-side program: fanuc, linuxcnc or sinumerik")->capture_default_str();
+  emulate->add_option("--dialect", e->dialect, "machine-side program: fanuc, linuxcnc or sinumerik")
+      ->capture_default_str();
   emulate->add_option("--layout", e->layout, "block layout: packed or split")->capture_default_str();
   emulate->add_option("--base", e->base, "block base address (-1: the dialect's default)")->capture_default_str();
   emulate->add_option("--points", e->points, "points per run, 1..2000")->capture_default_str();
   emulate->add_option("--runs", e->runs, "runs of the measuring program")->capture_default_str();
   emulate->add_option("--seed", e->seed, "seed of the deviations and of every fault draw")->capture_default_str();
-  emulate->add_option("--latency-ms", e->latency_ms, "API call latency, ms (uniform: its mean; lognormal: its median)")->capture_default_str();
+  emulate->add_option("--latency-ms", e->latency_ms, "API call latency, ms (uniform: its mean; lognormal: its median)")
+      ->capture_default_str();
   emulate->add_option("--jitter-ms", e->jitter_ms, "uniform latency in latency ± jitter, ms")->capture_default_str();
   emulate->add_option("--latency-dist", e->latency_dist, "uniform or lognormal")->capture_default_str();
   emulate->add_option("--spike-rate", e->spike_rate, "probability of a latency spike per call")->capture_default_str();
   emulate->add_option("--spike-ms", e->spike_ms, "size of a spike, ms")->capture_default_str();
   emulate->add_option("--measure-ms", e->measure_ms, "time of one probing move, ms")->capture_default_str();
-  emulate->add_option("--dwell-ms", e->dwell_ms, "the program's dwell per look at C (t_dwell), ms")->capture_default_str();
+  emulate->add_option("--dwell-ms", e->dwell_ms, "the program's dwell per look at C (t_dwell), ms")
+      ->capture_default_str();
   emulate->add_option("--arm-timeout-s", e->arm_timeout_s, "T_arm of the program")->capture_default_str();
   emulate->add_option("--ack-timeout-s", e->ack_timeout_s, "T_ack of the program")->capture_default_str();
   emulate->add_option("--run-gap-s", e->run_gap_s, "pause between runs")->capture_default_str();
   emulate->add_option("--restart-delay-s", e->restart_delay_s, "reset to cycle start")->capture_default_str();
   emulate->add_option("--start-delay-s", e->start_delay_s, "before the first run starts")->capture_default_str();
-  emulate->add_option("--visibility-ms", e->visibility_ms, "machine writes become visible after U(0, this), ms")->capture_default_str();
+  emulate->add_option("--visibility-ms", e->visibility_ms, "machine writes become visible after U(0, this), ms")
+      ->capture_default_str();
   emulate->add_option("--reorder-rate", e->reorder_rate, "per point: C visible before D")->capture_default_str();
-  emulate->add_option("--api-error-rate", e->api_error_rate, "per call: an error code, nothing applied")->capture_default_str();
-  emulate->add_option("--drop-write-rate", e->dropped_write_rate, "per write: reported OK, not applied")->capture_default_str();
-  emulate->add_option("--drop-connection-rate", e->connection_drop_rate, "per call: the connection is closed")->capture_default_str();
-  emulate->add_option("--half-open-rate", e->half_open_rate, "per call: the connection stops answering")->capture_default_str();
-  emulate->add_flag("--torn-reads", e->torn_reads, "range reads one address at a time with the machine running in between");
-  emulate->add_option("--repeat-rate", e->repeat_rate, "per point: the program sends the point again")->capture_default_str();
-  emulate->add_option("--skip-rate", e->skip_rate, "per point: the program skips the next point")->capture_default_str();
+  emulate->add_option("--api-error-rate", e->api_error_rate, "per call: an error code, nothing applied")
+      ->capture_default_str();
+  emulate->add_option("--drop-write-rate", e->dropped_write_rate, "per write: reported OK, not applied")
+      ->capture_default_str();
+  emulate->add_option("--drop-connection-rate", e->connection_drop_rate, "per call: the connection is closed")
+      ->capture_default_str();
+  emulate->add_option("--half-open-rate", e->half_open_rate, "per call: the connection stops answering")
+      ->capture_default_str();
+  emulate->add_flag("--torn-reads", e->torn_reads,
+                    "range reads one address at a time with the machine running in between");
+  emulate->add_option("--repeat-rate", e->repeat_rate, "per point: the program sends the point again")
+      ->capture_default_str();
+  emulate->add_option("--skip-rate", e->skip_rate, "per point: the program skips the next point")
+      ->capture_default_str();
   emulate->add_option("--reset-at", e->resets, "RUN:POINT: controller reset before probing that point");
   emulate->add_option("--corrupt-at", e->corrupt, "RUN:POINT: that point's data word is written + 0.5");
   emulate->add_option("--deviation", e->deviations, "RUN:POINT:AXIS:MM: the probe measures this deviation there");
-  emulate->add_option("--third-party", e->third_party, "RUN:POINT:OFFSET:VALUE: written into the block after that point's hand-over");
-  emulate->add_option("--precision", e->precision, "double or digits8 (8 significant digits kept)")->capture_default_str();
+  emulate->add_option("--third-party", e->third_party,
+                      "RUN:POINT:OFFSET:VALUE: written into the block after that point's hand-over");
+  emulate->add_option("--precision", e->precision, "double or digits8 (8 significant digits kept)")
+      ->capture_default_str();
   emulate->add_flag("--mantissa32", e->mantissa32, "API values pass a 32-bit mantissa + decimal exponent");
   emulate->add_option("--offset", e->offsets, "NAME=VALUE: initial offset (T3.radius_wear=0.085, G54.X=-120)");
-  emulate->add_option("--offset-mismatch", e->mismatch, "NAME=DELTA: the first write to that offset stores the written value + DELTA");
+  emulate->add_option("--offset-mismatch", e->mismatch,
+                      "NAME=DELTA: the first write to that offset stores the written value + DELTA");
   emulate->add_option("--offset-reject", e->reject, "NAME: writes to that offset are refused");
   emulate->add_option("--initial", e->initial, "ADDRESS=VALUE: memory at power-on (stale values)");
   emulate->add_option("--linger-s", e->linger_s, "keep answering this long after the last run")->capture_default_str();
@@ -554,24 +587,29 @@ void AddLinkCommand(CLI::App& root, CommandAction* action) {
 
   auto c = std::make_shared<CollectArgs>();
   CLI::App* collect = link->add_subcommand(
-      "collect", "Collect the points of the measuring program through the handshake; restartable from its journal at any moment.");
+      "collect",
+      "Collect the points of the measuring program through the handshake; restartable from its journal at any moment.");
   collect->add_option("--address", c->address, "controller HOST:PORT")->required();
   collect->add_option("--out", c->out, "CSV of the collected points (written when the collection ends)")->required();
   collect->add_option("--journal", c->journal, "journal (default: OUT.journal); keep it to resume after a crash");
-  collect->add_option("--expect", c->expect, "points per run the model expects (0: as the program says)")->capture_default_str();
+  collect->add_option("--expect", c->expect, "points per run the model expects (0: as the program says)")
+      ->capture_default_str();
   collect->add_option("--runs", c->runs, "finished runs to collect")->capture_default_str();
   c->block.Add(collect);
   collect->add_option("--poll-ms", c->poll_ms, "t_poll: interval of the range reads, ms")->capture_default_str();
   collect->add_option("--visibility-timeout-s", c->visibility_timeout_s, "T_vis")->capture_default_str();
-  collect->add_option("--idle-timeout-s", c->idle_timeout_s, "give up after this long without a change (0: never)")->capture_default_str();
+  collect->add_option("--idle-timeout-s", c->idle_timeout_s, "give up after this long without a change (0: never)")
+      ->capture_default_str();
   collect->add_option("--reconnect-min-s", c->reconnect_min_s, "first reconnect backoff")->capture_default_str();
   collect->add_option("--reconnect-max-s", c->reconnect_max_s, "largest reconnect backoff")->capture_default_str();
-  collect->add_option("--call-timeout-s", c->call_timeout_s, "a call without an answer by then fails")->capture_default_str();
+  collect->add_option("--call-timeout-s", c->call_timeout_s, "a call without an answer by then fails")
+      ->capture_default_str();
   collect->add_flag("--stop-on-range", c->stop_on_range, "answer an out-of-range point with ABORT");
   collect->add_flag("--no-fsync", c->no_fsync, "do not flush the journal to disk per point (measurements only)");
   collect->add_option("--plan", c->plan, "probing plan (JSON or CSV) of the measuring program, for --probe-log");
   collect->add_option("--probe-log", c->probe_log, "probe log (id,x,y,z,ax,ay,az,t) of the last COMPLETE run");
-  collect->add_option("--ball-radius-mm", c->ball_radius_mm, "stylus ball radius the program was written for")->capture_default_str();
+  collect->add_option("--ball-radius-mm", c->ball_radius_mm, "stylus ball radius the program was written for")
+      ->capture_default_str();
   collect->callback([action, c] { *action = [c] { return CollectCommand(*c); }; });
 
   auto w = std::make_shared<WriteArgs>();
@@ -580,12 +618,14 @@ void AddLinkCommand(CLI::App& root, CommandAction* action) {
   write->add_option("--address", w->address, "controller HOST:PORT")->required();
   write->add_option("--plan", w->plan, "offset write plan (formloop.offset_write_plan JSON)")->required();
   write->add_flag("--confirm", w->confirm, "the operator confirms this write (without it nothing is sent)");
-  write->add_option("--call-timeout-s", w->call_timeout_s, "a call without an answer by then fails")->capture_default_str();
+  write->add_option("--call-timeout-s", w->call_timeout_s, "a call without an answer by then fails")
+      ->capture_default_str();
   write->callback([action, w] { *action = [w] { return WriteCommand(*w); }; });
 
   auto p = std::make_shared<ProgramArgs>();
   CLI::App* program = link->add_subcommand(
-      "program", "Write the machine side of the handshake for a probing plan: Fanuc macro B, LinuxCNC O-codes or Sinumerik R.");
+      "program",
+      "Write the machine side of the handshake for a probing plan: Fanuc macro B, LinuxCNC O-codes or Sinumerik R.");
   program->add_option("--plan", p->plan, "probing plan (JSON or CSV), ids 1..N, N <= 2000")->required();
   program->add_option("--out", p->out, "folder for the program file(s)")->required();
   program->add_option("--dialect", p->dialect, "fanuc, linuxcnc or sinumerik")->capture_default_str();
@@ -595,16 +635,19 @@ void AddLinkCommand(CLI::App& root, CommandAction* action) {
   program->add_option("--arm-timeout-s", p->arm_timeout_s, "T_arm")->capture_default_str();
   program->add_option("--ack-timeout-s", p->ack_timeout_s, "T_ack")->capture_default_str();
   program->add_option("--ball-radius-mm", p->ball_radius_mm, "stylus ball radius")->capture_default_str();
-  program->add_option("--clearance-mm", p->clearance_mm, "start of the probing move outside the surface")->capture_default_str();
+  program->add_option("--clearance-mm", p->clearance_mm, "start of the probing move outside the surface")
+      ->capture_default_str();
   program->add_option("--search-mm", p->search_mm, "end of the probing move inside the surface")->capture_default_str();
   program->add_option("--feed", p->feed, "probing feed, mm/min")->capture_default_str();
   program->add_option("--safe-z-mm", p->safe_z_mm, "rapids between points")->capture_default_str();
-  program->add_option("--decimals", p->decimals, "coordinate decimals (-1: 3 for Fanuc IS-B, else 4)")->capture_default_str();
+  program->add_option("--decimals", p->decimals, "coordinate decimals (-1: 3 for Fanuc IS-B, else 4)")
+      ->capture_default_str();
   program->add_option("--title", p->title, "a comment line in the program");
   program->callback([action, p] { *action = [p] { return ProgramCommand(*p); }; });
 
   auto k = std::make_shared<CheckArgs>();
-  CLI::App* check = link->add_subcommand("check", "Read a machine-side program with formloop's reader of its dialect; every line is checked.");
+  CLI::App* check = link->add_subcommand(
+      "check", "Read a machine-side program with formloop's reader of its dialect; every line is checked.");
   check->add_option("--dialect", k->dialect, "fanuc, linuxcnc or sinumerik")->capture_default_str();
   check->add_option("files", k->files, "program file(s); Sinumerik: the MPF first, then its SPF files")->required();
   check->add_option("--r-last", k->r_last, "Sinumerik: highest R parameter (MD28050 - 1)")->capture_default_str();
@@ -612,14 +655,16 @@ void AddLinkCommand(CLI::App& root, CommandAction* action) {
   check->callback([action, k] { *action = [k] { return CheckCommand(*k); }; });
 
   auto al = std::make_shared<AlarmArgs>();
-  CLI::App* alarm = link->add_subcommand("alarm", "Write the alarm request A (0 clears it): the measuring program alarms at its next start while A > 0.");
+  CLI::App* alarm = link->add_subcommand(
+      "alarm", "Write the alarm request A (0 clears it): the measuring program alarms at its next start while A > 0.");
   alarm->add_option("--address", al->address, "controller HOST:PORT")->required();
   alarm->add_option("--code", al->code, "alarm code, 1..9999; 0 clears")->required();
   al->block.Add(alarm);
   alarm->callback([action, al] { *action = [al] { return AlarmCommand(*al); }; });
 
   auto s = std::make_shared<SelfTestArgs>();
-  CLI::App* selftest = link->add_subcommand("selftest", "Commissioning self-test: can the data word carry 36 bits exactly?");
+  CLI::App* selftest =
+      link->add_subcommand("selftest", "Commissioning self-test: can the data word carry 36 bits exactly?");
   selftest->add_option("--address", s->address, "controller HOST:PORT")->required();
   s->block.Add(selftest);
   selftest->callback([action, s] { *action = [s] { return SelfTestCommand(*s); }; });

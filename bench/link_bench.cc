@@ -18,6 +18,8 @@
 //
 //   nice -n 10 ./build/bench/formloop_bench_link [points]      (default 2000, one run)
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -27,8 +29,6 @@
 #include <filesystem>
 #include <thread>
 #include <vector>
-
-#include <unistd.h>
 
 #include "cnc/collector.h"
 #include "cnc/emulator_server.h"
@@ -62,7 +62,8 @@ ControllerOptions Emulator(const Setting& s, int points, double dwell_s) {
   return o;
 }
 
-Measured RunTcp(const Setting& s, int points, double dwell_s, double poll_s, const std::filesystem::path& journal, bool fsync) {
+Measured RunTcp(const Setting& s, int points, double dwell_s, double poll_s, const std::filesystem::path& journal,
+                bool fsync) {
   Measured m;
   EmulatorServerOptions so;
   so.linger_s = 0.2;
@@ -101,7 +102,8 @@ Measured RunTcp(const Setting& s, int points, double dwell_s, double poll_s, con
   thread.join();
   std::filesystem::remove(journal);
   if (!report.ok() || !report->ok || report->points_total() != points) {
-    std::fprintf(stderr, "collection failed: %s\n", report.ok() ? report->fatal.c_str() : report.status().ToString().c_str());
+    std::fprintf(stderr, "collection failed: %s\n",
+                 report.ok() ? report->fatal.c_str() : report.status().ToString().c_str());
     std::exit(1);
   }
   m.points = report->points_total();
@@ -122,7 +124,8 @@ double RunVirtual(const Setting& s, int points) {
   co.expect_points = points;
   co.poll_s = 0.010;
   co.fsync = false;
-  co.journal = std::filesystem::temp_directory_path() / ("formloop-bench-link-" + std::to_string(::getpid()) + ".journal");
+  co.journal =
+      std::filesystem::temp_directory_path() / ("formloop-bench-link-" + std::to_string(::getpid()) + ".journal");
   std::filesystem::remove(co.journal);
   const auto report = Collect(link, clock, co);
   std::filesystem::remove(co.journal);
@@ -139,14 +142,18 @@ int main(int argc, char** argv) {
   formloop::log::SetLevel(formloop::log::Level::kWarn);
   const int points = argc > 1 ? std::atoi(argv[1]) : 2000;
   const double dwell_s = 0.001, poll_s = 0.0002;
-  const std::filesystem::path ram = std::filesystem::exists("/dev/shm") ? "/dev/shm" : std::filesystem::temp_directory_path();
+  const std::filesystem::path ram =
+      std::filesystem::exists("/dev/shm") ? "/dev/shm" : std::filesystem::temp_directory_path();
   const std::filesystem::path disk = std::filesystem::current_path();
-  const auto journal = [&](const std::filesystem::path& dir) { return dir / ("formloop-bench-link-" + std::to_string(::getpid()) + ".journal"); };
-  std::printf("machine link throughput, %d points, Fanuc program in the emulator (measure 0, t_dwell %.0f ms), collector "
-              "t_poll %.1f ms, loopback TCP\n\n",
-              points, dwell_s * 1e3, poll_s * 1e3);
-  std::printf("%-22s %10s %12s %12s %14s %14s %14s %16s\n", "API latency", "RTT ms", "pts/s RAM", "pts/s disk", "calls/point",
-              "bound 4 RTT", "bound machine", "virtual 10/20ms");
+  const auto journal = [&](const std::filesystem::path& dir) {
+    return dir / ("formloop-bench-link-" + std::to_string(::getpid()) + ".journal");
+  };
+  std::printf(
+      "machine link throughput, %d points, Fanuc program in the emulator (measure 0, t_dwell %.0f ms), collector "
+      "t_poll %.1f ms, loopback TCP\n\n",
+      points, dwell_s * 1e3, poll_s * 1e3);
+  std::printf("%-22s %10s %12s %12s %14s %14s %14s %16s\n", "API latency", "RTT ms", "pts/s RAM", "pts/s disk",
+              "calls/point", "bound 4 RTT", "bound machine", "virtual 10/20ms");
   for (const Setting& s : {Setting{"0", 0, 0}, Setting{"1 ms +/- 0.5 ms", 1.0, 0.5}}) {
     const Measured ram_run = RunTcp(s, points, dwell_s, poll_s, journal(ram), true);
     const Measured disk_run = RunTcp(s, points, dwell_s, poll_s, journal(disk), true);
@@ -155,11 +162,12 @@ int main(int argc, char** argv) {
     const double to_hand_back = poll_s / 2 + 3.5 * rtt_s;  // POINT_READY visible → the control write applied
     const double bound_machine = 1.0 / (dwell_s * std::ceil(to_hand_back / dwell_s - 1e-9));
     const double virt = RunVirtual(s, std::min(points, 500));
-    std::printf("%-22s %10.3f %12.1f %12.1f %14.2f %14.1f %14.1f %16.1f\n", s.name, ram_run.rtt_median_ms, ram_run.points_per_s,
-                disk_run.points_per_s, ram_run.calls_per_point, bound_rtt, bound_machine, virt);
+    std::printf("%-22s %10.3f %12.1f %12.1f %14.2f %14.1f %14.1f %16.1f\n", s.name, ram_run.rtt_median_ms,
+                ram_run.points_per_s, disk_run.points_per_s, ram_run.calls_per_point, bound_rtt, bound_machine, virt);
   }
-  std::printf("\nbound 4 RTT: 1 / (4 round trips per point x median RTT) = the protocol's own limit on the collector side;\n"
-              "bound machine: 1 / (t_dwell x ceil((t_poll/2 + 3.5 RTT) / t_dwell)): the program looks at C once per dwell;\n"
-              "virtual 10/20 ms: points/s in virtual time with the spec's t_poll = 10 ms, t_dwell = 20 ms (check 14).\n");
+  std::printf(
+      "\nbound 4 RTT: 1 / (4 round trips per point x median RTT) = the protocol's own limit on the collector side;\n"
+      "bound machine: 1 / (t_dwell x ceil((t_poll/2 + 3.5 RTT) / t_dwell)): the program looks at C once per dwell;\n"
+      "virtual 10/20 ms: points/s in virtual time with the spec's t_poll = 10 ms, t_dwell = 20 ms (check 14).\n");
   return 0;
 }

@@ -18,7 +18,8 @@ Result<std::vector<MacroValue>> RequestTransport::ReadRange(int start, int count
   r.start = start;
   r.count = count;
   FL_ASSIGN_OR_RETURN(ApiResponse a, Answered(Call(r)));
-  if (static_cast<int>(a.values.size()) != count) return Status::IoError("the controller answered with the wrong number of values");
+  if (static_cast<int>(a.values.size()) != count)
+    return Status::IoError("the controller answered with the wrong number of values");
   return std::move(a.values);
 }
 

@@ -37,9 +37,7 @@ class EventScheduler {
     Action action;
   };
   struct Later {
-    bool operator()(const Event& a, const Event& b) const {
-      return a.t_s != b.t_s ? a.t_s > b.t_s : a.seq > b.seq;
-    }
+    bool operator()(const Event& a, const Event& b) const { return a.t_s != b.t_s ? a.t_s > b.t_s : a.seq > b.seq; }
   };
   std::priority_queue<Event, std::vector<Event>, Later> queue_;
   double now_s_ = 0;

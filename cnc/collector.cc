@@ -17,9 +17,11 @@ Status CollectorOptions::Validate() const {
   if (block.base < 0) return Status::BadInput("the block base address must be ≥ 0");
   if (expect_points < 0 || expect_points > kMaxPointId) return Status::BadInput("expect_points must be 0..2000");
   if (runs < 1) return Status::BadInput("runs must be ≥ 1");
-  if (!(poll_s > 0 && poll_slow_s >= poll_s && slow_after_s >= 0)) return Status::BadInput("poll intervals must be > 0 (slow ≥ fast)");
+  if (!(poll_s > 0 && poll_slow_s >= poll_s && slow_after_s >= 0))
+    return Status::BadInput("poll intervals must be > 0 (slow ≥ fast)");
   if (!(visibility_timeout_s > 0)) return Status::BadInput("visibility_timeout_s must be > 0");
-  if (!(reconnect_min_s > 0 && reconnect_max_s >= reconnect_min_s)) return Status::BadInput("reconnect backoff must be > 0 (max ≥ min)");
+  if (!(reconnect_min_s > 0 && reconnect_max_s >= reconnect_min_s))
+    return Status::BadInput("reconnect backoff must be > 0 (max ≥ min)");
   if (!(idle_timeout_s >= 0)) return Status::BadInput("idle_timeout_s must be ≥ 0");
   if (max_data_resets < 1) return Status::BadInput("max_data_resets must be ≥ 1");
   if (journal.empty()) return Status::BadInput("the collector needs a journal file");
@@ -129,9 +131,10 @@ class Collector {
     progress_ = progress.get();
     for (;;) {
       if (o_.idle_timeout_s > 0 && clock_.NowS() - last_change > o_.idle_timeout_s) {
-        Fatal("IDLE_TIMEOUT", "the block did not change for " + FormatFixed(o_.idle_timeout_s, 1) +
-                                  " s; the measuring program is not running or stopped in an alarm (the journal is kept: "
-                                  "run the collector again to resume)");
+        Fatal("IDLE_TIMEOUT",
+              "the block did not change for " + FormatFixed(o_.idle_timeout_s, 1) +
+                  " s; the measuring program is not running or stopped in an alarm (the journal is kept: "
+                  "run the collector again to resume)");
         break;
       }
       if (!EnsureConnected()) continue;
@@ -306,7 +309,8 @@ class Collector {
         return OnFinished(o, s);
       case WordKind::kAbort:
         if (s != nullptr && !CloseAborted("the block shows ABORT")) return Outcome::kFatal;
-        return Fatal("ABORTED", "the measuring run was stopped with ABORT (stop_on_range); reset the alarm on the machine");
+        return Fatal("ABORTED",
+                     "the measuring run was stopped with ABORT (stop_on_range); reset the alarm on the machine");
       case WordKind::kIllegal:
         break;
     }
@@ -319,7 +323,8 @@ class Collector {
     const int p = o.word.point;
     if (p == 0) {
       if (s != nullptr && o.qv() != s->q) {
-        if (!CloseAborted("the run was restarted (Q " + FormatExact(s->q) + " -> " + FormatExact(o.qv()) + ")")) return Outcome::kFatal;
+        if (!CloseAborted("the run was restarted (Q " + FormatExact(s->q) + " -> " + FormatExact(o.qv()) + ")"))
+          return Outcome::kFatal;
       } else if (s != nullptr && s->last_id() > 0) {
         return Fatal("PROTOCOL_ERROR", "the block was re-armed during run Q=" + FormatExact(s->q) + " after point " +
                                            std::to_string(s->last_id()));
@@ -328,28 +333,31 @@ class Collector {
     }
     if (s != nullptr) {
       if (o.qv() != s->q) {
-        if (!CloseAborted("the run was restarted (Q " + FormatExact(s->q) + " -> " + FormatExact(o.qv()) + ")")) return Outcome::kFatal;
+        if (!CloseAborted("the run was restarted (Q " + FormatExact(s->q) + " -> " + FormatExact(o.qv()) + ")"))
+          return Outcome::kFatal;
         return WantArm(o) ? Arm() : Outcome::kWait;
       }
       if (s->last_id() != p) {
-        return Fatal("LOST_POINTS", "the block shows point " + std::to_string(p) + " acknowledged but the journal ends at " +
-                                        std::to_string(s->last_id()));
+        return Fatal("LOST_POINTS", "the block shows point " + std::to_string(p) +
+                                        " acknowledged but the journal ends at " + std::to_string(s->last_id()));
       }
       return Outcome::kWait;
     }
     const auto& sessions = journal_.sessions();
     if (!sessions.empty() && o.qv() != sessions.back().q) return WantArm(o) ? Arm() : Outcome::kWait;
     if (!sessions.empty()) return Outcome::kWait;  // our last acknowledgement of a closed session
-    return Fatal("LOST_POINTS", "the block shows point " + std::to_string(p) + " of run Q=" + FormatExact(o.qv()) +
-                                    " acknowledged but the journal " + journal_.path().string() +
-                                    " has no session: the points were collected elsewhere or the journal was lost; reset "
-                                    "the block (C = 0) to start over");
+    return Fatal("LOST_POINTS",
+                 "the block shows point " + std::to_string(p) + " of run Q=" + FormatExact(o.qv()) +
+                     " acknowledged but the journal " + journal_.path().string() +
+                     " has no session: the points were collected elsewhere or the journal was lost; reset "
+                     "the block (C = 0) to start over");
   }
 
   Outcome OnReady(const Observation& o, const Session* s) {
     const int i = o.word.point;
     if (s != nullptr && o.qv() != s->q) {
-      if (!CloseAborted("the run was restarted (Q " + FormatExact(s->q) + " -> " + FormatExact(o.qv()) + ")")) return Outcome::kFatal;
+      if (!CloseAborted("the run was restarted (Q " + FormatExact(s->q) + " -> " + FormatExact(o.qv()) + ")"))
+        return Outcome::kFatal;
       s = nullptr;
     }
     if (s == nullptr) {
@@ -362,7 +370,8 @@ class Collector {
       if (!JournalOk(journal_.OpenSession(o.qv(), clock_.NowS()))) return Outcome::kFatal;
       log::Info("link: run Q={} started", FormatExact(o.qv()));
       s = journal_.open();
-      if (i > 1 && !JournalOk(journal_.AddError("GAP", "points 1.." + std::to_string(i - 1) + " of this run were never received"))) {
+      if (i > 1 && !JournalOk(journal_.AddError(
+                       "GAP", "points 1.." + std::to_string(i - 1) + " of this run were never received"))) {
         return Outcome::kFatal;
       }
     }
@@ -374,7 +383,8 @@ class Collector {
     if (i == last) return AcknowledgeStored(o, *s, i);
     if (o.data_empty) return WaitVisible(o, i);
     if (i > last + 1) {
-      const std::string missing = i == last + 2 ? std::to_string(last + 1) : std::to_string(last + 1) + ".." + std::to_string(i - 1);
+      const std::string missing =
+          i == last + 2 ? std::to_string(last + 1) : std::to_string(last + 1) + ".." + std::to_string(i - 1);
       log::Error("link: GAP: point {} arrived after {}; missing {}", i, last, missing);
       if (!JournalOk(journal_.AddError("GAP", "points " + missing + " were never received (point " + std::to_string(i) +
                                                   " followed " + std::to_string(last) + ")"))) {
@@ -385,9 +395,8 @@ class Collector {
     point.id = i;
     point.data = o.DataValues();
     point.t_s = clock_.NowS();
-    Result<DecodedPoint> decoded = block_.layout == Layout::kPacked
-                                       ? UnpackData(*o.data[0])
-                                       : DecodeSplit({*o.data[0], *o.data[1], *o.data[2]});
+    Result<DecodedPoint> decoded =
+        block_.layout == Layout::kPacked ? UnpackData(*o.data[0]) : DecodeSplit({*o.data[0], *o.data[1], *o.data[2]});
     if (decoded.ok()) {
       point.decoded = *decoded;
     } else {
@@ -397,8 +406,8 @@ class Collector {
       if (point.decoded.flags[a] == AxisFlag::kOverflow) {
         log::Error("link: point {}, axis {}: |deviation| >= 0.1 mm (OVERFLOW); the collection goes on", i, AxisName(a));
       } else if (point.decoded.flags[a] == AxisFlag::kRangeError) {
-        log::Error("link: point {}, axis {}: malformed value (RANGE_ERROR, data {}); the collection goes on", i, AxisName(a),
-                   Text(o.data[block_.layout == Layout::kPacked ? 0 : a]));
+        log::Error("link: point {}, axis {}: malformed value (RANGE_ERROR, data {}); the collection goes on", i,
+                   AxisName(a), Text(o.data[block_.layout == Layout::kPacked ? 0 : a]));
       }
     }
     if (!JournalOk(journal_.AddPoint(point))) return Outcome::kFatal;
@@ -407,7 +416,8 @@ class Collector {
     if (progress_ != nullptr) progress_->Advance();
     Hook(CollectorStep::kAfterPersist);
     const bool abort = o_.stop_on_range && !point.decoded.ok();
-    if (abort && !CloseAborted("stop_on_range: point " + std::to_string(i) + " is out of range")) return Outcome::kFatal;
+    if (abort && !CloseAborted("stop_on_range: point " + std::to_string(i) + " is out of range"))
+      return Outcome::kFatal;
     return Acknowledge(o, i, abort);
   }
 
@@ -420,10 +430,12 @@ class Collector {
       vis_reported_ = false;
     } else if (!vis_reported_ && clock_.NowS() - vis_since_ > o_.visibility_timeout_s) {
       vis_reported_ = true;
-      const std::string text = "point " + std::to_string(i) + ": POINT_READY but the data word stayed EMPTY for more than " +
-                               FormatFixed(o_.visibility_timeout_s, 1) + " s (the machine's write is not visible); still waiting";
+      const std::string text =
+          "point " + std::to_string(i) + ": POINT_READY but the data word stayed EMPTY for more than " +
+          FormatFixed(o_.visibility_timeout_s, 1) + " s (the machine's write is not visible); still waiting";
       log::Error("link: VISIBILITY_TIMEOUT: {}", text);
-      if (journal_.open() != nullptr && !JournalOk(journal_.AddWarning("VISIBILITY_TIMEOUT", text))) return Outcome::kFatal;
+      if (journal_.open() != nullptr && !JournalOk(journal_.AddWarning("VISIBILITY_TIMEOUT", text)))
+        return Outcome::kFatal;
     }
     return Outcome::kWait;
   }
@@ -480,8 +492,9 @@ class Collector {
         if (!empty) ++report_.counters.lost_writes;
       }
       if (!empty) {
-        return Fatal("WRITE_FAILED", "the data word could not be reset to EMPTY in " + std::to_string(o_.max_data_resets) +
-                                         " attempts at point " + std::to_string(i));
+        return Fatal("WRITE_FAILED", "the data word could not be reset to EMPTY in " +
+                                         std::to_string(o_.max_data_resets) + " attempts at point " +
+                                         std::to_string(i));
       }
     }
     hand_back_sent_.insert(std::make_pair(o.qv(), i));  // from here on it may have landed
@@ -495,35 +508,39 @@ class Collector {
   Outcome OnFinished(const Observation& o, const Session* s) {
     const int n = o.word.point;
     if (s != nullptr && o.qv() != s->q) {
-      if (!CloseAborted("the run was restarted (Q " + FormatExact(s->q) + " -> " + FormatExact(o.qv()) + ")")) return Outcome::kFatal;
+      if (!CloseAborted("the run was restarted (Q " + FormatExact(s->q) + " -> " + FormatExact(o.qv()) + ")"))
+        return Outcome::kFatal;
       s = nullptr;
     }
     if (s != nullptr) {
       if (n != s->last_id()) {
         if (!JournalOk(journal_.AddError("COUNT_MISMATCH", "the program finished with N = " + std::to_string(n) +
-                                                               " but the last point received is " + std::to_string(s->last_id())))) {
+                                                               " but the last point received is " +
+                                                               std::to_string(s->last_id())))) {
           return Outcome::kFatal;
         }
       }
       if (o_.expect_points > 0 && n != o_.expect_points) {
-        if (!JournalOk(journal_.AddError("COUNT_MISMATCH", "the program finished with N = " + std::to_string(n) + " but " +
-                                                               std::to_string(o_.expect_points) + " points were expected"))) {
+        if (!JournalOk(journal_.AddError("COUNT_MISMATCH", "the program finished with N = " + std::to_string(n) +
+                                                               " but " + std::to_string(o_.expect_points) +
+                                                               " points were expected"))) {
           return Outcome::kFatal;
         }
       }
       const Session& now = *journal_.open();
       const SessionStatus status = now.errors.empty() ? SessionStatus::kComplete : SessionStatus::kIncomplete;
       if (!JournalOk(journal_.End(n, status))) return Outcome::kFatal;
-      log::Info("link: run Q={} finished: {} points, {}", FormatExact(now.q), now.points.size(), SessionStatusName(status));
+      log::Info("link: run Q={} finished: {} points, {}", FormatExact(now.q), now.points.size(),
+                SessionStatusName(status));
       Hook(CollectorStep::kAfterEnd);
     } else {
       const auto& sessions = journal_.sessions();
-      const bool ended_here = !sessions.empty() && sessions.back().q == o.qv() &&
-                              (sessions.back().status == SessionStatus::kComplete ||
-                               sessions.back().status == SessionStatus::kIncomplete);
+      const bool ended_here =
+          !sessions.empty() && sessions.back().q == o.qv() &&
+          (sessions.back().status == SessionStatus::kComplete || sessions.back().status == SessionStatus::kIncomplete);
       if (!ended_here) {
-        return Fatal("LOST_POINTS", "the block shows run Q=" + FormatExact(o.qv()) + " FINISHED with " + std::to_string(n) +
-                                        " points, but the journal has no such session");
+        return Fatal("LOST_POINTS", "the block shows run Q=" + FormatExact(o.qv()) + " FINISHED with " +
+                                        std::to_string(n) + " points, but the journal has no such session");
       }
     }
     if (!WriteControl(IdleWord())) return Outcome::kAgain;
@@ -580,9 +597,10 @@ Result<SelfTestReport> RunSelfTest(MacroTransport& transport, const BlockLayout&
     if (read != value) report.passed = false;
   }
   FL_RETURN_IF_ERROR(transport.Write(block.data(), kEmptyData));
-  report.message = report.passed
-                       ? "both data words read back exactly: the PACKED layout is safe on this controller and API path"
-                       : "a data word came back changed: the controller or the API keeps too few digits; configure the SPLIT layout";
+  report.message =
+      report.passed
+          ? "both data words read back exactly: the PACKED layout is safe on this controller and API path"
+          : "a data word came back changed: the controller or the API keeps too few digits; configure the SPLIT layout";
   return report;
 }
 
@@ -597,8 +615,10 @@ Status WriteCollection(const std::filesystem::path& path, const std::vector<Sess
       for (int v : p.decoded.v) out << "," << v;
       std::string flags;
       for (int a = 0; a < 3; ++a) {
-        out << "," << (p.decoded.flags[a] == AxisFlag::kOk ? FormatFixed(p.decoded.v[a] * kValueUnitMm, 4) : std::string());
-        if (p.decoded.flags[a] != AxisFlag::kOk) flags += std::string(flags.empty() ? "" : " ") + AxisName(a) + ":" + AxisFlagName(p.decoded.flags[a]);
+        out << ","
+            << (p.decoded.flags[a] == AxisFlag::kOk ? FormatFixed(p.decoded.v[a] * kValueUnitMm, 4) : std::string());
+        if (p.decoded.flags[a] != AxisFlag::kOk)
+          flags += std::string(flags.empty() ? "" : " ") + AxisName(a) + ":" + AxisFlagName(p.decoded.flags[a]);
       }
       out << "," << (flags.empty() ? "OK" : flags) << "," << FormatExact(p.t_s) << "\n";
     }

@@ -39,10 +39,9 @@
 
 #include <functional>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "cnc/clock.h"
 #include "cnc/handshake.h"
@@ -54,20 +53,20 @@ namespace formloop::cnc {
 
 struct CollectorOptions {
   BlockLayout block;
-  int expect_points = 0;          // points per run the model expects; 0 = take N from FINISHED
-  int runs = 1;                   // FINISHED runs to collect before returning
-  double poll_s = 0.010;          // t_poll (R4)
-  double poll_slow_s = 0.100;     // after slow_after_s without change
+  int expect_points = 0;       // points per run the model expects; 0 = take N from FINISHED
+  int runs = 1;                // FINISHED runs to collect before returning
+  double poll_s = 0.010;       // t_poll (R4)
+  double poll_slow_s = 0.100;  // after slow_after_s without change
   double slow_after_s = 5.0;
-  double visibility_timeout_s = 2.0;   // T_vis (R5)
-  double reconnect_min_s = 0.5;        // K0 backoff 0.5 s .. 8 s
+  double visibility_timeout_s = 2.0;  // T_vis (R5)
+  double reconnect_min_s = 0.5;       // K0 backoff 0.5 s .. 8 s
   double reconnect_max_s = 8.0;
-  double idle_timeout_s = 600;    // give up when the block has not changed for this long; 0 = never
-  int max_data_resets = 50;       // data := EMPTY attempts for one point before giving up
-  bool stop_on_range = false;     // acknowledge an out-of-range point with ABORT
+  double idle_timeout_s = 600;  // give up when the block has not changed for this long; 0 = never
+  int max_data_resets = 50;     // data := EMPTY attempts for one point before giving up
+  bool stop_on_range = false;   // acknowledge an out-of-range point with ABORT
   std::filesystem::path journal;
   bool fsync = true;
-  bool progress = false;          // a progress bar on stderr (core/progress.h)
+  bool progress = false;  // a progress bar on stderr (core/progress.h)
   Status Validate() const;
 };
 
@@ -78,21 +77,21 @@ using CollectorHook = std::function<void(CollectorStep)>;
 
 struct CollectorCounters {
   long reads = 0, writes = 0;
-  long api_errors = 0;       // calls the controller refused
+  long api_errors = 0;  // calls the controller refused
   long connection_errors = 0;
   long reconnects = 0;
-  long points_stored = 0;    // by this collector object
+  long points_stored = 0;  // by this collector object
   long duplicates = 0;
-  long resumed = 0;          // points found stored after a restart and acknowledged
-  long lost_writes = 0;      // writes that did not land (seen on read-back) and were made again
-  long visibility_waits = 0; // reads that found POINT_READY with the data still EMPTY
+  long resumed = 0;           // points found stored after a restart and acknowledged
+  long lost_writes = 0;       // writes that did not land (seen on read-back) and were made again
+  long visibility_waits = 0;  // reads that found POINT_READY with the data still EMPTY
   long arms = 0;
   nlohmann::json ToJson() const;
 };
 
 struct CollectorReport {
   bool ok = true;
-  std::string fatal;  // "PROTOCOL_ERROR: ..." when !ok
+  std::string fatal;              // "PROTOCOL_ERROR: ..." when !ok
   std::vector<Session> sessions;  // the journal's sessions when the collector stopped
   CollectorCounters counters;
   double elapsed_s = 0;

@@ -39,9 +39,11 @@ Status ControllerFaults::Validate() const {
                                    {"reorder_rate", reorder_rate},
                                    {"repeat_rate", repeat_rate},
                                    {"skip_rate", skip_rate}}) {
-    if (!(rate >= 0 && rate <= 0.5)) return Status::BadInput(std::string("fault rate ") + name + " must be in [0, 0.5]");
+    if (!(rate >= 0 && rate <= 0.5))
+      return Status::BadInput(std::string("fault rate ") + name + " must be in [0, 0.5]");
   }
-  if (!(visibility_max_s >= 0 && visibility_max_s <= 10)) return Status::BadInput("visibility_max_s must be in [0, 10] s");
+  if (!(visibility_max_s >= 0 && visibility_max_s <= 10))
+    return Status::BadInput("visibility_max_s must be in [0, 10] s");
   for (const auto& d : deviations) {
     if (d.axis < 0 || d.axis > 2) return Status::BadInput("a deviation fault names axis 0..2");
   }
@@ -71,7 +73,8 @@ metrology::ProbingPlan SyntheticPlan(int count) {
     metrology::ProbePoint p;
     p.id = k + 1;
     p.point = Eigen::Vector3d(x, y, 0.5 * std::sin(x / 13) * std::cos(y / 17));
-    const double zx = 0.5 / 13 * std::cos(x / 13) * std::cos(y / 17), zy = -0.5 / 17 * std::sin(x / 13) * std::sin(y / 17);
+    const double zx = 0.5 / 13 * std::cos(x / 13) * std::cos(y / 17),
+                 zy = -0.5 / 17 * std::sin(x / 13) * std::sin(y / 17);
     p.normal = Eigen::Vector3d(-zx, -zy, 1).normalized();
     p.u = x;
     p.v = y;
@@ -119,7 +122,9 @@ Status Controller::Setup() {
   block_ = program_.block;
   for (const auto& p : plan_.points) {
     const ProbePath path = ProbePathOf(p, options_.program.probe);
-    if (!probe_index_.emplace(EndKey(AsWritten(path.end, options_.program.probe.post.decimals)), static_cast<int>(p.id - 1)).second) {
+    if (!probe_index_
+             .emplace(EndKey(AsWritten(path.end, options_.program.probe.post.decimals)), static_cast<int>(p.id - 1))
+             .second) {
       return Status::Internal("two probe points of the synthetic plan end at the same position");
     }
   }
@@ -129,7 +134,8 @@ Status Controller::Setup() {
     offsets_["T" + std::to_string(t) + ".length_wear"] = OffsetEntry{};
   }
   for (int g = 54; g <= 59; ++g) {
-    for (const char* axis : {"X", "Y", "Z"}) offsets_["G" + std::to_string(g) + "." + axis] = OffsetEntry{0, -1000, 1000, 0.001};
+    for (const char* axis : {"X", "Y", "Z"})
+      offsets_["G" + std::to_string(g) + "." + axis] = OffsetEntry{0, -1000, 1000, 0.001};
   }
   for (const auto& [name, entry] : options_.offsets) {
     FL_RETURN_IF_ERROR(ParseOffsetAddress(name).status());
@@ -188,7 +194,8 @@ std::vector<std::array<double, 3>> Controller::GenerateTruth(int run) const {
     t.push_back(d);
   }
   for (const auto& dev : options_.faults.deviations) {
-    if (dev.at.run == run && dev.at.point >= 1 && dev.at.point <= options_.points) t[dev.at.point - 1][dev.axis] = dev.value_mm;
+    if (dev.at.run == run && dev.at.point >= 1 && dev.at.point <= options_.points)
+      t[dev.at.point - 1][dev.axis] = dev.value_mm;
   }
   return t;
 }
@@ -317,7 +324,8 @@ void Controller::WriteVariable(int number, MacroValue value) {
   // Visibility: the delay is drawn for the block's addresses (what the API side watches); the
   // program's scratch variables are committed in order with them.
   const bool in_block = number >= block_.base && number < block_.base + block_.size();
-  const double delay = in_block && options_.faults.visibility_max_s > 0 ? rng_.Uniform(0, options_.faults.visibility_max_s) : 0.0;
+  const double delay =
+      in_block && options_.faults.visibility_max_s > 0 ? rng_.Uniform(0, options_.faults.visibility_max_s) : 0.0;
   double t_visible = scheduler_->now_s() + delay;
   if (reorder) {
     ++fault_counts_["reorder"];
@@ -439,7 +447,8 @@ void Controller::Submit(const ApiRequest& request, std::function<void(const ApiR
       ++fault_counts_["dropped_write"];
     } else {
       scheduler_->At(now + latency / 2, [this, request] {
-        for (std::size_t k = 0; k < request.values.size(); ++k) Commit(request.start + static_cast<int>(k), ApiPath(request.values[k]));
+        for (std::size_t k = 0; k < request.values.size(); ++k)
+          Commit(request.start + static_cast<int>(k), ApiPath(request.values[k]));
       });
     }
   } else if (apply) {
@@ -463,8 +472,9 @@ void Controller::Submit(const ApiRequest& request, std::function<void(const ApiR
       }
       if (!(request.value >= entry.min_mm && request.value <= entry.max_mm)) {
         response->ok = false;
-        response->error = "EW_DATA: " + request.offset + " = " + FormatExact(request.value) + " is outside the controller's range [" +
-                          FormatExact(entry.min_mm) + ", " + FormatExact(entry.max_mm) + "]";
+        response->error = "EW_DATA: " + request.offset + " = " + FormatExact(request.value) +
+                          " is outside the controller's range [" + FormatExact(entry.min_mm) + ", " +
+                          FormatExact(entry.max_mm) + "]";
         return;
       }
       // The controller keeps whole resolution steps (0.001 mm steps: integer µm), read back as the
@@ -488,9 +498,10 @@ Status Controller::WriteRecord(const std::filesystem::path& path) const {
   std::ostringstream out;
   out << "run,q,id,data0,data1,data2,dx_mm,dy_mm,dz_mm,t_s,corrupted\n";
   for (const auto& r : record_) {
-    out << r.run << "," << FormatExact(r.q) << "," << r.id << "," << FormatExact(r.data[0]) << "," << FormatExact(r.data[1]) << ","
-        << FormatExact(r.data[2]) << "," << FormatExact(r.truth_mm[0]) << "," << FormatExact(r.truth_mm[1]) << ","
-        << FormatExact(r.truth_mm[2]) << "," << FormatExact(r.t_s) << "," << (r.corrupted ? 1 : 0) << "\n";
+    out << r.run << "," << FormatExact(r.q) << "," << r.id << "," << FormatExact(r.data[0]) << ","
+        << FormatExact(r.data[1]) << "," << FormatExact(r.data[2]) << "," << FormatExact(r.truth_mm[0]) << ","
+        << FormatExact(r.truth_mm[1]) << "," << FormatExact(r.truth_mm[2]) << "," << FormatExact(r.t_s) << ","
+        << (r.corrupted ? 1 : 0) << "\n";
   }
   return WriteFileAtomic(path, out.str());
 }

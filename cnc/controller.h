@@ -10,9 +10,10 @@
 // reproducible bit for bit.
 //
 // Memory model. Addresses hold a double or nothing (vacant). A write through the API is visible at
-// once. A write by the machine program becomes visible to the API after a visibility delay drawn in
-// [0, visibility_max_s]; the writes of the program become visible in the order it made them (FIFO)
-// unless the reorder fault moves one handover's control word ahead of its data. The program itself
+// once. A write by the machine program to the block becomes visible to the API after a visibility
+// delay drawn in [0, visibility_max_s] (its scratch variables carry no delay of their own); the writes
+// of the program become visible in the order it made them (FIFO) unless the reorder fault moves one
+// handover's control word ahead of its data. The program itself
 // reads its own writes (as an NC does). Precision modes round every stored value to 8 significant
 // digits, or pass API values through a 32-bit mantissa with a decimal exponent (FOCAS's ODBM).
 //
@@ -56,8 +57,8 @@ namespace formloop::cnc {
 struct LatencyModel {
   enum class Distribution { kUniform, kLogNormal };
   Distribution distribution = Distribution::kUniform;
-  double base_s = 0;    // fixed part
-  double jitter_s = 0;  // uniform: U(0, jitter); log-normal: median jitter, σ(ln) = 0.5
+  double base_s = 0;      // fixed part
+  double jitter_s = 0;    // uniform: U(0, jitter); log-normal: median jitter, σ(ln) = 0.5
   double spike_rate = 0;  // probability of a spike per call
   double spike_s = 0;     // added on a spike
   double Draw(Rng& rng) const;
@@ -79,9 +80,9 @@ struct ControllerFaults {
   bool torn_range_reads = false;
   bool api_mantissa32 = false;
   double visibility_max_s = 0;
-  double reorder_rate = 0;  // per handover
-  double repeat_rate = 0;   // per handover
-  double skip_rate = 0;     // per handover
+  double reorder_rate = 0;      // per handover
+  double repeat_rate = 0;       // per handover
+  double skip_rate = 0;         // per handover
   std::vector<PointAt> resets;  // reset just before the program starts probing this point
   struct ThirdParty {
     PointAt at;
@@ -109,16 +110,16 @@ struct OffsetEntry {
 
 struct ControllerOptions {
   Dialect dialect = Dialect::kFanuc;
-  MachineProgramOptions program;   // how the machine-side program is written (dialect is overridden)
-  int points = 100;                // per run, 1..2000
-  int runs = 1;                    // complete runs of the measuring program
+  MachineProgramOptions program;  // how the machine-side program is written (dialect is overridden)
+  int points = 100;               // per run, 1..2000
+  int runs = 1;                   // complete runs of the measuring program
   std::uint64_t seed = 1;
   Precision precision = Precision::kDouble;
-  LatencyModel latency;            // per API call
-  double measure_time_s = 0.05;    // one probing move
-  double run_gap_s = 0.2;          // between one run's end and the next start
-  double restart_delay_s = 0.5;    // reset → cycle start
-  double start_delay_s = 0;        // before the first run
+  LatencyModel latency;                              // per API call
+  double measure_time_s = 0.05;                      // one probing move
+  double run_gap_s = 0.2;                            // between one run's end and the next start
+  double restart_delay_s = 0.5;                      // reset → cycle start
+  double start_delay_s = 0;                          // before the first run
   std::vector<std::pair<int, int>> volatile_ranges;  // cleared by a reset (Fanuc #100-#199 by default)
   std::map<int, double> initial_values;              // block (and other) addresses set at power-on
   std::map<std::string, OffsetEntry> offsets;        // added to / replacing the default table
@@ -128,15 +129,14 @@ struct ControllerOptions {
 
 // What the program handed over, as the controller saw it (its own record).
 struct HandoverRecord {
-  int run = 0;        // program start (1-based)
-  double q = 0;       // Q as the program holds it
+  int run = 0;   // program start (1-based)
+  double q = 0;  // Q as the program holds it
   int id = 0;
-  std::array<double, 3> data{};  // D (packed: data[0]) or v_x, v_y, v_z (split), as written
+  std::array<double, 3> data{};      // D (packed: data[0]) or v_x, v_y, v_z (split), as written
   std::array<double, 3> truth_mm{};  // the deviation the probe measured (reference → trigger point)
   double t_s = 0;
   bool corrupted = false;
 };
-
 
 class Controller final : public MachineEnvironment {
  public:
@@ -190,7 +190,6 @@ class Controller final : public MachineEnvironment {
   MarkAction OnPointMark(int id) override;
 
  private:
-
   std::vector<std::array<double, 3>> GenerateTruth(int run) const;
   double Store(double value) const;  // precision mode
   double ApiPath(double value) const;
@@ -219,7 +218,7 @@ class Controller final : public MachineEnvironment {
   double last_visible_t_ = 0;
   std::map<std::string, OffsetEntry> offsets_;
   std::set<std::string> mismatch_used_;
-  std::map<std::int64_t, int> probe_index_;  // key of a probe end point → plan index
+  std::map<std::int64_t, int> probe_index_;                // key of a probe end point → plan index
   std::vector<std::vector<std::array<double, 3>>> truth_;  // per run (lazily), per point
   std::vector<HandoverRecord> record_;
   std::vector<AlarmRecord> alarms_;

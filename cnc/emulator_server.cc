@@ -1,17 +1,17 @@
 #include "cnc/emulator_server.h"
 
-#include <cerrno>
-#include <chrono>
-#include <cmath>
-#include <cstring>
-#include <vector>
-
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <poll.h>
 #include <sys/socket.h>
 #include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <vector>
 
 #include "cnc/wire.h"
 #include "core/log.h"
@@ -44,11 +44,13 @@ Result<std::unique_ptr<EmulatorServer>> EmulatorServer::Start(const ControllerOp
   addr.sin_family = AF_INET;
   addr.sin_port = htons(static_cast<std::uint16_t>(options.port));
   if (::inet_pton(AF_INET, options.host.c_str(), &addr.sin_addr) != 1) {
-    return Status::BadInput(Where{.field = "--host"}, "'" + options.host + "' is not an IPv4 address", "use e.g. 127.0.0.1");
+    return Status::BadInput(Where{.field = "--host"}, "'" + options.host + "' is not an IPv4 address",
+                            "use e.g. 127.0.0.1");
   }
-  if (::bind(s->listen_fd_, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0 || ::listen(s->listen_fd_, 16) != 0) {
-    return Status::IoError("cannot listen on " + options.host + ":" + std::to_string(options.port) + ": " + std::strerror(errno) +
-                           " (another process uses the port? use --port 0 for a free one)");
+  if (::bind(s->listen_fd_, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0 ||
+      ::listen(s->listen_fd_, 16) != 0) {
+    return Status::IoError("cannot listen on " + options.host + ":" + std::to_string(options.port) + ": " +
+                           std::strerror(errno) + " (another process uses the port? use --port 0 for a free one)");
   }
   socklen_t len = sizeof(addr);
   ::getsockname(s->listen_fd_, reinterpret_cast<sockaddr*>(&addr), &len);

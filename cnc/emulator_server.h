@@ -16,15 +16,16 @@ namespace formloop::cnc {
 
 struct EmulatorServerOptions {
   std::string host = "127.0.0.1";
-  int port = 0;                   // 0: the system picks a free port (see port())
-  bool exit_when_done = true;     // leave the loop when the runs are over (plus linger_s)
-  double linger_s = 1.0;          // keep answering after the last run ended (the collector's last writes)
-  double max_run_s = 0;           // stop after this long whatever happens; 0 = no limit
+  int port = 0;                // 0: the system picks a free port (see port())
+  bool exit_when_done = true;  // leave the loop when the runs are over (plus linger_s)
+  double linger_s = 1.0;       // keep answering after the last run ended (the collector's last writes)
+  double max_run_s = 0;        // stop after this long whatever happens; 0 = no limit
 };
 
 class EmulatorServer {
  public:
-  static Result<std::unique_ptr<EmulatorServer>> Start(const ControllerOptions& controller, const EmulatorServerOptions& options);
+  static Result<std::unique_ptr<EmulatorServer>> Start(const ControllerOptions& controller,
+                                                       const EmulatorServerOptions& options);
   ~EmulatorServer();
   int port() const { return port_; }
   // Serves until the controller is done (and linger_s passed), max_run_s, or *stop becomes true.

@@ -49,7 +49,7 @@ struct ControlWord {
   int lock = 0;    // LK
   int holder = 0;  // HD: 0 machine, 1 collector
   State state = State::kIdle;
-  int point = 0;   // PT
+  int point = 0;  // PT
   bool operator==(const ControlWord&) const = default;
 };
 
@@ -81,9 +81,7 @@ const char* AxisFlagName(AxisFlag flag);
 struct DecodedPoint {
   std::array<int, 3> v{};  // 0.1 µm steps; kOverflowValue for an OVERFLOW axis
   std::array<AxisFlag, 3> flags{AxisFlag::kOk, AxisFlag::kOk, AxisFlag::kOk};
-  bool ok() const {
-    return flags[0] == AxisFlag::kOk && flags[1] == AxisFlag::kOk && flags[2] == AxisFlag::kOk;
-  }
+  bool ok() const { return flags[0] == AxisFlag::kOk && flags[1] == AxisFlag::kOk && flags[2] == AxisFlag::kOk; }
 };
 
 // The value a measuring program writes for one axis: round((measured − reference)·10000), half away

@@ -1,14 +1,14 @@
 #include "cnc/journal.h"
 
-#include <array>
-#include <cerrno>
-#include <functional>
-#include <optional>
-#include <cstring>
-#include <sstream>
-
 #include <fcntl.h>
 #include <unistd.h>
+
+#include <array>
+#include <cerrno>
+#include <cstring>
+#include <functional>
+#include <optional>
+#include <sstream>
 
 #include "core/atomic_file.h"
 #include "core/point_io.h"
@@ -81,7 +81,8 @@ const char* SessionStatusName(SessionStatus status) {
   return "?";
 }
 
-Journal::Journal(Journal&& o) noexcept : path_(std::move(o.path_)), fd_(o.fd_), fsync_(o.fsync_), sessions_(std::move(o.sessions_)) {
+Journal::Journal(Journal&& o) noexcept
+    : path_(std::move(o.path_)), fd_(o.fd_), fsync_(o.fsync_), sessions_(std::move(o.sessions_)) {
   o.fd_ = -1;
 }
 
@@ -108,7 +109,8 @@ const Session* Journal::open() const {
 Status Journal::Apply(const std::string& record, long line, const std::string& file) {
   const auto bad = [&](const std::string& what) {
     return Status::BadInput(Where{.file = file, .line = line}, what,
-                            "the journal is written only by `formloop link collect`; restore it or start a new collection with a new --journal");
+                            "the journal is written only by `formloop link collect`; restore it or start a new "
+                            "collection with a new --journal");
   };
   const std::string type = record.substr(0, record.find(' '));
   const auto number = [&](const std::string& text, double* out) { return ParseDouble(text, out); };
@@ -137,7 +139,8 @@ Status Journal::Apply(const std::string& record, long line, const std::string& f
     p.decoded.v = {static_cast<int>(vx), static_cast<int>(vy), static_cast<int>(vz)};
     p.decoded.flags = {static_cast<AxisFlag>(static_cast<int>(fx)), static_cast<AxisFlag>(static_cast<int>(fy)),
                        static_cast<AxisFlag>(static_cast<int>(fz))};
-    if (p.id <= s->last_id()) return bad("point id " + std::to_string(p.id) + " does not follow " + std::to_string(s->last_id()));
+    if (p.id <= s->last_id())
+      return bad("point id " + std::to_string(p.id) + " does not follow " + std::to_string(s->last_id()));
     s->points.push_back(p);
     return Status::Ok();
   }
@@ -183,14 +186,16 @@ Status Replay(const std::string& text, const std::string& file, std::size_t* goo
     const bool last = nl + 1 == text.size();
     if (line == 1) {
       if (raw != kHeader) {
-        return Status::BadInput(Where{.file = file, .line = 1}, "not a formloop link journal (first line '" + raw + "')",
+        return Status::BadInput(Where{.file = file, .line = 1},
+                                "not a formloop link journal (first line '" + raw + "')",
                                 "give --journal a new file name or a journal written by `formloop link collect`");
       }
     } else {
       const auto record = Unseal(raw);
       if (!record) {
         if (last) break;  // a torn final line
-        return Status::BadInput(Where{.file = file, .line = line}, "the line's checksum does not match (the journal is corrupted)",
+        return Status::BadInput(Where{.file = file, .line = line},
+                                "the line's checksum does not match (the journal is corrupted)",
                                 "restore the journal from a backup; the collector never edits old lines");
       }
       FL_RETURN_IF_ERROR(apply(*record, line));
@@ -207,7 +212,8 @@ Result<std::vector<Session>> Journal::Read(const std::filesystem::path& path) {
   FL_ASSIGN_OR_RETURN(const std::string text, ReadFile(path));
   Journal j;
   std::size_t good = 0;
-  FL_RETURN_IF_ERROR(Replay(text, path.string(), &good, [&](const std::string& r, long line) { return j.Apply(r, line, path.string()); }));
+  FL_RETURN_IF_ERROR(Replay(text, path.string(), &good,
+                            [&](const std::string& r, long line) { return j.Apply(r, line, path.string()); }));
   return j.sessions_;
 }
 
@@ -218,7 +224,8 @@ Result<Journal> Journal::Open(const std::filesystem::path& path, bool fsync) {
   std::size_t good = 0;
   if (std::filesystem::exists(path)) {
     FL_ASSIGN_OR_RETURN(const std::string text, ReadFile(path));
-    FL_RETURN_IF_ERROR(Replay(text, path.string(), &good, [&](const std::string& r, long line) { return j.Apply(r, line, path.string()); }));
+    FL_RETURN_IF_ERROR(Replay(text, path.string(), &good,
+                              [&](const std::string& r, long line) { return j.Apply(r, line, path.string()); }));
   }
   j.fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_CLOEXEC, 0644);
   if (j.fd_ < 0) return Status::IoError("cannot open the journal " + path.string() + ": " + std::strerror(errno));
@@ -228,7 +235,8 @@ Result<Journal> Journal::Open(const std::filesystem::path& path, bool fsync) {
   }
   if (good == 0) {
     const std::string header = std::string(kHeader) + "\n";
-    if (::write(j.fd_, header.data(), header.size()) != static_cast<ssize_t>(header.size()) || (fsync && ::fsync(j.fd_) != 0)) {
+    if (::write(j.fd_, header.data(), header.size()) != static_cast<ssize_t>(header.size()) ||
+        (fsync && ::fsync(j.fd_) != 0)) {
       return Status::IoError("cannot write the journal " + path.string() + ": " + std::strerror(errno));
     }
   }
@@ -245,7 +253,8 @@ Status Journal::Append(const std::string& record) {
     if (n <= 0) return Status::IoError("cannot append to the journal " + path_.string() + ": " + std::strerror(errno));
     done += static_cast<std::size_t>(n);
   }
-  if (fsync_ && ::fdatasync(fd_) != 0) return Status::IoError("cannot flush the journal " + path_.string() + ": " + std::strerror(errno));
+  if (fsync_ && ::fdatasync(fd_) != 0)
+    return Status::IoError("cannot flush the journal " + path_.string() + ": " + std::strerror(errno));
   return Status::Ok();
 }
 
@@ -273,7 +282,8 @@ Status Journal::AddWarning(const std::string& code, const std::string& text) {
 
 Status Journal::End(int finished_count, SessionStatus status) {
   if (open() == nullptr) return Status::Internal("journal: END without an open session");
-  return Append("END " + FormatExact(sessions_.back().q) + " " + std::to_string(finished_count) + " " + SessionStatusName(status));
+  return Append("END " + FormatExact(sessions_.back().q) + " " + std::to_string(finished_count) + " " +
+                SessionStatusName(status));
 }
 
 Status Journal::Abort(const std::string& reason) {

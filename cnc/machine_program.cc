@@ -12,16 +12,16 @@ namespace {
 
 // Scratch variables, as offsets from the dialect's scratch base.
 enum Scratch {
-  kCount = 0,   // loop counter of the waits
-  kId = 1,      // the point id being sent
-  kRef = 2,     // 2..4 reference x, y, z
-  kEnd = 5,     // 5..7 probe end x, y, z
-  kV = 8,       // 8..10 quantised v_x, v_y, v_z
-  kC = 11,      // the control word as last read
-  kHd = 12,     // holder bit
-  kPt = 13,     // point field
-  kSt = 14,     // state field
-  kTmp = 15,    // Q + 1, A
+  kCount = 0,  // loop counter of the waits
+  kId = 1,     // the point id being sent
+  kRef = 2,    // 2..4 reference x, y, z
+  kEnd = 5,    // 5..7 probe end x, y, z
+  kV = 8,      // 8..10 quantised v_x, v_y, v_z
+  kC = 11,     // the control word as last read
+  kHd = 12,    // holder bit
+  kPt = 13,    // point field
+  kSt = 14,    // state field
+  kTmp = 15,   // Q + 1, A
   kNumScratch = 16,
 };
 
@@ -204,9 +204,8 @@ class Emitter {
     Line(std::string(d_ == Dialect::kFanuc ? "G00" : "G0") + " X" + Num(p[0]) + " Y" + Num(p[1]));
   }
   void Probe(double feed) {
-    const std::string xyz = d_ == Dialect::kSinumerik
-                                ? "X=" + S(kEnd) + " Y=" + S(kEnd + 1) + " Z=" + S(kEnd + 2)
-                                : "X" + S(kEnd) + " Y" + S(kEnd + 1) + " Z" + S(kEnd + 2);
+    const std::string xyz = d_ == Dialect::kSinumerik ? "X=" + S(kEnd) + " Y=" + S(kEnd + 1) + " Z=" + S(kEnd + 2)
+                                                      : "X" + S(kEnd) + " Y" + S(kEnd + 1) + " Z" + S(kEnd + 2);
     const std::string f = "F" + FormatFixed(feed, 0);
     switch (d_) {
       case Dialect::kFanuc:
@@ -243,7 +242,9 @@ class Emitter {
 };
 
 // Loop iterations of a wait of `timeout_s` with one dwell of `dwell_s` per look.
-long long Looks(double timeout_s, double dwell_s) { return static_cast<long long>(std::ceil(timeout_s / dwell_s - 1e-9)); }
+long long Looks(double timeout_s, double dwell_s) {
+  return static_cast<long long>(std::ceil(timeout_s / dwell_s - 1e-9));
+}
 
 constexpr int kAlarmOffline = 1, kAlarmTimeout = 2, kAlarmAborted = 3, kAlarmHandshake = 4, kAlarmNg = 5,
               kAlarmProbe = 6;
@@ -282,20 +283,22 @@ void SendBody(Emitter& e, const MachineProgramOptions& o) {
   // M3: wait for the hand-back.
   e.AssignS(kCount, "0");
   e.AssignS(kHd, "1");
-  e.While(e.Br(e.Cmp(e.S(kHd), "EQ", "1") + " AND " + e.Cmp(e.S(kCount), "LT", e.Int(Looks(o.ack_timeout_s, o.dwell_s)))),
-          [&] {
-            e.Dwell(o.dwell_s);
-            e.AssignS(kCount, e.S(kCount) + "+1");
-            e.ReadBlock(0, kC);
-            e.AssignS(kHd, e.Fix(e.S(kC) + "/16384") + "-2*" + e.Fix(e.S(kC) + "/32768"));
-          });
-  e.If(e.Cmp(e.S(kHd), "EQ", "1"), e.Cmp(e.S(kHd), "NE", "1"),
-       [&] { e.Alarm(kAlarmTimeout, "COLLECTOR TIMEOUT"); });
+  e.While(
+      e.Br(e.Cmp(e.S(kHd), "EQ", "1") + " AND " + e.Cmp(e.S(kCount), "LT", e.Int(Looks(o.ack_timeout_s, o.dwell_s)))),
+      [&] {
+        e.Dwell(o.dwell_s);
+        e.AssignS(kCount, e.S(kCount) + "+1");
+        e.ReadBlock(0, kC);
+        e.AssignS(kHd, e.Fix(e.S(kC) + "/16384") + "-2*" + e.Fix(e.S(kC) + "/32768"));
+      });
+  e.If(e.Cmp(e.S(kHd), "EQ", "1"), e.Cmp(e.S(kHd), "NE", "1"), [&] { e.Alarm(kAlarmTimeout, "COLLECTOR TIMEOUT"); });
   e.AssignS(kPt, e.S(kC) + "-4096*" + e.Fix(e.S(kC) + "/4096"));
   e.AssignS(kSt, e.Fix(e.S(kC) + "/4096") + "-4*" + e.Fix(e.S(kC) + "/16384"));
-  e.If(e.Cmp(e.S(kPt), "EQ", "4095"), e.Cmp(e.S(kPt), "NE", "4095"), [&] { e.Alarm(kAlarmAborted, "ABORTED BY COLLECTOR"); });
+  e.If(e.Cmp(e.S(kPt), "EQ", "4095"), e.Cmp(e.S(kPt), "NE", "4095"),
+       [&] { e.Alarm(kAlarmAborted, "ABORTED BY COLLECTOR"); });
   e.If(e.Cmp(e.S(kSt), "NE", "1"), e.Cmp(e.S(kSt), "EQ", "1"), [&] { e.Alarm(kAlarmHandshake, "HANDSHAKE ERROR"); });
-  e.If(e.Cmp(e.S(kPt), "NE", e.S(kId)), e.Cmp(e.S(kPt), "EQ", e.S(kId)), [&] { e.Alarm(kAlarmHandshake, "HANDSHAKE ERROR"); });
+  e.If(e.Cmp(e.S(kPt), "NE", e.S(kId)), e.Cmp(e.S(kPt), "EQ", e.S(kId)),
+       [&] { e.Alarm(kAlarmHandshake, "HANDSHAKE ERROR"); });
 }
 
 std::string Title(const MachineProgramOptions& o, std::size_t points) {
@@ -329,7 +332,8 @@ Status MachineProgramOptions::Validate() const {
   switch (dialect) {
     case Dialect::kFanuc:
       if (b.base < 500 || b.base + b.size() - 1 > 999) {
-        return Status::BadInput("Fanuc block #" + std::to_string(b.base) + ".. must lie in the retained common variables #500-#999");
+        return Status::BadInput("Fanuc block #" + std::to_string(b.base) +
+                                ".. must lie in the retained common variables #500-#999");
       }
       if (program_number < 1 || program_number > 9998) return Status::BadInput("program_number must be 1..9998");
       break;
@@ -406,7 +410,8 @@ Result<MachineProgram> WriteMachineProgram(const metrology::ProbingPlan& plan, c
   }
   for (std::size_t k = 0; k < n; ++k) {
     if (plan.points[k].id != static_cast<std::int64_t>(k + 1)) {
-      return Status::BadInput("point " + std::to_string(k + 1) + " of the plan has id " + std::to_string(plan.points[k].id) +
+      return Status::BadInput("point " + std::to_string(k + 1) + " of the plan has id " +
+                              std::to_string(plan.points[k].id) +
                               "; the handshake sends ids 1..N in plan order, renumber the plan");
     }
   }
@@ -445,7 +450,8 @@ Result<MachineProgram> WriteMachineProgram(const metrology::ProbingPlan& plan, c
     e.Comment(title);
   }
   if (!o.probe.post.title.empty()) e.Comment(o.probe.post.title);
-  e.Comment("STYLUS BALL RADIUS " + FormatFixed(o.probe.ball_radius_mm, 4) + " MM - REFERENCE = BALL CENTRE AT NOMINAL CONTACT");
+  e.Comment("STYLUS BALL RADIUS " + FormatFixed(o.probe.ball_radius_mm, 4) +
+            " MM - REFERENCE = BALL CENTRE AT NOMINAL CONTACT");
   if (d == Dialect::kLinuxCnc) {
     // The send subprogram first: LinuxCNC wants a sub defined before its call.
     e.Line("o<fl_send> sub");
@@ -464,12 +470,13 @@ Result<MachineProgram> WriteMachineProgram(const metrology::ProbingPlan& plan, c
   const std::string arm = e.Int(static_cast<long long>(EncodeControl(MeasuringWord(0))));
   e.AssignS(kCount, "0");
   e.ReadBlock(0, kC);
-  e.While(e.Br(e.Cmp(e.S(kC), "NE", arm) + " AND " + e.Cmp(e.S(kCount), "LT", e.Int(Looks(o.arm_timeout_s, o.dwell_s)))),
-          [&] {
-            e.Dwell(o.dwell_s);
-            e.AssignS(kCount, e.S(kCount) + "+1");
-            e.ReadBlock(0, kC);
-          });
+  e.While(
+      e.Br(e.Cmp(e.S(kC), "NE", arm) + " AND " + e.Cmp(e.S(kCount), "LT", e.Int(Looks(o.arm_timeout_s, o.dwell_s)))),
+      [&] {
+        e.Dwell(o.dwell_s);
+        e.AssignS(kCount, e.S(kCount) + "+1");
+        e.ReadBlock(0, kC);
+      });
   e.If(e.Cmp(e.S(kC), "NE", arm), e.Cmp(e.S(kC), "EQ", arm), [&] { e.Alarm(kAlarmOffline, "COLLECTOR OFFLINE"); });
   e.Move(true, {0, 0, o.probe.safe_z_mm}, true);
   for (std::size_t k = 0; k < n; ++k) {
@@ -499,16 +506,18 @@ Result<MachineProgram> WriteMachineProgram(const metrology::ProbingPlan& plan, c
   e.WriteBlock(0, e.Int(static_cast<long long>(EncodeControl(FinishedWord(static_cast<int>(n))))));
   e.AssignS(kCount, "0");
   e.ReadBlock(0, kC);
-  e.While(e.Br(e.Cmp(e.S(kC), "NE", "0") + " AND " + e.Cmp(e.S(kCount), "LT", e.Int(Looks(o.finish_timeout_s, o.dwell_s)))),
-          [&] {
-            e.Dwell(o.dwell_s);
-            e.AssignS(kCount, e.S(kCount) + "+1");
-            e.ReadBlock(0, kC);
-          });
+  e.While(
+      e.Br(e.Cmp(e.S(kC), "NE", "0") + " AND " + e.Cmp(e.S(kCount), "LT", e.Int(Looks(o.finish_timeout_s, o.dwell_s)))),
+      [&] {
+        e.Dwell(o.dwell_s);
+        e.AssignS(kCount, e.S(kCount) + "+1");
+        e.ReadBlock(0, kC);
+      });
   e.If(e.Cmp(e.S(kC), "NE", "0"), e.Cmp(e.S(kC), "EQ", "0"), [&] { e.Message("MEASUREMENT NOT CONFIRMED"); });
   if (d == Dialect::kFanuc) {
     e.Line("M30");
-    e.Line("O" + send_name + " (FORMLOOP SEND POINT - ID " + e.S(kId) + " REFERENCE " + e.S(kRef) + "-" + e.S(kRef + 2) + ")");
+    e.Line("O" + send_name + " (FORMLOOP SEND POINT - ID " + e.S(kId) + " REFERENCE " + e.S(kRef) + "-" +
+           e.S(kRef + 2) + ")");
     SendBody(e, o);
     e.Line("M99");
     e.Line("%");

@@ -47,11 +47,11 @@ namespace formloop::cnc {
 struct MachineProgramOptions {
   Dialect dialect = Dialect::kFanuc;
   Layout layout = Layout::kPacked;
-  int base = -1;                // block base; −1 = the dialect's default (Fanuc #900, Sinumerik R90, LinuxCNC E0)
-  double dwell_s = 0.020;       // t_dwell (spec R4)
-  double arm_timeout_s = 60;    // T_arm
-  double ack_timeout_s = 10;    // T_ack
-  double finish_timeout_s = 10; // how long M5 waits for C = 0
+  int base = -1;                 // block base; −1 = the dialect's default (Fanuc #900, Sinumerik R90, LinuxCNC E0)
+  double dwell_s = 0.020;        // t_dwell (spec R4)
+  double arm_timeout_s = 60;     // T_arm
+  double ack_timeout_s = 10;     // T_ack
+  double finish_timeout_s = 10;  // how long M5 waits for C = 0
   // Probe geometry, feed, safe Z, machine limits and the title (probe.post.title); coordinates are
   // written with probe.post.decimals (Fanuc IS-B: at most 3).
   nc::ProbeProgramOptions probe;

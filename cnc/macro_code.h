@@ -42,13 +42,27 @@ struct VarRef {
 
 struct Expr {
   enum class Op : std::uint8_t {
-    kNumber, kVar, kNeg, kAdd, kSub, kMul, kDiv, kEq, kNe, kGt, kGe, kLt, kLe, kAnd, kOr,
-    kTrunc,       // toward zero (Fanuc FIX, Sinumerik TRUNC)
-    kFloor,       // LinuxCNC fix
-    kCeil,        // LinuxCNC fup
+    kNumber,
+    kVar,
+    kNeg,
+    kAdd,
+    kSub,
+    kMul,
+    kDiv,
+    kEq,
+    kNe,
+    kGt,
+    kGe,
+    kLt,
+    kLe,
+    kAnd,
+    kOr,
+    kTrunc,         // toward zero (Fanuc FIX, Sinumerik TRUNC)
+    kFloor,         // LinuxCNC fix
+    kCeil,          // LinuxCNC fup
     kAwayFromZero,  // Fanuc FUP
-    kRound,       // half away from zero in double (Fanuc ROUND, Sinumerik ROUND)
-    kRoundCInt,   // LinuxCNC round: half away from zero through a C int
+    kRound,         // half away from zero in double (Fanuc ROUND, Sinumerik ROUND)
+    kRoundCInt,     // LinuxCNC round: half away from zero through a C int
     kAbs,
   };
   Op op = Op::kNumber;
@@ -64,21 +78,21 @@ struct SourcePos {
 
 struct Instr {
   enum class Kind : std::uint8_t {
-    kNop,         // comments, modal codes, STOPRE; `mark` > 0 for a "point <id>" comment
-    kAssign,      // target = value
-    kJump,        // to `jump`
-    kJumpIf,      // to `jump` when value (a condition) is true (Fanuc IF [..] GOTO n)
-    kJumpIfNot,   // to `jump` when value (a condition) is false (loops, IF/ENDIF)
-    kDwell,       // value = seconds
-    kMove,        // rapid or feed to axes (absolute, mm)
-    kProbe,       // probing move to axes; result in the measured variables
-    kCall,        // to `jump`, pushing the return address
+    kNop,        // comments, modal codes, STOPRE; `mark` > 0 for a "point <id>" comment
+    kAssign,     // target = value
+    kJump,       // to `jump`
+    kJumpIf,     // to `jump` when value (a condition) is true (Fanuc IF [..] GOTO n)
+    kJumpIfNot,  // to `jump` when value (a condition) is false (loops, IF/ENDIF)
+    kDwell,      // value = seconds
+    kMove,       // rapid or feed to axes (absolute, mm)
+    kProbe,      // probing move to axes; result in the measured variables
+    kCall,       // to `jump`, pushing the return address
     kReturn,
-    kEnd,         // program end (M30 / M2)
-    kAlarm,       // alarm `number` with `text`; the program stops
-    kMessage,     // operator message `text`; the program goes on
-    kPortOut,     // LinuxCNC M68 E<number> Q<value>
-    kPortIn,      // LinuxCNC M66 E<number> L0 → #5399
+    kEnd,      // program end (M30 / M2)
+    kAlarm,    // alarm `number` with `text`; the program stops
+    kMessage,  // operator message `text`; the program goes on
+    kPortOut,  // LinuxCNC M68 E<number> Q<value>
+    kPortIn,   // LinuxCNC M66 E<number> L0 → #5399
   };
   Kind kind = Kind::kNop;
   SourcePos pos;
@@ -102,9 +116,9 @@ struct MacroCode {
   Dialect dialect = Dialect::kFanuc;
   std::vector<std::string> files;
   std::vector<Instr> instrs;
-  int entry = 0;                         // first instruction of the main program
-  std::map<int, int> marks;              // point id → instruction of its "point <id>" comment
-  std::map<std::string, int> subs;       // subprogram name ("1001", "fl_send", "FL_SEND") → entry
+  int entry = 0;                    // first instruction of the main program
+  std::map<int, int> marks;         // point id → instruction of its "point <id>" comment
+  std::map<std::string, int> subs;  // subprogram name ("1001", "fl_send", "FL_SEND") → entry
 };
 
 // Variable ranges a program may use (reads and writes), per dialect; defaults are the controllers'

@@ -222,7 +222,8 @@ MacroInterpreter::Step MacroInterpreter::Run() {
           return Step{State::kRunning, out.duration_s};
         }
         case Instr::Kind::kCall:
-          if (static_cast<int>(stack_.size()) >= kMaxCallDepth) throw ArithmeticError{"subprogram calls nested too deep"};
+          if (static_cast<int>(stack_.size()) >= kMaxCallDepth)
+            throw ArithmeticError{"subprogram calls nested too deep"};
           stack_.push_back(pc_);
           pc_ = in.jump;
           break;

@@ -236,7 +236,8 @@ class ExprParser {
     if (ch == open()) return Group(c);
     if (auto n = c.Number()) return Number(*n);
     if (d_ != Dialect::kSinumerik && c.Accept('#')) {
-      if (c.Peek() == '[' || c.Peek() == '<') throw LineError{"indirect or named parameters are not in the subset" + c.Near()};
+      if (c.Peek() == '[' || c.Peek() == '<')
+        throw LineError{"indirect or named parameters are not in the subset" + c.Near()};
       const int n = c.Integer("a variable number after '#'");
       rules_.CheckRead(n);
       return Var(VarRef{VarRef::Space::kNumbered, n});
@@ -331,14 +332,16 @@ class ExprParser {
   Expr Multiplicative(Cursor& c) {
     auto next = [this](Cursor& k) { return UnaryExpr(k); };
     if (d_ == Dialect::kFanuc) {
-      return LeftAssoc(c, {{"*", false, Expr::Op::kMul}, {"/", false, Expr::Op::kDiv}, {"AND", true, Expr::Op::kAnd}}, next);
+      return LeftAssoc(c, {{"*", false, Expr::Op::kMul}, {"/", false, Expr::Op::kDiv}, {"AND", true, Expr::Op::kAnd}},
+                       next);
     }
     return LeftAssoc(c, {{"*", false, Expr::Op::kMul}, {"/", false, Expr::Op::kDiv}}, next);
   }
   Expr Additive(Cursor& c) {
     auto next = [this](Cursor& k) { return Multiplicative(k); };
     if (d_ == Dialect::kFanuc) {
-      return LeftAssoc(c, {{"+", false, Expr::Op::kAdd}, {"-", false, Expr::Op::kSub}, {"OR", true, Expr::Op::kOr}}, next);
+      return LeftAssoc(c, {{"+", false, Expr::Op::kAdd}, {"-", false, Expr::Op::kSub}, {"OR", true, Expr::Op::kOr}},
+                       next);
     }
     return LeftAssoc(c, {{"+", false, Expr::Op::kAdd}, {"-", false, Expr::Op::kSub}}, next);
   }
@@ -366,7 +369,8 @@ class ExprParser {
     return e;
   }
   Expr LinuxLogical(Cursor& c) {
-    return LeftAssoc(c, {{"AND", true, Expr::Op::kAnd}, {"OR", true, Expr::Op::kOr}}, [this](Cursor& k) { return Comparison(k); });
+    return LeftAssoc(c, {{"AND", true, Expr::Op::kAnd}, {"OR", true, Expr::Op::kOr}},
+                     [this](Cursor& k) { return Comparison(k); });
   }
   Expr SinumerikAnd(Cursor& c) {
     return LeftAssoc(c, {{"AND", true, Expr::Op::kAnd}}, [this](Cursor& k) { return Comparison(k); });
@@ -418,15 +422,13 @@ class Builder {
   struct Block {
     std::string key;
     enum Kind { kWhile, kIf, kSub } kind;
-    int start;          // the loop's condition / the sub's jump-over
-    int pending = -1;   // a jump to patch at the block's end (if: the JumpIfNot, or the else's Jump)
+    int start;         // the loop's condition / the sub's jump-over
+    int pending = -1;  // a jump to patch at the block's end (if: the JumpIfNot, or the else's Jump)
     bool has_else = false;
     SourcePos opened;
   };
   std::vector<Block> blocks;
-  Block* Top(const std::string& key) {
-    return blocks.empty() || blocks.back().key != key ? nullptr : &blocks.back();
-  }
+  Block* Top(const std::string& key) { return blocks.empty() || blocks.back().key != key ? nullptr : &blocks.back(); }
 
   // Jumps and calls resolved once every label is known.
   struct Fixup {
@@ -498,7 +500,8 @@ Words ParseWords(Cursor& c, Builder& b, Dialect d) {
       slot = &w.axes[letter - 'X'];
       if (*slot) throw LineError{std::string("two ") + letter + " words in one block"};
     } else {
-      const std::pair<char, std::optional<Expr>*> kSlots[] = {{'F', &w.f}, {'P', &w.p}, {'E', &w.e}, {'Q', &w.q}, {'L', &w.l}};
+      const std::pair<char, std::optional<Expr>*> kSlots[] = {
+          {'F', &w.f}, {'P', &w.p}, {'E', &w.e}, {'Q', &w.q}, {'L', &w.l}};
       for (const auto& [l, where] : kSlots) slot = l == letter ? where : slot;
     }
     if (slot == nullptr) throw LineError{std::string("word ") + letter + " is not in the subset"};
@@ -603,7 +606,8 @@ class FanucReader {
       c.Accept('O');
       const int number = c.Integer("a program number after O");
       if (!c.AtEnd()) throw LineError{"text after the program number"};
-      if (in_program_) throw LineError{"program O" + std::to_string(number) + " starts before O" + program_ + " ended (M30/M99)"};
+      if (in_program_)
+        throw LineError{"program O" + std::to_string(number) + " starts before O" + program_ + " ended (M30/M99)"};
       program_ = std::to_string(number);
       in_program_ = true;
       if (b_.code().subs.count(program_) != 0) throw LineError{"program O" + program_ + " is defined twice"};
@@ -666,13 +670,15 @@ class FanucReader {
       Instr test;
       test.kind = Instr::Kind::kJumpIfNot;
       test.value = std::move(cond);
-      b_.blocks.push_back({"DO" + std::to_string(m), Builder::Block::kWhile, b_.Emit(std::move(test)), -1, false, b_.pos});
+      b_.blocks.push_back(
+          {"DO" + std::to_string(m), Builder::Block::kWhile, b_.Emit(std::move(test)), -1, false, b_.pos});
       return;
     }
     if (c.AcceptWord("END", true)) {
       const int m = c.Integer("the loop number after END");
       auto* blk = b_.Top("DO" + std::to_string(m));
-      if (blk == nullptr) throw LineError{"END" + std::to_string(m) + " without a matching open DO" + std::to_string(m)};
+      if (blk == nullptr)
+        throw LineError{"END" + std::to_string(m) + " without a matching open DO" + std::to_string(m)};
       Instr back;
       back.kind = Instr::Kind::kJump;
       back.jump = blk->start;
@@ -700,7 +706,8 @@ class FanucReader {
       if (!value || *value != std::floor(*value) || *value < 0 || *value > 999) {
         throw LineError{"#" + std::to_string(n) + " takes a whole number 0..999 and the text in a comment"};
       }
-      if (!c.AtEnd()) throw LineError{"text after #" + std::to_string(n) + "=" + std::to_string(static_cast<int>(*value))};
+      if (!c.AtEnd())
+        throw LineError{"text after #" + std::to_string(n) + "=" + std::to_string(static_cast<int>(*value))};
       Instr i;
       i.kind = n == 3000 ? Instr::Kind::kAlarm : Instr::Kind::kMessage;
       i.number = (n == 3000 ? 3000 : 0) + static_cast<int>(*value);
@@ -860,7 +867,8 @@ class LinuxCncReader {
       b_.blocks.push_back({key, Builder::Block::kWhile, b_.Emit(std::move(test)), -1, false, b_.pos});
     } else if (c.AcceptWord("ENDWHILE")) {
       auto* blk = b_.Top(key);
-      if (blk == nullptr || blk->kind != Builder::Block::kWhile) throw LineError{"o" + key + " endwhile without its while"};
+      if (blk == nullptr || blk->kind != Builder::Block::kWhile)
+        throw LineError{"o" + key + " endwhile without its while"};
       Instr back;
       back.kind = Instr::Kind::kJump;
       back.jump = blk->start;
@@ -875,7 +883,8 @@ class LinuxCncReader {
       b_.blocks.push_back({key, Builder::Block::kIf, at, at, false, b_.pos});
     } else if (c.AcceptWord("ELSE")) {
       auto* blk = b_.Top(key);
-      if (blk == nullptr || blk->kind != Builder::Block::kIf || blk->has_else) throw LineError{"o" + key + " else without its if"};
+      if (blk == nullptr || blk->kind != Builder::Block::kIf || blk->has_else)
+        throw LineError{"o" + key + " else without its if"};
       Instr skip;
       skip.kind = Instr::Kind::kJump;
       const int at = b_.Emit(std::move(skip));
@@ -905,13 +914,14 @@ class LinuxCncReader {
       if (!w.e || w.e->op != Expr::Op::kNumber) throw LineError{"M" + std::to_string(m) + " needs E<analog port>"};
       const int port = static_cast<int>(w.e->number);
       if (port < 0 || port >= limits_.linuxcnc_ports) {
-        throw LineError{"analog port E" + std::to_string(port) + " is beyond motion.num_aio = " +
-                        std::to_string(limits_.linuxcnc_ports)};
+        throw LineError{"analog port E" + std::to_string(port) +
+                        " is beyond motion.num_aio = " + std::to_string(limits_.linuxcnc_ports)};
       }
       Instr io;
       io.number = port;
       if (m == 66) {
-        if (!w.l || w.l->op != Expr::Op::kNumber || w.l->number != 0) throw LineError{"M66 reads immediately (L0) here"};
+        if (!w.l || w.l->op != Expr::Op::kNumber || w.l->number != 0)
+          throw LineError{"M66 reads immediately (L0) here"};
         io.kind = Instr::Kind::kPortIn;
       } else {
         if (!w.q) throw LineError{"M68 needs Q<value>"};
@@ -1115,7 +1125,9 @@ class SinumerikReader {
     if (!c.AtEnd()) throw LineError{"unexpected text" + c.Near()};
   }
   void Finish(const char* what, Instr::Kind kind, bool allowed) {
-    if (!allowed) throw LineError{std::string(what) + (main_ ? " ends a subprogram, not the main program" : " ends the main program, not a subprogram")};
+    if (!allowed)
+      throw LineError{std::string(what) + (main_ ? " ends a subprogram, not the main program"
+                                                 : " ends the main program, not a subprogram")};
     if (!b_.blocks.empty()) throw LineError{std::string(what) + " inside an open " + b_.blocks.back().key};
     Instr end;
     end.kind = kind;
@@ -1148,7 +1160,8 @@ Result<MacroCode> ReadMacroProgram(Dialect dialect, const std::vector<MacroFile>
   for (std::size_t f = 0; f < files.size(); ++f) {
     b.code().files.push_back(files[f].name);
     if (dialect != Dialect::kSinumerik && f > 0) {
-      return Status::BadInput(Where{.file = files[f].name}, std::string(DialectName(dialect)) + " programs are one file");
+      return Status::BadInput(Where{.file = files[f].name},
+                              std::string(DialectName(dialect)) + " programs are one file");
     }
     if (dialect == Dialect::kSinumerik) {
       sinumerik.StartFile(static_cast<int>(f));

@@ -1,9 +1,5 @@
 #include "cnc/tcp_transport.h"
 
-#include <cerrno>
-#include <chrono>
-#include <cstring>
-
 #include <arpa/inet.h>
 #include <fcntl.h>
 #include <netinet/in.h>
@@ -11,6 +7,10 @@
 #include <poll.h>
 #include <sys/socket.h>
 #include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cstring>
 
 #include "cnc/wire.h"
 
@@ -30,7 +30,8 @@ int RemainingMs(double deadline) {
 Status ParseAddress(const std::string& text, std::string* host, int* port) {
   const auto colon = text.rfind(':');
   const auto bad = [&] {
-    return Status::BadInput(Where{.field = "--address"}, "'" + text + "' is not HOST:PORT", "write e.g. 127.0.0.1:5800");
+    return Status::BadInput(Where{.field = "--address"}, "'" + text + "' is not HOST:PORT",
+                            "write e.g. 127.0.0.1:5800");
   };
   if (colon == std::string::npos || colon == 0) return bad();
   *host = text.substr(0, colon);

@@ -19,7 +19,8 @@ std::string OffsetAddress::ToString() const {
 Result<OffsetAddress> ParseOffsetAddress(const std::string& text) {
   const auto dot = text.find('.');
   const auto bad = [&] {
-    return Status::BadInput("offset '" + text + "' is not T<tool>.radius_wear, T<tool>.length_wear or G54..G59.<X|Y|Z>");
+    return Status::BadInput("offset '" + text +
+                            "' is not T<tool>.radius_wear, T<tool>.length_wear or G54..G59.<X|Y|Z>");
   };
   if (dot == std::string::npos) return bad();
   const std::string head = text.substr(0, dot), tail = text.substr(dot + 1);

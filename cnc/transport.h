@@ -27,9 +27,9 @@ enum class OffsetKind { kToolRadiusWear, kToolLengthWear, kWorkOffset };
 // "T3.length_wear", "G54.X".
 struct OffsetAddress {
   OffsetKind kind = OffsetKind::kToolRadiusWear;
-  int tool = 0;          // tool kinds: 1..9999
-  std::string wcs;       // WORK_OFFSET: G54..G59
-  int axis = 0;          // WORK_OFFSET: 0 X, 1 Y, 2 Z
+  int tool = 0;     // tool kinds: 1..9999
+  std::string wcs;  // WORK_OFFSET: G54..G59
+  int axis = 0;     // WORK_OFFSET: 0 X, 1 Y, 2 Z
   bool operator<(const OffsetAddress& o) const { return ToString() < o.ToString(); }
   bool operator==(const OffsetAddress& o) const { return ToString() == o.ToString(); }
   std::string ToString() const;

@@ -11,7 +11,7 @@
 namespace formloop::cnc {
 
 struct VirtualLinkOptions {
-  double call_timeout_s = 1.0;   // a call with no answer by then fails (IoError)
+  double call_timeout_s = 1.0;  // a call with no answer by then fails (IoError)
   double connect_time_s = 0.001;
 };
 

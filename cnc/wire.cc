@@ -65,7 +65,8 @@ Status DecodeRequest(const std::string& line, std::uint64_t* seq, ApiRequest* r)
   }
   if (t[1] == "WR") {
     r->op = ApiRequest::Op::kWriteRange;
-    if (t.size() < 4 || !ParseInt(t[2], &r->start) || r->start < 0 || t.size() - 3 > static_cast<std::size_t>(kMaxRange)) {
+    if (t.size() < 4 || !ParseInt(t[2], &r->start) || r->start < 0 ||
+        t.size() - 3 > static_cast<std::size_t>(kMaxRange)) {
       return bad("WR <start> <v1> ..");
     }
     for (std::size_t k = 3; k < t.size(); ++k) {

@@ -13,7 +13,8 @@ namespace {
 constexpr double kEps = 1e-9;  // mm: floating-point slack in the limit comparisons
 
 Status ParseWrite(const Json& j, const std::string& source, const std::string& prefix, PlannedWrite* w) {
-  if (!j.is_object()) return Status::BadInput(Where{.file = source, .field = prefix}, "each write must be a JSON object");
+  if (!j.is_object())
+    return Status::BadInput(Where{.file = source, .field = prefix}, "each write must be a JSON object");
   JsonFields f(j, source, prefix + ".");
   std::string kind;
   FL_RETURN_IF_ERROR(f.String("offset", &w->offset));
@@ -30,7 +31,8 @@ Status ParseWrite(const Json& j, const std::string& source, const std::string& p
     FL_RETURN_IF_ERROR(f.String("axis", &axis));
     const auto parsed = ParseOffsetAddress(wcs + "." + axis);
     if (!parsed.ok()) {
-      return Status::BadInput(Where{.file = source, .field = prefix + ".wcs"}, "work offset '" + wcs + "' axis '" + axis + "' is not known",
+      return Status::BadInput(Where{.file = source, .field = prefix + ".wcs"},
+                              "work offset '" + wcs + "' axis '" + axis + "' is not known",
                               "use wcs G54..G59 and axis X, Y or Z");
     }
     w->address = *parsed;
@@ -57,15 +59,17 @@ std::vector<std::string> LimitProblems(const PlannedWrite& w) {
   std::vector<std::string> out;
   const std::string name = w.offset + " (" + w.address.ToString() + ")";
   if (std::fabs(w.new_mm - w.baseline_mm) > w.limit_mm + kEps) {
-    out.push_back(name + ": new value " + FormatExact(w.new_mm) + " mm is " + FormatExact(std::fabs(w.new_mm - w.baseline_mm)) +
-                  " mm from its baseline " + FormatExact(w.baseline_mm) + " mm, beyond the limit " + FormatExact(w.limit_mm) + " mm");
+    out.push_back(name + ": new value " + FormatExact(w.new_mm) + " mm is " +
+                  FormatExact(std::fabs(w.new_mm - w.baseline_mm)) + " mm from its baseline " +
+                  FormatExact(w.baseline_mm) + " mm, beyond the limit " + FormatExact(w.limit_mm) + " mm");
   }
   if (w.step_limit_mm && std::fabs(w.delta_mm) > *w.step_limit_mm + kEps) {
-    out.push_back(name + ": change " + FormatExact(w.delta_mm) + " mm is beyond the step limit " + FormatExact(*w.step_limit_mm) + " mm");
+    out.push_back(name + ": change " + FormatExact(w.delta_mm) + " mm is beyond the step limit " +
+                  FormatExact(*w.step_limit_mm) + " mm");
   }
   if (std::fabs(w.previous_mm + w.delta_mm - w.new_mm) > w.resolution_mm / 2) {
-    out.push_back(name + ": new " + FormatExact(w.new_mm) + " mm is not previous " + FormatExact(w.previous_mm) + " + delta " +
-                  FormatExact(w.delta_mm) + " mm");
+    out.push_back(name + ": new " + FormatExact(w.new_mm) + " mm is not previous " + FormatExact(w.previous_mm) +
+                  " + delta " + FormatExact(w.delta_mm) + " mm");
   }
   const double steps = w.delta_mm / w.resolution_mm;
   if (std::fabs(steps - std::round(steps)) > 1e-6) {
@@ -84,8 +88,9 @@ Result<WritePlan> ParseWritePlan(const Json& json, const std::string& source) {
   long long version = 0;
   FL_RETURN_IF_ERROR(f.String("format", &format));
   if (format != "formloop.offset_write_plan") {
-    return Status::BadInput(Where{.file = source, .field = "format"}, "format is '" + format + "'",
-                            "give the offset write plan written by `formloop tune` (format formloop.offset_write_plan)");
+    return Status::BadInput(
+        Where{.file = source, .field = "format"}, "format is '" + format + "'",
+        "give the offset write plan written by `formloop tune` (format formloop.offset_write_plan)");
   }
   FL_RETURN_IF_ERROR(f.Integer("version", &version, 1, 1));
   WritePlan plan;
@@ -102,7 +107,8 @@ Result<WritePlan> ParseWritePlan(const Json& json, const std::string& source) {
     if (!a.is_array()) return Status::BadInput(Where{.file = source, .field = key}, "must be an array of strings");
     for (std::size_t k = 0; k < a.size(); ++k) {
       if (!a[k].is_string()) {
-        return Status::BadInput(Where{.file = source, .field = std::string(key) + "[" + std::to_string(k) + "]"}, "must be a string");
+        return Status::BadInput(Where{.file = source, .field = std::string(key) + "[" + std::to_string(k) + "]"},
+                                "must be a string");
       }
       (std::string(key) == "blocked_reasons" ? plan.blocked_reasons : plan.not_reachable_acknowledged).push_back(a[k]);
     }
@@ -133,8 +139,8 @@ Result<WritePlan> ReadWritePlan(const std::filesystem::path& path) {
 nlohmann::json WriteBackReport::ToJson() const {
   nlohmann::json list = nlohmann::json::array();
   for (const auto& i : items) {
-    nlohmann::json j = {{"offset", i.offset},     {"address", i.address}, {"previous_mm", i.previous_mm},
-                        {"new_mm", i.new_mm},     {"written", i.written}, {"rolled_back", i.rolled_back}};
+    nlohmann::json j = {{"offset", i.offset}, {"address", i.address}, {"previous_mm", i.previous_mm},
+                        {"new_mm", i.new_mm}, {"written", i.written}, {"rolled_back", i.rolled_back}};
     if (i.read_before_mm) j["read_before_mm"] = *i.read_before_mm;
     if (i.read_back_mm) j["read_back_mm"] = *i.read_back_mm;
     if (i.rolled_back_read_mm) j["rolled_back_read_mm"] = *i.rolled_back_read_mm;
@@ -176,9 +182,12 @@ Result<WriteBackReport> WriteBack(MacroTransport& t, const WritePlan& plan, bool
   for (const auto& w : plan.writes) {
     for (auto& p : LimitProblems(w)) report.reasons.push_back(std::move(p));
   }
-  if (plan.writes.empty()) report.reasons.push_back("the plan has no writes");
   if (!report.reasons.empty()) {
     report.outcome = "REFUSED";
+    return report;
+  }
+  if (plan.writes.empty()) {
+    report.outcome = "NOTHING_TO_WRITE";  // every rounded change was zero
     return report;
   }
   // 2. The offsets must still hold what the plan was computed from.
@@ -190,8 +199,9 @@ Result<WriteBackReport> WriteBack(MacroTransport& t, const WritePlan& plan, bool
     report.items[k].read_before_mm = now;
     if (std::fabs(now - w.previous_mm) > w.resolution_mm / 2) {
       changed = true;
-      report.reasons.push_back("OFFSET_CHANGED: " + w.address.ToString() + " reads " + FormatExact(now) + " mm, the plan expects " +
-                               FormatExact(w.previous_mm) + " mm; re-run the measurement and `formloop tune`");
+      report.reasons.push_back("OFFSET_CHANGED: " + w.address.ToString() + " reads " + FormatExact(now) +
+                               " mm, the plan expects " + FormatExact(w.previous_mm) +
+                               " mm; re-run the measurement and `formloop tune`");
     }
   }
   if (changed) {
@@ -220,14 +230,15 @@ Result<WriteBackReport> WriteBack(MacroTransport& t, const WritePlan& plan, bool
     const auto back = ReadOffsetRetry(t, w.address);
     if (!back.ok()) {
       mismatch = true;
-      report.reasons.push_back("WRITE_VERIFY_FAILED: " + w.address.ToString() + " cannot be read back: " + back.status().message());
+      report.reasons.push_back("WRITE_VERIFY_FAILED: " + w.address.ToString() +
+                               " cannot be read back: " + back.status().message());
       continue;
     }
     report.items[k].read_back_mm = *back;
     if (report.items[k].written && std::fabs(*back - w.new_mm) > w.resolution_mm / 2) {
       mismatch = true;
-      report.reasons.push_back("WRITE_VERIFY_FAILED: " + w.address.ToString() + " was written " + FormatExact(w.new_mm) +
-                               " mm but reads back " + FormatExact(*back) + " mm");
+      report.reasons.push_back("WRITE_VERIFY_FAILED: " + w.address.ToString() + " was written " +
+                               FormatExact(w.new_mm) + " mm but reads back " + FormatExact(*back) + " mm");
     }
   }
   if (!failed && !mismatch) {
@@ -244,16 +255,19 @@ Result<WriteBackReport> WriteBack(MacroTransport& t, const WritePlan& plan, bool
     if (back.ok()) report.items[k].rolled_back_read_mm = *back;
     // What counts is the value read back: an offset whose write was refused still holds its previous value.
     report.items[k].rolled_back = back.ok() && std::fabs(*back - w.previous_mm) <= w.resolution_mm / 2;
-    if (!s.ok() && report.items[k].rolled_back) report.items[k].note += " (its rollback write was refused; it reads the previous value)";
+    if (!s.ok() && report.items[k].rolled_back)
+      report.items[k].note += " (its rollback write was refused; it reads the previous value)";
     if (!report.items[k].rolled_back) {
       rollback_ok = false;
-      report.reasons.push_back("ROLLBACK_FAILED: " + w.address.ToString() + " could not be set back to " + FormatExact(w.previous_mm) +
-                               " mm (reads " + (back.ok() ? FormatExact(*back) + " mm" : back.status().message()) +
+      report.reasons.push_back("ROLLBACK_FAILED: " + w.address.ToString() + " could not be set back to " +
+                               FormatExact(w.previous_mm) + " mm (reads " +
+                               (back.ok() ? FormatExact(*back) + " mm" : back.status().message()) +
                                "): check this offset on the controller by hand before the next part");
     }
   }
   report.outcome = !rollback_ok ? "ROLLBACK_FAILED" : (failed ? "WRITE_FAILED" : "WRITE_VERIFY_FAILED");
-  log::Error("link write: {}; every written offset {}", report.outcome, rollback_ok ? "was rolled back and verified" : "that could be was rolled back");
+  log::Error("link write: {}; every written offset {}", report.outcome,
+             rollback_ok ? "was rolled back and verified" : "that could be was rolled back");
   return report;
 }
 

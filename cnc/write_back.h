@@ -8,6 +8,7 @@
 //                          |new − baseline| ≤ limit, |delta| ≤ step_limit (when given), new =
 //                          previous + delta (within resolution/2), delta a whole number of resolution
 //                          steps. The limit cannot be overridden from here.
+//   NOTHING_TO_WRITE       a SAFE, confirmed plan without writes (every rounded change was zero)
 //   OFFSET_CHANGED         just before writing, every offset is read; |o_now − previous| >
 //                          resolution/2 on any of them aborts before anything is written.
 //   write, read back       each new value is written, then every written offset is read back;
@@ -18,11 +19,10 @@
 // This file holds its own small reader of the plan (the tuning layer writes it; cnc/ sits below it).
 
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "cnc/transport.h"
 #include "core/status.h"
@@ -30,8 +30,8 @@
 namespace formloop::cnc {
 
 struct PlannedWrite {
-  std::string offset;          // the model's offset id ("T3_radius_wear")
-  OffsetAddress address;       // from kind, tool, wcs, axis
+  std::string offset;              // the model's offset id ("T3_radius_wear")
+  OffsetAddress address;           // from kind, tool, wcs, axis
   std::string controller_address;  // free text from the model, reported only
   double previous_mm = 0, delta_mm = 0, new_mm = 0;
   double resolution_mm = 0.001;
@@ -64,11 +64,11 @@ struct WriteBackItem {
 };
 
 struct WriteBackReport {
-  // WRITTEN, REFUSED, OFFSET_CHANGED, WRITE_VERIFY_FAILED, WRITE_FAILED, ROLLBACK_FAILED
+  // WRITTEN, NOTHING_TO_WRITE, REFUSED, OFFSET_CHANGED, WRITE_VERIFY_FAILED, WRITE_FAILED, ROLLBACK_FAILED
   std::string outcome;
   std::vector<std::string> reasons;
   std::vector<WriteBackItem> items;
-  bool ok() const { return outcome == "WRITTEN"; }
+  bool ok() const { return outcome == "WRITTEN" || outcome == "NOTHING_TO_WRITE"; }
   nlohmann::json ToJson() const;
 };
 

@@ -5,14 +5,15 @@
 // compared with the controller's own record of what the program handed over (bit for bit) and with
 // the deviations the emulated probe measured.
 
+#include "cnc/collector.h"
+
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 
-#include <gtest/gtest.h>
-
-#include "cnc/collector.h"
 #include "cnc/controller.h"
 #include "core/atomic_file.h"
 #include "tests/cnc/link_fixture.h"
@@ -96,8 +97,9 @@ TEST_F(CollectorTest, Acceptance13TwoThousandPointsWithLatencyErrorsAndKills) {
   // Five kills at random moments: a seeded choice among the collector's steps.
   Rng rng(1313);
   int kills = 0;
-  const auto report = bench.CollectWithKills(bench.Collector(Journal(), 1, 2000),
-                                             [&](CollectorStep) { return kills < 5 && rng.Uniform() < 0.0015; }, 0.2, &kills);
+  const auto report = bench.CollectWithKills(
+      bench.Collector(Journal(), 1, 2000), [&](CollectorStep) { return kills < 5 && rng.Uniform() < 0.0015; }, 0.2,
+      &kills);
   ASSERT_TRUE(report.ok()) << report.status().ToString();
   ASSERT_TRUE(report->ok) << report->fatal;
   EXPECT_EQ(kills, 5);
@@ -279,7 +281,8 @@ TEST_F(CollectorTest, ApiErrorsDroppedAndHalfOpenConnectionsAreRetriedWithoutLos
   VirtualBench bench(co);
   const CollectorReport report = CollectAll(bench, 1, 300);
   ASSERT_TRUE(report.ok);
-  for (const char* fault : {"api_error", "connection_drop", "half_open"}) EXPECT_GT(bench.controller->fault_counts().at(fault), 3) << fault;
+  for (const char* fault : {"api_error", "connection_drop", "half_open"})
+    EXPECT_GT(bench.controller->fault_counts().at(fault), 3) << fault;
   EXPECT_GT(report.counters.reconnects, 6);
   EXPECT_EQ(testing::ExpectMatchesRecord(*bench.controller, report.sessions), 300);
   bench.Drain();
@@ -306,8 +309,9 @@ TEST_F(CollectorTest, TornRangeReadsWithTheMachineWritingInBetween) {
 // resetting D and writing C, after the hand-back, after arming, after journaling the end) and
 // restarted from its journal: nothing lost, nothing doubled.
 TEST_F(CollectorTest, KilledAtEveryStepAndRestartedFromTheJournal) {
-  for (const CollectorStep step : {CollectorStep::kAfterRead, CollectorStep::kAfterPersist, CollectorStep::kAfterDataReset,
-                                   CollectorStep::kAfterAck, CollectorStep::kAfterArm, CollectorStep::kAfterEnd}) {
+  for (const CollectorStep step :
+       {CollectorStep::kAfterRead, CollectorStep::kAfterPersist, CollectorStep::kAfterDataReset,
+        CollectorStep::kAfterAck, CollectorStep::kAfterArm, CollectorStep::kAfterEnd}) {
     SCOPED_TRACE(static_cast<int>(step));
     ControllerOptions co = Basic(Dialect::kFanuc, 60, 2, 61);
     VirtualBench bench(co);
@@ -381,7 +385,8 @@ TEST_F(CollectorTest, SkippedIdIsAGapListingTheMissingIdAndTheSessionIsIncomplet
       ++gaps;
       const std::string missing = std::to_string(s.points[k - 1].id + 1);
       bool named = false;
-      for (const auto& e : s.errors) named = named || e.find("points " + missing + " were never received") != std::string::npos;
+      for (const auto& e : s.errors)
+        named = named || e.find("points " + missing + " were never received") != std::string::npos;
       EXPECT_TRUE(named) << "gap at " << missing;
     }
   }
@@ -516,14 +521,15 @@ TEST_F(CollectorTest, TenThousandPointsWithEveryFaultAndTwentyKills) {
   VirtualBench bench(co);
   Rng rng(2222);
   int kills = 0;
-  const auto report = bench.CollectWithKills(bench.Collector(Journal(), 5, 2000),
-                                             [&](CollectorStep) { return kills < 25 && rng.Uniform() < 0.0005; }, 0.2, &kills);
+  const auto report = bench.CollectWithKills(
+      bench.Collector(Journal(), 5, 2000), [&](CollectorStep) { return kills < 25 && rng.Uniform() < 0.0005; }, 0.2,
+      &kills);
   ASSERT_TRUE(report.ok()) << report.status().ToString();
   ASSERT_TRUE(report->ok) << report->fatal;
   EXPECT_GE(kills, 20);
   const auto& faults = bench.controller->fault_counts();
-  for (const char* f : {"api_error", "dropped_write", "connection_drop", "half_open", "torn_read", "reorder", "repeat_id",
-                        "skip_id", "reset", "corrupt_data"}) {
+  for (const char* f : {"api_error", "dropped_write", "connection_drop", "half_open", "torn_read", "reorder",
+                        "repeat_id", "skip_id", "reset", "corrupt_data"}) {
     EXPECT_GT(faults.count(f) ? faults.at(f) : 0, 0) << f;
   }
   // Six sessions: the run reset at point 777 is ABORTED, the five others finished.
@@ -561,10 +567,13 @@ TEST_F(CollectorTest, TenThousandPointsWithEveryFaultAndTwentyKills) {
   EXPECT_EQ(report->sessions[4].points[16].id, 17);
   EXPECT_EQ(report->sessions[4].points[16].decoded.flags[0], AxisFlag::kOverflow);
   bool corrupted_flagged = false;
-  for (const auto& p : report->sessions[1].points) corrupted_flagged = corrupted_flagged || (p.id == 1234 && !p.decoded.ok());
+  for (const auto& p : report->sessions[1].points)
+    corrupted_flagged = corrupted_flagged || (p.id == 1234 && !p.decoded.ok());
   EXPECT_TRUE(corrupted_flagged);
-  std::printf("10,000 points: %d kills, %ld duplicates kept once, %ld ids never sent (GAP), virtual time %.0f s; faults injected:",
-              kills, duplicates, gap_ids, bench.scheduler.now_s());
+  std::printf(
+      "10,000 points: %d kills, %ld duplicates kept once, %ld ids never sent (GAP), virtual time %.0f s; faults "
+      "injected:",
+      kills, duplicates, gap_ids, bench.scheduler.now_s());
   for (const auto& [name, count] : faults) std::printf(" %s %ld", name.c_str(), count);
   std::printf("\n");
 }

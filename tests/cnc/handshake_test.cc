@@ -3,12 +3,13 @@
 // triples, the OVERFLOW sentinel and malformed fields, and the macro-arithmetic decoding the machine
 // programs use, checked against the bit decoding for every 16-bit word.
 
-#include <cmath>
-#include <limits>
+#include "cnc/handshake.h"
 
 #include <gtest/gtest.h>
 
-#include "cnc/handshake.h"
+#include <cmath>
+#include <limits>
+
 #include "core/random.h"
 
 namespace formloop::cnc {
@@ -53,8 +54,8 @@ TEST(HandshakeWords, LegalAndIllegalControlWords) {
                               ControlWord{1, 1, State::kFinished, 0}, ControlWord{1, 1, State::kPointReady, 4095}}) {
     EXPECT_EQ(ClassifyControl(w), WordKind::kIllegal) << FormatControl(w);
   }
-  for (const double v : {0.5, -1.0, 65536.0, 1e9, std::numeric_limits<double>::quiet_NaN(),
-                         std::numeric_limits<double>::infinity()}) {
+  for (const double v :
+       {0.5, -1.0, 65536.0, 1e9, std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()}) {
     EXPECT_EQ(ClassifyControlValue(v), WordKind::kIllegal) << v;
   }
   // Every 16-bit value decodes to the word that encodes back to it.
@@ -109,11 +110,11 @@ TEST(HandshakeWords, AMillionRandomTriplesDecodeExactly) {
 }
 
 TEST(HandshakeWords, OverflowSentinelAndRangeErrors) {
-  EXPECT_EQ(QuantiseDeviation(0.1), kOverflowValue);       // 1000 steps
-  EXPECT_EQ(QuantiseDeviation(0.09995), kOverflowValue);   // 999.5 rounds away from zero to 1000
+  EXPECT_EQ(QuantiseDeviation(0.1), kOverflowValue);      // 1000 steps
+  EXPECT_EQ(QuantiseDeviation(0.09995), kOverflowValue);  // 999.5 rounds away from zero to 1000
   EXPECT_EQ(QuantiseDeviation(-0.09994), -999);
   EXPECT_EQ(QuantiseDeviation(-0.15), kOverflowValue);
-  EXPECT_EQ(QuantiseDeviation(-0.00005), -1);              // half away from zero
+  EXPECT_EQ(QuantiseDeviation(-0.00005), -1);  // half away from zero
   EXPECT_EQ(QuantiseDeviation(std::numeric_limits<double>::quiet_NaN()), kOverflowValue);
 
   const auto sentinel = UnpackData(*PackData({kOverflowValue, 0, 5}));

@@ -4,6 +4,8 @@
 // journal (as after SIGKILL), and the comparison of what the collector stored with the controller's
 // own record.
 
+#include <gtest/gtest.h>
+
 #include <filesystem>
 #include <functional>
 #include <map>
@@ -11,8 +13,6 @@
 #include <set>
 #include <string>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "cnc/collector.h"
 #include "cnc/controller.h"
@@ -57,8 +57,9 @@ struct VirtualBench {
 
   // Runs collectors until one returns; `kill(step)` decides whether to kill at a step. Each kill
   // drops the collector and starts a new one after restart_s of virtual time.
-  Result<CollectorReport> CollectWithKills(const CollectorOptions& options, const std::function<bool(CollectorStep)>& kill,
-                                           double restart_s, int* kills) {
+  Result<CollectorReport> CollectWithKills(const CollectorOptions& options,
+                                           const std::function<bool(CollectorStep)>& kill, double restart_s,
+                                           int* kills) {
     for (int attempt = 0; attempt < 100000; ++attempt) {
       try {
         return Collect(*link, clock, options, [&](CollectorStep step) {
@@ -106,7 +107,8 @@ inline long ExpectMatchesRecord(const Controller& controller, const std::vector<
       const auto& r = *records[k];
       EXPECT_EQ(p.id, r.id) << "run " << run << " position " << k;
       const int count = controller.block().data_count();
-      for (int a = 0; a < count; ++a) EXPECT_EQ(p.data[a], r.data[a]) << "run " << run << " id " << r.id << " word " << a;
+      for (int a = 0; a < count; ++a)
+        EXPECT_EQ(p.data[a], r.data[a]) << "run " << run << " id " << r.id << " word " << a;
       if (!r.corrupted) {
         for (int a = 0; a < 3; ++a) {
           if (p.decoded.flags[a] == AxisFlag::kOk) {
@@ -117,7 +119,8 @@ inline long ExpectMatchesRecord(const Controller& controller, const std::vector<
       ++compared;
     }
     // Strictly increasing ids: in order, no duplicates.
-    for (std::size_t k = 1; k < session->points.size(); ++k) EXPECT_LT(session->points[k - 1].id, session->points[k].id);
+    for (std::size_t k = 1; k < session->points.size(); ++k)
+      EXPECT_LT(session->points[k - 1].id, session->points[k].id);
   }
   return compared;
 }

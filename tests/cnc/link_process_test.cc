@@ -5,6 +5,8 @@
 // bit for bit as the emulator's own record has it. Also the CLI's write-back against the emulator
 // (limit refusal, OFFSET_CHANGED, an injected read-back mismatch rolled back) and a protocol error.
 
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -15,10 +17,9 @@
 #include <sstream>
 #include <thread>
 
-#include <gtest/gtest.h>
-
 #include "cnc/controller.h"
 #include "core/json_io.h"
+#include "metrology/probe.h"
 #include "core/point_io.h"
 #include "core/random.h"
 #include "tests/cnc/process_support.h"
@@ -67,33 +68,93 @@ class LinkProcessTest : public ::testing::Test {
 TEST_F(LinkProcessTest, TenThousandPointsWithTwentyCollectorKillsAcrossProcesses) {
   ProcessGuard guard;
   pid_t emulator = -1;
-  const std::string address = StartEmulator(
-      dir_,
-      {"--points", "2000", "--runs", "5", "--seed", "2026", "--latency-ms", "0.1", "--jitter-ms", "0.05", "--dwell-ms", "1",
-       "--measure-ms", "0.5", "--visibility-ms", "1", "--reorder-rate", "0.05", "--api-error-rate", "0.01", "--drop-write-rate",
-       "0.002", "--drop-connection-rate", "0.0005", "--half-open-rate", "0.0002", "--torn-reads", "--repeat-rate", "0.001",
-       "--ack-timeout-s", "30", "--arm-timeout-s", "120", "--record", (dir_ / "record.csv").string(), "--linger-s", "2",
-       "--max-run-s", "400"},
-      &guard, &emulator);
+  const std::string address = StartEmulator(dir_,
+                                            {"--points",
+                                             "2000",
+                                             "--runs",
+                                             "5",
+                                             "--seed",
+                                             "2026",
+                                             "--latency-ms",
+                                             "0.1",
+                                             "--jitter-ms",
+                                             "0.05",
+                                             "--dwell-ms",
+                                             "1",
+                                             "--measure-ms",
+                                             "0.5",
+                                             "--visibility-ms",
+                                             "1",
+                                             "--reorder-rate",
+                                             "0.05",
+                                             "--api-error-rate",
+                                             "0.01",
+                                             "--drop-write-rate",
+                                             "0.002",
+                                             "--drop-connection-rate",
+                                             "0.0005",
+                                             "--half-open-rate",
+                                             "0.0002",
+                                             "--torn-reads",
+                                             "--repeat-rate",
+                                             "0.001",
+                                             "--ack-timeout-s",
+                                             "30",
+                                             "--arm-timeout-s",
+                                             "120",
+                                             "--record",
+                                             (dir_ / "record.csv").string(),
+                                             "--linger-s",
+                                             "2",
+                                             "--max-run-s",
+                                             "400"},
+                                            &guard, &emulator);
   ASSERT_FALSE(address.empty()) << "the emulator did not start";
-  const std::vector<std::string> collect = {"link",      "collect", "--address", address, "--out", (dir_ / "P.csv").string(),
-                                            "--journal", (shm_ / "P.journal").string(), "--expect", "2000", "--runs", "5",
-                                            "--poll-ms", "0.5", "--visibility-timeout-s", "0.1", "--reconnect-min-s", "0.02",
-                                            "--reconnect-max-s", "0.2", "--call-timeout-s", "0.2", "--idle-timeout-s", "60",
+  const std::vector<std::string> collect = {"link",
+                                            "collect",
+                                            "--address",
+                                            address,
+                                            "--out",
+                                            (dir_ / "P.csv").string(),
+                                            "--journal",
+                                            (shm_ / "P.journal").string(),
+                                            "--expect",
+                                            "2000",
+                                            "--runs",
+                                            "5",
+                                            "--poll-ms",
+                                            "0.5",
+                                            "--visibility-timeout-s",
+                                            "0.1",
+                                            "--reconnect-min-s",
+                                            "0.02",
+                                            "--reconnect-max-s",
+                                            "0.2",
+                                            "--call-timeout-s",
+                                            "0.2",
+                                            "--idle-timeout-s",
+                                            "60",
                                             "--quiet"};
   Rng rng(20);
-  int kills = 0, exit_code = -1;
+  int kills = 0, active_kills = 0, exit_code = -1;
   const auto start = std::chrono::steady_clock::now();
   for (int attempt = 0; attempt < 200; ++attempt) {
     const pid_t collector = SpawnFormloop(collect, dir_ / "collect.out", dir_ / "collect.err");
     ASSERT_GT(collector, 0);
     guard.pids.push_back(collector);
     if (kills < 22) {
-      // A random moment after the process is up (it takes ~0.25 s to load): kill it there.
-      exit_code = WaitFor(collector, rng.Uniform(0.3, 1.2));
+      // Wait until this collector stores points (its journal grows; the binary takes ~0.25 s to load),
+      // then kill it at a random moment of its work.
+      const auto journal = shm_ / "P.journal";
+      const auto size = [&] { return std::filesystem::exists(journal) ? std::filesystem::file_size(journal) : 0; };
+      const auto before = size();
+      for (int k = 0; k < 1000 && size() == before; ++k) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      exit_code = WaitFor(collector, rng.Uniform(0.0, 0.4));
       if (exit_code == -1) {
+        const auto at_kill = size();
         KillAndReap(collector);
         ++kills;
+        active_kills += at_kill > before ? 1 : 0;
         continue;
       }
       break;
@@ -104,6 +165,7 @@ TEST_F(LinkProcessTest, TenThousandPointsWithTwentyCollectorKillsAcrossProcesses
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   EXPECT_EQ(exit_code, 0);
   EXPECT_GE(kills, 20);
+  EXPECT_GE(active_kills, 20);  // each killed while it was storing points
   EXPECT_EQ(WaitFor(emulator, 30), 0) << "the emulator did not finish its runs cleanly";
   // The emulator's record (run, q, id, data, deviations) against what the collector stored.
   const auto record = ReadCsv(dir_ / "record.csv");
@@ -130,9 +192,10 @@ TEST_F(LinkProcessTest, TenThousandPointsWithTwentyCollectorKillsAcrossProcesses
   }
   EXPECT_EQ(points, 10000);
   EXPECT_EQ(mismatches, 0);
-  std::printf("10,000 points over TCP between processes: %d SIGKILLs of the collector, %.1f s wall, %zu handovers recorded "
-              "(repeats included)\n",
-              kills, seconds, record.size());
+  std::printf(
+      "10,000 points over TCP between processes: %d SIGKILLs of the collector (%d while it was storing points), %.1f s "
+      "wall, %zu handovers recorded (repeats included)\n",
+      kills, active_kills, seconds, record.size());
   std::ifstream summary(dir_ / "emulate.out");
   std::string line;
   while (std::getline(summary, line)) {
@@ -148,17 +211,18 @@ TEST_F(LinkProcessTest, TenThousandPointsWithTwentyCollectorKillsAcrossProcesses
 TEST_F(LinkProcessTest, WriteBackRefusesRollsBackAndWrites) {
   ProcessGuard guard;
   pid_t emulator = -1;
-  const std::string address =
-      StartEmulator(dir_,
-                    {"--points", "1", "--start-delay-s", "1e6", "--offset", "T3.radius_wear=0.085", "--offset", "T5.length_wear=-0.02",
-                     "--offset", "G54.X=-120.5", "--offset-mismatch", "G54.X=0.004", "--max-run-s", "60"},
-                    &guard, &emulator);
+  const std::string address = StartEmulator(
+      dir_,
+      {"--points", "1", "--start-delay-s", "1e6", "--offset", "T3.radius_wear=0.085", "--offset",
+       "T5.length_wear=-0.02", "--offset", "G54.X=-120.5", "--offset-mismatch", "G54.X=0.004", "--max-run-s", "60"},
+      &guard, &emulator);
   ASSERT_FALSE(address.empty());
   const auto plan = [&](const std::string& name, const std::string& status, bool confirmed, const std::string& writes) {
     const auto path = dir_ / (name + ".json");
-    std::ofstream(path) << R"({"format": "formloop.offset_write_plan", "version": 1, "session": "test", "status": ")" << status
-                        << R"(", "blocked_reasons": [], "confirmed": )" << (confirmed ? "true" : "false")
-                        << R"(, "not_reachable_acknowledged": [], "extra_field_from_tuning": 1, "writes": [)" << writes << "]}";
+    std::ofstream(path) << R"({"format": "formloop.offset_write_plan", "version": 1, "session": "test", "status": ")"
+                        << status << R"(", "blocked_reasons": [], "confirmed": )" << (confirmed ? "true" : "false")
+                        << R"(, "not_reachable_acknowledged": [], "extra_field_from_tuning": 1, "writes": [)" << writes
+                        << "]}";
     return path.string();
   };
   const std::string t3_ok =
@@ -201,7 +265,8 @@ TEST_F(LinkProcessTest, WriteBackRefusesRollsBackAndWrites) {
   EXPECT_EQ(run(plan("recheck", "RECHECK", true, t3_ok), true, &r), 1);
   EXPECT_EQ(r["outcome"], "REFUSED");
   // The offset moved since the plan was made: OFFSET_CHANGED, nothing written.
-  const std::string t3_stale = std::string(t3_ok).replace(t3_ok.find("0.085"), 5, "0.080").replace(t3_ok.find("0.095"), 5, "0.090");
+  const std::string t3_stale =
+      std::string(t3_ok).replace(t3_ok.find("0.085"), 5, "0.080").replace(t3_ok.find("0.095"), 5, "0.090");
   EXPECT_EQ(run(plan("stale", "SAFE", true, t3_stale), true, &r), 1);
   EXPECT_EQ(r["outcome"], "OFFSET_CHANGED");
   EXPECT_FALSE(offset(r, "T3.radius_wear")["written"].get<bool>());
@@ -223,11 +288,13 @@ TEST_F(LinkProcessTest, WriteBackRefusesRollsBackAndWrites) {
   EXPECT_NEAR(offset(r, "T5.length_wear")["read_back_mm"].get<double>(), -0.025, 1e-12);
   // The alarm request and the self-test through the CLI against the same controller.
   for (const char* code : {"5", "0"}) {
-    const pid_t p = SpawnFormloop({"link", "alarm", "--address", address, "--code", code, "--quiet"}, dir_ / "alarm.out", dir_ / "alarm.err");
+    const pid_t p = SpawnFormloop({"link", "alarm", "--address", address, "--code", code, "--quiet"},
+                                  dir_ / "alarm.out", dir_ / "alarm.err");
     guard.pids.push_back(p);
     EXPECT_EQ(WaitFor(p, 30), 0);
   }
-  const pid_t self = SpawnFormloop({"link", "selftest", "--address", address, "--quiet"}, dir_ / "selftest.out", dir_ / "selftest.err");
+  const pid_t self = SpawnFormloop({"link", "selftest", "--address", address, "--quiet"}, dir_ / "selftest.out",
+                                   dir_ / "selftest.err");
   guard.pids.push_back(self);
   EXPECT_EQ(WaitFor(self, 30), 0);
   EXPECT_TRUE(nlohmann::json::parse(*ReadFile(dir_ / "selftest.out"))["passed"].get<bool>());
@@ -236,6 +303,42 @@ TEST_F(LinkProcessTest, WriteBackRefusesRollsBackAndWrites) {
   const auto summary = nlohmann::json::parse(*ReadFile(dir_ / "emulate.out"));
   EXPECT_TRUE(summary["stopped_by_signal"].get<bool>());
   EXPECT_NEAR(summary["offsets_mm"]["T3.radius_wear"].get<double>(), 0.095, 1e-12);
+}
+
+// `link collect --plan --probe-log` turns the last complete run into a probe log for `formloop analyse`:
+// each centre is the point's reference (surface point + R·normal) plus the deviation the emulated probe
+// measured, to within the 0.1 µm quantisation.
+TEST_F(LinkProcessTest, CollectWritesAProbeLogOfTheRun) {
+  ProcessGuard guard;
+  const auto plan = dir_ / "plan.json";
+  const metrology::ProbingPlan probing = SyntheticPlan(40);
+  ASSERT_TRUE(WriteJsonFile(plan, probing.ToJson()).ok());
+  pid_t emulator = -1;
+  const std::string address = StartEmulator(
+      dir_, {"--points", "40", "--dwell-ms", "2", "--measure-ms", "1", "--record", (dir_ / "record.csv").string(), "--linger-s", "0.5"},
+      &guard, &emulator);
+  ASSERT_FALSE(address.empty());
+  const pid_t collector = SpawnFormloop({"link", "collect", "--address", address, "--out", (dir_ / "P.csv").string(), "--expect",
+                                         "40", "--poll-ms", "1", "--plan", plan.string(), "--probe-log",
+                                         (dir_ / "probe_log.csv").string(), "--quiet"},
+                                        dir_ / "collect.out", dir_ / "collect.err");
+  guard.pids.push_back(collector);
+  ASSERT_EQ(WaitFor(collector, 60), 0) << *ReadFile(dir_ / "collect.err");
+  EXPECT_EQ(WaitFor(emulator, 30), 0);
+  const auto log = metrology::ReadProbeLog(dir_ / "probe_log.csv");
+  ASSERT_TRUE(log.ok()) << log.status().ToString();
+  ASSERT_EQ(log->records.size(), 40u);
+  const auto record = ReadCsv(dir_ / "record.csv");
+  for (std::size_t k = 0; k < 40; ++k) {
+    const auto& r = log->records[k];
+    const auto& p = probing.points[k];
+    EXPECT_EQ(r.id, p.id);
+    for (int a = 0; a < 3; ++a) {
+      const double truth = std::stod(record[k][6 + a]);
+      EXPECT_NEAR(r.centre[a], p.point[a] + p.normal[a] + truth, 1e-4) << "point " << p.id << " axis " << a;
+    }
+    EXPECT_NEAR((r.approach + p.normal).norm(), 0, 1e-9);
+  }
 }
 
 // `link program` writes the machine side for a plan file and `link check` reads it back; a broken line
@@ -251,7 +354,9 @@ TEST_F(LinkProcessTest, ProgramAndCheckCommands) {
   };
   for (const std::string dialect : {"fanuc", "linuxcnc", "sinumerik"}) {
     const auto out = dir_ / dialect;
-    ASSERT_EQ(run({"link", "program", "--plan", plan.string(), "--dialect", dialect, "--out", out.string(), "--quiet"}), 0) << dialect;
+    ASSERT_EQ(run({"link", "program", "--plan", plan.string(), "--dialect", dialect, "--out", out.string(), "--quiet"}),
+              0)
+        << dialect;
     std::vector<std::string> check = {"link", "check", "--dialect", dialect};
     for (const char* name : {"measure.nc", "measure.ngc", "FL_MEASURE.MPF", "FL_SEND.SPF"}) {
       if (std::filesystem::exists(out / name)) check.push_back((out / name).string());
@@ -274,12 +379,14 @@ TEST_F(LinkProcessTest, ProgramAndCheckCommands) {
 TEST_F(LinkProcessTest, ProtocolErrorStopsBothSides) {
   ProcessGuard guard;
   pid_t emulator = -1;
-  const std::string address = StartEmulator(
-      dir_, {"--points", "20", "--dwell-ms", "2", "--measure-ms", "1", "--third-party", "1:5:0:12345", "--ack-timeout-s", "1", "--linger-s", "0.5"},
-      &guard, &emulator);
+  const std::string address = StartEmulator(dir_,
+                                            {"--points", "20", "--dwell-ms", "2", "--measure-ms", "1", "--third-party",
+                                             "1:5:0:12345", "--ack-timeout-s", "1", "--linger-s", "0.5"},
+                                            &guard, &emulator);
   ASSERT_FALSE(address.empty());
-  const pid_t collector = SpawnFormloop({"link", "collect", "--address", address, "--out", (dir_ / "P.csv").string(), "--poll-ms", "1"},
-                                        dir_ / "collect.out", dir_ / "collect.err");
+  const pid_t collector =
+      SpawnFormloop({"link", "collect", "--address", address, "--out", (dir_ / "P.csv").string(), "--poll-ms", "1"},
+                    dir_ / "collect.out", dir_ / "collect.err");
   guard.pids.push_back(collector);
   EXPECT_EQ(WaitFor(collector, 30), 1);
   EXPECT_EQ(WaitFor(emulator, 30), 1);

@@ -11,6 +11,10 @@
 //     packing of the deviations it measured, and formloop's interpreter writes the same words;
 //   - refusals: too many points, ids out of order, a position beyond the travel, a feed beyond the limit.
 
+#include "cnc/machine_program.h"
+
+#include <gtest/gtest.h>
+
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -21,10 +25,7 @@
 #include <regex>
 #include <sstream>
 
-#include <gtest/gtest.h>
-
 #include "cnc/controller.h"
-#include "cnc/machine_program.h"
 #include "cnc/macro_interpreter.h"
 #include "core/atomic_file.h"
 #include "core/point_io.h"
@@ -97,7 +98,8 @@ TEST(MachineProgramReaders, RefuseWhatIsWrongAndNameTheLine) {
   const std::vector<Broken> cases = {
       {Dialect::kFanuc, "%\nO1\n#1200=1\nM30\n%\n", 3, "cannot be written"},
       {Dialect::kFanuc, "%\nO1\n#100=#5000\nM30\n%\n", 3, "is not a Fanuc variable"},
-      {Dialect::kFanuc, "%\nO1\nWHILE [#100 LT 3] DO1\nG04 X0.02\nEND2\nM30\n%\n", 5, "END2 without a matching open DO2"},
+      {Dialect::kFanuc, "%\nO1\nWHILE [#100 LT 3] DO1\nG04 X0.02\nEND2\nM30\n%\n", 5,
+       "END2 without a matching open DO2"},
       {Dialect::kFanuc, "%\nO1\nGOTO 7\nM30\n%\n", 3, "GOTO target N7"},
       {Dialect::kFanuc, "%\nO1\n#100=[1+2\nM30\n%\n", 3, "to close an expression"},
       {Dialect::kFanuc, "%\nO1\n#100=SIN[1]\nM30\n%\n", 3, "function 'SIN'"},
@@ -106,7 +108,8 @@ TEST(MachineProgramReaders, RefuseWhatIsWrongAndNameTheLine) {
       {Dialect::kFanuc, "%\nO1\nG00 X1\n%\n", 4, "no M30 or M99"},
       {Dialect::kFanuc, "%\nO1\nG31 X1 Y2 Z3\nM30\n%\n", 3, "needs its feed"},
       {Dialect::kLinuxCnc, "%\n#1000 = #1000+1\nM2\n%\n", 2, "must be bracketed"},
-      {Dialect::kLinuxCnc, "%\no100 while [#1000 LT 3]\nG4 P0.02\no101 endwhile\nM2\n%\n", 4, "endwhile without its while"},
+      {Dialect::kLinuxCnc, "%\no100 while [#1000 LT 3]\nG4 P0.02\no101 endwhile\nM2\n%\n", 4,
+       "endwhile without its while"},
       {Dialect::kLinuxCnc, "%\no<fl_send> call\nM2\n%\n", 2, "called before it is defined"},
       {Dialect::kLinuxCnc, "%\nM68 E7 Q[1]\nM2\n%\n", 2, "beyond motion.num_aio"},
       {Dialect::kLinuxCnc, "%\n#5070 = 1\nM2\n%\n", 2, "cannot be written"},
@@ -172,20 +175,21 @@ int RunToEnd(MacroInterpreter& interpreter) {
 
 TEST(MacroInterpreter, DialectSemantics) {
   {
-    const auto code = ReadMacroProgram(Dialect::kFanuc, {{"f", "%\nO1\n#100=FIX[-1.5]\n#101=FUP[-1.2]\n#102=ROUND[-2.5]\n"
-                                                                 "#103=[#104 EQ 0]\n#105=[#104 LT 1]\n#106=#104+1\n#107=#0\n"
-                                                                 "#108=2+3*4\n#109=[1 EQ 1] OR [1 EQ 2]\nM30\n%\n"}});
+    const auto code = ReadMacroProgram(Dialect::kFanuc, {{"f",
+                                                          "%\nO1\n#100=FIX[-1.5]\n#101=FUP[-1.2]\n#102=ROUND[-2.5]\n"
+                                                          "#103=[#104 EQ 0]\n#105=[#104 LT 1]\n#106=#104+1\n#107=#0\n"
+                                                          "#108=2+3*4\n#109=[1 EQ 1] OR [1 EQ 2]\nM30\n%\n"}});
     ASSERT_TRUE(code.ok()) << code.status().ToString();
     MapEnvironment env;
     MacroInterpreter in(&*code, &env);
     RunToEnd(in);
     EXPECT_EQ(in.state(), MacroInterpreter::State::kEnded);
-    EXPECT_EQ(env.vars[100], -1);      // FIX truncates toward zero
-    EXPECT_EQ(env.vars[101], -2);      // FUP away from zero
-    EXPECT_EQ(env.vars[102], -3);      // ROUND half away from zero
-    EXPECT_EQ(env.vars[103], 0);       // vacant EQ 0 is false on Fanuc
-    EXPECT_EQ(env.vars[105], 1);       // ... but vacant LT 1 treats it as 0
-    EXPECT_EQ(env.vars[106], 1);       // vacant + 1 = 1
+    EXPECT_EQ(env.vars[100], -1);        // FIX truncates toward zero
+    EXPECT_EQ(env.vars[101], -2);        // FUP away from zero
+    EXPECT_EQ(env.vars[102], -3);        // ROUND half away from zero
+    EXPECT_EQ(env.vars[103], 0);         // vacant EQ 0 is false on Fanuc
+    EXPECT_EQ(env.vars[105], 1);         // ... but vacant LT 1 treats it as 0
+    EXPECT_EQ(env.vars[106], 1);         // vacant + 1 = 1
     EXPECT_EQ(env.vars.count(107), 0u);  // #107 = #0 leaves it vacant
     EXPECT_EQ(env.vars[108], 14);
     EXPECT_EQ(env.vars[109], 1);
@@ -193,8 +197,9 @@ TEST(MacroInterpreter, DialectSemantics) {
   {
     const auto code = ReadMacroProgram(
         Dialect::kLinuxCnc,
-        {{"l", "%\n#1000 = fix[-1.5]\n#1001 = round[-1.5]\n#1002 = round[68719476735.4]\n#1003 = fup[-1.2]\n"
-               "#1004 = [2 + 3 * 4]\n#1005 = [1 EQ 1 AND 2 GT 3]\nM68 E1 Q[#1000 + 0.5]\nM2\n%\n"}});
+        {{"l",
+          "%\n#1000 = fix[-1.5]\n#1001 = round[-1.5]\n#1002 = round[68719476735.4]\n#1003 = fup[-1.2]\n"
+          "#1004 = [2 + 3 * 4]\n#1005 = [1 EQ 1 AND 2 GT 3]\nM68 E1 Q[#1000 + 0.5]\nM2\n%\n"}});
     ASSERT_TRUE(code.ok()) << code.status().ToString();
     MapEnvironment env;
     MacroInterpreter in(&*code, &env);
@@ -204,8 +209,10 @@ TEST(MacroInterpreter, DialectSemantics) {
     // The parameters live in the interpreter; read them back through a port.
   }
   {
-    const auto code = ReadMacroProgram(Dialect::kLinuxCnc, {{"l", "%\n#1002 = round[68719476735.4]\nM68 E0 Q#1002\n#1001 = round[-1.5]\n"
-                                                                   "M68 E1 Q#1001\nM2\n%\n"}});
+    const auto code =
+        ReadMacroProgram(Dialect::kLinuxCnc, {{"l",
+                                               "%\n#1002 = round[68719476735.4]\nM68 E0 Q#1002\n#1001 = round[-1.5]\n"
+                                               "M68 E1 Q#1001\nM2\n%\n"}});
     ASSERT_TRUE(code.ok());
     MapEnvironment env;
     MacroInterpreter in(&*code, &env);
@@ -214,8 +221,10 @@ TEST(MacroInterpreter, DialectSemantics) {
     EXPECT_EQ(env.ports[1], -2);
   }
   {
-    const auto code = ReadMacroProgram(Dialect::kSinumerik, {{"s", "R1=TRUNC(-1.5)\nR2=ROUND(2.5)\nR3=R9+1\nIF (R3 == 1) AND (R2 > 2)\n"
-                                                                   "R4=7\nELSE\nR4=8\nENDIF\nM30\n"}});
+    const auto code =
+        ReadMacroProgram(Dialect::kSinumerik, {{"s",
+                                                "R1=TRUNC(-1.5)\nR2=ROUND(2.5)\nR3=R9+1\nIF (R3 == 1) AND (R2 > 2)\n"
+                                                "R4=7\nELSE\nR4=8\nENDIF\nM30\n"}});
     ASSERT_TRUE(code.ok()) << code.status().ToString();
     MapEnvironment env;
     MacroInterpreter in(&*code, &env);
@@ -247,7 +256,8 @@ bool Rs274Installed() { return std::system("command -v rs274 >/dev/null 2>&1") =
 
 std::string Rs274(const std::filesystem::path& program, int* exit_code) {
   const auto canon = program.string() + ".canon";
-  const std::string command = "rs274 -g " + program.string() + " " + canon + " </dev/null >" + program.string() + ".console 2>&1";
+  const std::string command =
+      "rs274 -g " + program.string() + " " + canon + " </dev/null >" + program.string() + ".console 2>&1";
   const int status = std::system(command.c_str());
   *exit_code = WEXITSTATUS(status);
   const auto text = ReadFile(canon);
@@ -299,7 +309,8 @@ std::string Loopback(const std::string& program) {
       const int port = std::stoi(m[1]);
       out << "#" << 4000 + port << " = " << m[2].str() << "\n";
       if (port == 0) {
-        out << "o" << block << " if [[#4000 GE 57344] AND [#4000 LT 61440]]\n#4000 = [#4000 - 57344 + 36864]\no" << block << " endif\n";
+        out << "o" << block << " if [[#4000 GE 57344] AND [#4000 LT 61440]]\n#4000 = [#4000 - 57344 + 36864]\no"
+            << block << " endif\n";
         ++block;
         out << "o" << block << " if [#4000 GE 61440]\n#4000 = 0\no" << block << " endif\n";
         ++block;

@@ -3,19 +3,18 @@
 // stdout and stderr to files), wait for it with a deadline, kill it by pid, and reap it, so no test
 // leaves a process behind.
 
-#include <chrono>
-#include <csignal>
-#include <filesystem>
-#include <string>
-#include <thread>
-#include <vector>
-
 #include <fcntl.h>
 #include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <chrono>
+#include <csignal>
+#include <filesystem>
 #include <nlohmann/json.hpp>
+#include <string>
+#include <thread>
+#include <vector>
 
 #include "core/atomic_file.h"
 #include "core/json_io.h"
@@ -25,7 +24,8 @@ extern char** environ;
 namespace formloop::cnc::testing {
 
 // Starts FORMLOOP_BINARY with `args`; stdout/stderr go to the given files. Returns the pid (−1 on failure).
-inline pid_t SpawnFormloop(const std::vector<std::string>& args, const std::filesystem::path& out, const std::filesystem::path& err) {
+inline pid_t SpawnFormloop(const std::vector<std::string>& args, const std::filesystem::path& out,
+                           const std::filesystem::path& err) {
   std::vector<std::string> argv_s = {FORMLOOP_BINARY};
   argv_s.insert(argv_s.end(), args.begin(), args.end());
   std::vector<char*> argv;
@@ -74,14 +74,16 @@ struct ProcessGuard {
 };
 
 // Starts `formloop link emulate --port 0 --ready-file F ...` and waits for its port.
-inline std::string StartEmulator(const std::filesystem::path& dir, std::vector<std::string> args, ProcessGuard* guard, pid_t* pid) {
+inline std::string StartEmulator(const std::filesystem::path& dir, std::vector<std::string> args, ProcessGuard* guard,
+                                 pid_t* pid) {
   const auto ready = dir / "ready.json";
   std::filesystem::remove(ready);
   std::vector<std::string> all = {"link", "emulate", "--port", "0", "--ready-file", ready.string()};
   all.insert(all.end(), args.begin(), args.end());
   *pid = SpawnFormloop(all, dir / "emulate.out", dir / "emulate.err");
   if (*pid > 0) guard->pids.push_back(*pid);
-  for (int k = 0; k < 1000 && !std::filesystem::exists(ready); ++k) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  for (int k = 0; k < 1000 && !std::filesystem::exists(ready); ++k)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
   const auto json = ReadJsonFile(ready);
   return json.ok() ? (*json)["address"].get<std::string>() : std::string();
 }

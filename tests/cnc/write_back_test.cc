@@ -3,9 +3,10 @@
 // 0.085 + 0.020 = 0.105 > 0.1 is never sent, 0.085 + 0.010 = 0.095 is), OFFSET_CHANGED, a read-back
 // mismatch rolled back and verified, a refused write rolled back, and that a refusal sends nothing.
 
+#include "cnc/write_back.h"
+
 #include <gtest/gtest.h>
 
-#include "cnc/write_back.h"
 #include "core/json_io.h"
 #include "core/point_io.h"
 #include "tests/cnc/link_fixture.h"
@@ -49,15 +50,17 @@ TEST(WritePlan, ReadsTheFormatAndNamesTheFieldOfAnError) {
     Json value;
     std::string field;
   };
-  for (const Bad& b : {Bad{"/writes/1/limit_mm", -1, "writes[1].limit_mm"}, Bad{"/writes/0/kind", "TOOL_DIAMETER", "writes[0].kind"},
-                       Bad{"/writes/0/tool", 0, "writes[0].tool"}, Bad{"/format", "something", "format"},
-                       Bad{"/version", 2, "version"}, Bad{"/status", "MAYBE", "status"}, Bad{"/writes/1/wcs", "G60", "writes[1].wcs"},
-                       Bad{"/writes/0/resolution_mm", 0, "writes[0].resolution_mm"}}) {
+  for (const Bad& b :
+       {Bad{"/writes/1/limit_mm", -1, "writes[1].limit_mm"}, Bad{"/writes/0/kind", "TOOL_DIAMETER", "writes[0].kind"},
+        Bad{"/writes/0/tool", 0, "writes[0].tool"}, Bad{"/format", "something", "format"},
+        Bad{"/version", 2, "version"}, Bad{"/status", "MAYBE", "status"}, Bad{"/writes/1/wcs", "G60", "writes[1].wcs"},
+        Bad{"/writes/0/resolution_mm", 0, "writes[0].resolution_mm"}}) {
     Json j = PlanJson(0.010);
     j[Json::json_pointer(b.edit)] = b.value;
     const auto bad = ParseWritePlan(j, "offsets.json");
     ASSERT_FALSE(bad.ok()) << b.edit;
-    EXPECT_NE(bad.status().message().find("offsets.json: field '" + b.field + "'"), std::string::npos) << bad.status().message();
+    EXPECT_NE(bad.status().message().find("offsets.json: field '" + b.field + "'"), std::string::npos)
+        << bad.status().message();
   }
   Json twice = PlanJson(0.010);
   twice["writes"][1] = twice["writes"][0];
@@ -90,8 +93,10 @@ TEST(WriteBack, Acceptance10TheLimitIsCheckedAgainAndNothingBeyondItIsSent) {
 TEST(WriteBack, RefusesUnlessSafeConfirmedAndConfirmedByTheOperator) {
   VirtualBench bench(WithOffsets());
   for (const auto& [status, confirmed, operator_ok] : {std::tuple<std::string, bool, bool>{"RECHECK", true, true},
-                                                       {"INTERVENE", true, true}, {"BLOCKED", true, true},
-                                                       {"SAFE", false, true}, {"SAFE", true, false}}) {
+                                                       {"INTERVENE", true, true},
+                                                       {"BLOCKED", true, true},
+                                                       {"SAFE", false, true},
+                                                       {"SAFE", true, false}}) {
     const auto plan = ParseWritePlan(PlanJson(0.010, status, confirmed), "offsets.json");
     ASSERT_TRUE(plan.ok());
     const auto r = WriteBack(*bench.link, *plan, operator_ok);
@@ -106,6 +111,12 @@ TEST(WriteBack, RefusesUnlessSafeConfirmedAndConfirmedByTheOperator) {
   Json wrong = PlanJson(0.010);
   wrong["writes"][0]["new_mm"] = 0.097;
   EXPECT_EQ(WriteBack(*bench.link, *ParseWritePlan(wrong, "p"), true)->outcome, "REFUSED");
+  // A plan whose rounded changes were all zero has nothing to write: not a refusal, nothing sent.
+  Json empty = PlanJson(0.010);
+  empty["writes"] = Json::array();
+  const auto nothing = WriteBack(*bench.link, *ParseWritePlan(empty, "p"), true);
+  EXPECT_EQ(nothing->outcome, "NOTHING_TO_WRITE");
+  EXPECT_TRUE(nothing->ok());
   EXPECT_EQ(bench.link->calls(), 0);
 }
 
@@ -129,7 +140,8 @@ TEST(WriteBack, AReadBackMismatchIsDetectedReportedAndEverythingRolledBack) {
   ASSERT_TRUE(r.ok());
   EXPECT_EQ(r->outcome, "WRITE_VERIFY_FAILED");
   bool named = false;
-  for (const auto& reason : r->reasons) named = named || reason.find("G55.Z was written -250.002 mm but reads back -249.999 mm") != std::string::npos;
+  for (const auto& reason : r->reasons)
+    named = named || reason.find("G55.Z was written -250.002 mm but reads back -249.999 mm") != std::string::npos;
   EXPECT_TRUE(named) << r->ToJson().dump(1);
   for (const auto& item : r->items) {
     EXPECT_TRUE(item.written);
