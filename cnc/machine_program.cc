@@ -246,6 +246,19 @@ long long Looks(double timeout_s, double dwell_s) {
   return static_cast<long long>(std::ceil(timeout_s / dwell_s - 1e-9));
 }
 
+// count := 0; while (waiting AND count < looks) { dwell; count := count + 1; read C; after_read() }.
+// Every wait of the program has this shape: its timeout is a number of looks, one dwell each.
+void WaitLoop(Emitter& e, const std::string& waiting, double timeout_s, double dwell_s,
+              const std::function<void()>& after_read = {}) {
+  e.AssignS(kCount, "0");
+  e.While(e.Br(waiting + " AND " + e.Cmp(e.S(kCount), "LT", e.Int(Looks(timeout_s, dwell_s)))), [&] {
+    e.Dwell(dwell_s);
+    e.AssignS(kCount, e.S(kCount) + "+1");
+    e.ReadBlock(0, kC);
+    if (after_read) after_read();
+  });
+}
+
 constexpr int kAlarmOffline = 1, kAlarmTimeout = 2, kAlarmAborted = 3, kAlarmHandshake = 4, kAlarmNg = 5,
               kAlarmProbe = 6;
 
@@ -281,16 +294,9 @@ void SendBody(Emitter& e, const MachineProgramOptions& o) {
   }
   e.WriteBlock(0, e.Int(static_cast<long long>(EncodeControl(PointReadyWord(0)))) + "+" + e.S(kId));
   // M3: wait for the hand-back.
-  e.AssignS(kCount, "0");
   e.AssignS(kHd, "1");
-  e.While(
-      e.Br(e.Cmp(e.S(kHd), "EQ", "1") + " AND " + e.Cmp(e.S(kCount), "LT", e.Int(Looks(o.ack_timeout_s, o.dwell_s)))),
-      [&] {
-        e.Dwell(o.dwell_s);
-        e.AssignS(kCount, e.S(kCount) + "+1");
-        e.ReadBlock(0, kC);
-        e.AssignS(kHd, e.Fix(e.S(kC) + "/16384") + "-2*" + e.Fix(e.S(kC) + "/32768"));
-      });
+  WaitLoop(e, e.Cmp(e.S(kHd), "EQ", "1"), o.ack_timeout_s, o.dwell_s,
+           [&] { e.AssignS(kHd, e.Fix(e.S(kC) + "/16384") + "-2*" + e.Fix(e.S(kC) + "/32768")); });
   e.If(e.Cmp(e.S(kHd), "EQ", "1"), e.Cmp(e.S(kHd), "NE", "1"), [&] { e.Alarm(kAlarmTimeout, "COLLECTOR TIMEOUT"); });
   e.AssignS(kPt, e.S(kC) + "-4096*" + e.Fix(e.S(kC) + "/4096"));
   e.AssignS(kSt, e.Fix(e.S(kC) + "/4096") + "-4*" + e.Fix(e.S(kC) + "/16384"));
@@ -468,15 +474,8 @@ Result<MachineProgram> WriteMachineProgram(const metrology::ProbingPlan& plan, c
   e.WriteBlock(q_offset, e.S(kTmp) + "+1");
   // M1.
   const std::string arm = e.Int(static_cast<long long>(EncodeControl(MeasuringWord(0))));
-  e.AssignS(kCount, "0");
   e.ReadBlock(0, kC);
-  e.While(
-      e.Br(e.Cmp(e.S(kC), "NE", arm) + " AND " + e.Cmp(e.S(kCount), "LT", e.Int(Looks(o.arm_timeout_s, o.dwell_s)))),
-      [&] {
-        e.Dwell(o.dwell_s);
-        e.AssignS(kCount, e.S(kCount) + "+1");
-        e.ReadBlock(0, kC);
-      });
+  WaitLoop(e, e.Cmp(e.S(kC), "NE", arm), o.arm_timeout_s, o.dwell_s);
   e.If(e.Cmp(e.S(kC), "NE", arm), e.Cmp(e.S(kC), "EQ", arm), [&] { e.Alarm(kAlarmOffline, "COLLECTOR OFFLINE"); });
   e.Move(true, {0, 0, o.probe.safe_z_mm}, true);
   for (std::size_t k = 0; k < n; ++k) {
@@ -504,15 +503,8 @@ Result<MachineProgram> WriteMachineProgram(const metrology::ProbingPlan& plan, c
   }
   // M4, M5.
   e.WriteBlock(0, e.Int(static_cast<long long>(EncodeControl(FinishedWord(static_cast<int>(n))))));
-  e.AssignS(kCount, "0");
   e.ReadBlock(0, kC);
-  e.While(
-      e.Br(e.Cmp(e.S(kC), "NE", "0") + " AND " + e.Cmp(e.S(kCount), "LT", e.Int(Looks(o.finish_timeout_s, o.dwell_s)))),
-      [&] {
-        e.Dwell(o.dwell_s);
-        e.AssignS(kCount, e.S(kCount) + "+1");
-        e.ReadBlock(0, kC);
-      });
+  WaitLoop(e, e.Cmp(e.S(kC), "NE", "0"), o.finish_timeout_s, o.dwell_s);
   e.If(e.Cmp(e.S(kC), "NE", "0"), e.Cmp(e.S(kC), "EQ", "0"), [&] { e.Message("MEASUREMENT NOT CONFIRMED"); });
   if (d == Dialect::kFanuc) {
     e.Line("M30");
