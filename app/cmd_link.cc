@@ -6,7 +6,8 @@
 //     running formloop's own measuring program, latency and fault injection; prints a JSON summary.
 //   formloop link collect --address HOST:PORT --out P.csv [--expect N] [--runs R] [--journal J]
 //     collects the points of R runs; restartable at any moment (the journal), progress on stderr,
-//     a JSON summary with retries and points per second on stdout.
+//     a JSON summary with retries and points per second on stdout; exit 1 when a session is not
+//     COMPLETE (lost points, aborted run), its points still written with their status.
 //   formloop link write --address HOST:PORT --plan offsets.json --confirm
 //     writes the confirmed offset write plan, reads every value back, rolls back on a mismatch.
 //   formloop link program --plan probing_plan.json --dialect D --out DIR
@@ -25,6 +26,7 @@
 #include <csignal>
 #include <iostream>
 #include <memory>
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
@@ -377,6 +379,15 @@ Status CollectCommand(const CollectArgs& a) {
       c.connection_errors, c.reconnects, c.lost_writes);
   FL_RETURN_IF_ERROR(Print(json, "link collect"));
   if (!report.ok) return Status::Failed("link collect: " + report.fatal);
+  // A session that lost points or was aborted is the job's own failure (exit 1): its points are in OUT
+  // with the session's status, but nothing downstream may take it for a whole measurement (spec §7.5).
+  std::string unfinished;
+  for (const auto& s : report.sessions) {
+    if (s.status == SessionStatus::kComplete) continue;
+    unfinished += fmt::format("{}run Q={} {}", unfinished.empty() ? "" : "; ", s.q, SessionStatusName(s.status));
+    for (const auto& e : s.errors) unfinished += " (" + e + ")";
+  }
+  if (!unfinished.empty()) return Status::Failed("link collect: not every session is COMPLETE: " + unfinished);
   return Status::Ok();
 }
 

@@ -374,6 +374,29 @@ TEST_F(LinkProcessTest, ProgramAndCheckCommands) {
   EXPECT_NE(err.find("broken.nc:" + std::to_string(line) + ":"), std::string::npos) << err;
 }
 
+// The program skips points: the collector keeps what it received, names the missing ids (GAP) and
+// exits 1, so a lost point can never pass for a whole measurement.
+TEST_F(LinkProcessTest, SkippedPointsMakeTheCollectionFail) {
+  ProcessGuard guard;
+  pid_t emulator = -1;
+  const std::string address = StartEmulator(
+      dir_, {"--points", "30", "--dwell-ms", "2", "--measure-ms", "1", "--skip-rate", "0.2", "--seed", "7",
+             "--ack-timeout-s", "5", "--linger-s", "0.5"},
+      &guard, &emulator);
+  ASSERT_FALSE(address.empty());
+  const pid_t collector =
+      SpawnFormloop({"link", "collect", "--address", address, "--out", (dir_ / "P.csv").string(), "--poll-ms", "1",
+                     "--idle-timeout-s", "20"},
+                    dir_ / "collect.out", dir_ / "collect.err");
+  guard.pids.push_back(collector);
+  EXPECT_EQ(WaitFor(collector, 60), 1);
+  WaitFor(emulator, 30);
+  const auto err = *ReadFile(dir_ / "collect.err");
+  EXPECT_NE(err.find("not every session is COMPLETE"), std::string::npos) << err;
+  EXPECT_NE(err.find("GAP"), std::string::npos) << err;
+  EXPECT_TRUE(std::filesystem::exists(dir_ / "P.csv"));
+}
+
 // A third party writes an illegal control word mid-run: the collector exits 1 naming PROTOCOL_ERROR and
 // the program stops in an alarm; both processes end on their own.
 TEST_F(LinkProcessTest, ProtocolErrorStopsBothSides) {
