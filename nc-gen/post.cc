@@ -4,7 +4,7 @@
 #include <cmath>
 #include <utility>
 
-#include "core/point_io.h"
+#include "core/number_text.h"
 #include "nc-gen/post_text.h"
 
 namespace formloop::nc {

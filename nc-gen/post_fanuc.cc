@@ -9,7 +9,7 @@
 #include <cctype>
 #include <string>
 
-#include "core/point_io.h"
+#include "core/number_text.h"
 #include "nc-gen/post.h"
 #include "nc-gen/post_text.h"
 

@@ -6,7 +6,7 @@
 
 #include <string>
 
-#include "core/point_io.h"
+#include "core/number_text.h"
 #include "nc-gen/post.h"
 #include "nc-gen/post_text.h"
 

@@ -41,7 +41,7 @@
 #include <cctype>
 #include <sstream>
 
-#include "core/point_io.h"
+#include "core/number_text.h"
 #include "nc-gen/post_text.h"
 
 namespace formloop::nc {

@@ -11,6 +11,7 @@
 #include <set>
 #include <utility>
 
+#include "core/number_text.h"
 #include "core/random.h"
 
 namespace formloop::retrieval {
@@ -29,11 +30,7 @@ constexpr double kNoSpread = 1e-24;
 // Offset scale when the parent's inputs have no spread at all (z-score units).
 constexpr double kDegenerateOffset = 1e-3;
 
-std::string Num(double x) {
-  char buffer[32];
-  std::snprintf(buffer, sizeof buffer, "%.6g", x);
-  return buffer;
-}
+std::string Num(double x) { return FormatSignificant(x, 6); }
 
 Status Bad(const std::string& field, const std::string& what, const std::string& fix = "") {
   return Status::BadInput(Where{.field = field}, "ghsom: " + what, fix);

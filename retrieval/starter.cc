@@ -10,6 +10,8 @@
 #include <numbers>
 #include <sstream>
 
+#include "core/number_text.h"
+
 namespace formloop::retrieval {
 namespace {
 
@@ -65,12 +67,8 @@ json MaterialProperties(const std::string& material) {
   return {{"youngs_modulus_gpa", nullptr}, {"hardness_hv", nullptr}, {"specific_cutting_force_n_per_mm2", nullptr}};
 }
 
-// %.*g without the locale (std::to_chars), so the generated library is the same whatever LC_NUMERIC says.
-std::string Round(double x, int digits) {
-  char buf[64];
-  const auto r = std::to_chars(buf, buf + sizeof buf, x, std::chars_format::general, digits);
-  return std::string(buf, r.ptr);
-}
+// %.*g without the locale, so the generated library is the same whatever LC_NUMERIC says.
+std::string Round(double x, int digits) { return FormatSignificant(x, digits); }
 double R6(double x) {
   const std::string text = Round(x, 6);
   double value = 0;
