@@ -27,13 +27,13 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
-#include <fstream>
 #include <iostream>
 #include <limits>
 #include <memory>
 #include <optional>
 #include <set>
 #include <sstream>
+#include <string_view>
 #include <string>
 #include <vector>
 
@@ -43,8 +43,10 @@
 #include "app/command.h"
 #include "app/run_folder.h"
 #include "core/atomic_file.h"
+#include "core/csv.h"
 #include "core/json_io.h"
 #include "core/log.h"
+#include "core/number_text.h"
 #include "core/point_io.h"
 #include "metrology/decomposition.h"
 #include "metrology/morans_i.h"
@@ -60,106 +62,24 @@ using metrology::IslandPolicy;
 using metrology::SpatialWeights;
 using metrology::WeightStyle;
 
-// A comma-separated table with a header row; '#' lines and blank lines are comments; cells may be
-// wrapped in double quotes (no commas inside). Numbers are parsed on demand, without the locale.
-struct Table {
-  std::string file;
-  std::vector<std::string> header;
-  std::vector<std::vector<std::string>> rows;
-  std::vector<long> lines;  // 1-based file line of each row
-
-  Result<int> Column(const std::string& name, const std::string& option) const {
-    for (std::size_t c = 0; c < header.size(); ++c) {
-      if (header[c] == name) return static_cast<int>(c);
-    }
-    std::string names;
-    for (std::size_t c = 0; c < header.size(); ++c) names += (c ? ", " : "") + header[c];
-    return Status::BadInput(Where{.file = file, .line = 1, .field = option},
-                            "no column '" + name + "' in the header (columns: " + names + ")",
-                            "name one of the columns, spelled as in the header");
+// One numeric column of a table read by the one CSV reader (core/csv.h); `option` names the option
+// that asked for it in messages.
+Result<Eigen::VectorXd> NumericColumn(const CsvTable& table, const std::string& name, const std::string& option) {
+  FL_ASSIGN_OR_RETURN(const int c, table.Column(name, option));
+  Eigen::VectorXd out(static_cast<long>(table.rows.size()));
+  for (std::size_t r = 0; r < table.rows.size(); ++r) {
+    FL_RETURN_IF_ERROR(table.Number(r, c, &out[static_cast<long>(r)]));
   }
-
-  Result<Eigen::VectorXd> Numeric(const std::string& name, const std::string& option) const {
-    FL_ASSIGN_OR_RETURN(const int c, Column(name, option));
-    Eigen::VectorXd out(static_cast<long>(rows.size()));
-    for (std::size_t r = 0; r < rows.size(); ++r) {
-      const std::string& cell = rows[r][static_cast<std::size_t>(c)];
-      double value = 0;
-      if (!ParseDouble(cell, &value) || !std::isfinite(value)) {
-        return Status::BadInput(Where{.file = file, .line = lines[r], .field = name},
-                                "'" + cell + "' is not a finite number",
-                                "write a decimal number such as 1.25 (no empty cells, NaN or units)");
-      }
-      out[static_cast<long>(r)] = value;
-    }
-    return out;
-  }
-};
-
-std::string Trim(const std::string& s) {
-  const auto a = s.find_first_not_of(" \t\r");
-  if (a == std::string::npos) return "";
-  const auto b = s.find_last_not_of(" \t\r");
-  std::string t = s.substr(a, b - a + 1);
-  if (t.size() >= 2 && t.front() == '"' && t.back() == '"') t = t.substr(1, t.size() - 2);
-  return t;
+  return out;
 }
 
-std::vector<std::string> SplitCells(const std::string& line) {
-  std::vector<std::string> cells;
-  std::stringstream ss(line);
-  std::string cell;
-  while (std::getline(ss, cell, ',')) cells.push_back(Trim(cell));
-  if (!line.empty() && line.back() == ',') cells.emplace_back();
-  return cells;
-}
-
-Result<Table> ReadTable(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return Status::NotFound("points file '" + path + "' cannot be opened. Fix: check the path");
-  Table t;
-  t.file = path;
-  std::string line;
-  long line_no = 0;
-  while (std::getline(in, line)) {
-    ++line_no;
-    const std::string trimmed = Trim(line);
-    if (trimmed.empty() || trimmed[0] == '#') continue;
-    std::vector<std::string> cells = SplitCells(line);
-    if (t.header.empty()) {
-      t.header = std::move(cells);
-      for (std::size_t c = 0; c < t.header.size(); ++c) {
-        if (t.header[c].empty()) {
-          return Status::BadInput(Where{.file = path, .line = line_no},
-                                  "header column " + std::to_string(c + 1) + " has no name",
-                                  "name every column in the first row");
-        }
-      }
-      continue;
-    }
-    if (cells.size() != t.header.size()) {
-      return Status::BadInput(
-          Where{.file = path, .line = line_no},
-          "row has " + std::to_string(cells.size()) + " cells, the header " + std::to_string(t.header.size()),
-          "give every row one cell per header column, separated by commas");
-    }
-    t.rows.push_back(std::move(cells));
-    t.lines.push_back(line_no);
-  }
-  if (t.header.empty() || t.rows.empty()) {
-    return Status::BadInput(Where{.file = path}, "no header row or no data rows",
-                            "write a header row naming the columns, then one row per point");
-  }
-  return t;
-}
-
+// "u, v,,w" -> {"u", "v", "w"}: an option's comma-separated list, blanks and empty items dropped.
 std::vector<std::string> SplitList(const std::string& text) {
+  std::vector<std::string_view> cells;
+  SplitCsvCells(text, &cells);
   std::vector<std::string> out;
-  std::stringstream ss(text);
-  std::string item;
-  while (std::getline(ss, item, ',')) {
-    item = Trim(item);
-    if (!item.empty()) out.push_back(item);
+  for (std::string_view cell : cells) {
+    if (!cell.empty()) out.emplace_back(cell);
   }
   return out;
 }
@@ -183,7 +103,7 @@ struct MoranArgs {
   int lisa_permutations = 999;
 };
 
-Result<Eigen::MatrixXd> Coordinates(const Table& table, const std::string& coords, bool two_d_only) {
+Result<Eigen::MatrixXd> Coordinates(const CsvTable& table, const std::string& coords, bool two_d_only) {
   std::vector<std::string> names = SplitList(coords);
   if (names.empty()) {
     // Default: the surface parameters when the table has them, else x, y.
@@ -197,7 +117,7 @@ Result<Eigen::MatrixXd> Coordinates(const Table& table, const std::string& coord
   }
   Eigen::MatrixXd points(static_cast<long>(names.size()), static_cast<long>(table.rows.size()));
   for (std::size_t d = 0; d < names.size(); ++d) {
-    FL_ASSIGN_OR_RETURN(const Eigen::VectorXd column, table.Numeric(names[d], "--coords"));
+    FL_ASSIGN_OR_RETURN(const Eigen::VectorXd column, NumericColumn(table, names[d], "--coords"));
     points.row(static_cast<long>(d)) = column.transpose();
   }
   return points;
@@ -216,8 +136,8 @@ Status RunMoran(const MoranArgs& args) {
   }
   FL_ASSIGN_OR_RETURN(const WeightStyle style, metrology::ParseWeightStyle(args.style, "--style"));
   FL_ASSIGN_OR_RETURN(const IslandPolicy policy, metrology::ParseIslandPolicy(args.islands, "--islands"));
-  FL_ASSIGN_OR_RETURN(const Table table, ReadTable(args.points));
-  FL_ASSIGN_OR_RETURN(const Eigen::VectorXd y, table.Numeric(args.value, "--value"));
+  FL_ASSIGN_OR_RETURN(const CsvTable table, ReadCsvTable(args.points));
+  FL_ASSIGN_OR_RETURN(const Eigen::VectorXd y, NumericColumn(table, args.value, "--value"));
   const long n = y.size();
 
   // Ids: the --id column, else 1..n in file order (GeoDa's record numbers).
@@ -285,7 +205,7 @@ Status RunMoran(const MoranArgs& args) {
     Eigen::MatrixXd design(n, static_cast<long>(regressors.size()) + 1);
     design.col(0).setOnes();
     for (std::size_t k = 0; k < regressors.size(); ++k) {
-      FL_ASSIGN_OR_RETURN(const Eigen::VectorXd column, table.Numeric(regressors[k], "--regressors"));
+      FL_ASSIGN_OR_RETURN(const Eigen::VectorXd column, NumericColumn(table, regressors[k], "--regressors"));
       design.col(static_cast<long>(k) + 1) = column;
     }
     FL_ASSIGN_OR_RETURN(const metrology::ResidualMoranResult residual,

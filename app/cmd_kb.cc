@@ -182,18 +182,8 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
     *action = [args]() -> Status {
       FL_ASSIGN_OR_RETURN(kb::CaseRecord record, kb::ReadCaseFile(args->file));
       FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
-      FL_ASSIGN_OR_RETURN(long long changes_before, library->ChangeCounter());
-      FL_RETURN_IF_ERROR(library->AddCase(record, args->replace));
+      FL_ASSIGN_OR_RETURN(const nlohmann::json ghsom, retrieval::AddCaseAndGrowGhsom(*library, record, args->replace));
       log::Info("added case {} to {}", record.uid, args->path);
-      // The case is committed; a failed GHSOM insertion only leaves the GHSOM stale (kb check reports it).
-      nlohmann::json ghsom;
-      auto inserted = retrieval::InsertCaseIntoGhsom(*library, record, changes_before);
-      if (inserted.ok()) {
-        ghsom = *inserted;
-      } else {
-        log::Warn("case {} not inserted into the GHSOM: {}", record.uid, inserted.status().ToString());
-        ghsom = {{"inserted", false}, {"reason", inserted.status().ToString()}};
-      }
       Print({{"added", record.uid}, {"replace", args->replace}, {"ghsom", ghsom}});
       return Status::Ok();
     };

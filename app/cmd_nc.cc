@@ -20,7 +20,7 @@
 #include "app/command.h"
 #include "core/atomic_file.h"
 #include "core/log.h"
-#include "core/point_io.h"
+#include "core/number_text.h"
 #include "metrology/probe.h"
 #include "metrology/probing_plan.h"
 #include "nc-gen/compensation.h"

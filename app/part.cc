@@ -1,7 +1,7 @@
 #include "app/part.h"
 
 #include "core/json_io.h"
-#include "core/point_io.h"
+#include "core/number_text.h"
 #include "reconstruction/analytic_surface.h"
 #include "retrieval/starter.h"
 

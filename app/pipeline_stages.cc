@@ -487,10 +487,7 @@ Result<std::optional<kb::CaseRecord>> PrepareRetain(const PartSpec& part, const 
 
 Status CommitRetained(const std::string& kb_path, const kb::CaseRecord& record) {
   FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(kb_path));
-  FL_ASSIGN_OR_RETURN(long long changes_before, library->ChangeCounter());
-  FL_RETURN_IF_ERROR(library->AddCase(record, /*replace=*/true));
-  auto inserted = retrieval::InsertCaseIntoGhsom(*library, record, changes_before);
-  if (!inserted.ok()) log::Warn("case {} not inserted into the GHSOM: {}", record.uid, inserted.status().ToString());
+  FL_RETURN_IF_ERROR(retrieval::AddCaseAndGrowGhsom(*library, record, /*replace=*/true).status());
   log::Info("[retain] case {} stored in {}", record.uid, kb_path);
   return Status::Ok();
 }

@@ -14,6 +14,7 @@
 #include "app/report_image.h"
 #include "core/atomic_file.h"
 #include "core/json_io.h"
+#include "core/number_text.h"
 #include "core/point_io.h"
 #include "core/point_set.h"
 

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <limits>
 
-#include "core/point_io.h"
+#include "core/number_text.h"
 
 namespace formloop::app {
 namespace {

@@ -17,21 +17,10 @@ namespace fs = std::filesystem;
 
 namespace {
 
-Status ReadVector3(const nlohmann::json& object, const std::string& source, const std::string& prefix,
-                   const std::string& key, Eigen::Vector3d* out) {
-  const auto it = object.find(key);
-  if (it == object.end() || !it->is_array() || it->size() != 3) {
-    return Status::BadInput(Where{.file = source, .field = prefix + key}, "must be an array of 3 numbers",
-                            "write it as [x, y, z]");
-  }
-  for (int a = 0; a < 3; ++a) {
-    const nlohmann::json& c = (*it)[static_cast<std::size_t>(a)];
-    if (!c.is_number() || !std::isfinite(c.get<double>())) {
-      return Status::BadInput(Where{.file = source, .field = prefix + key + "[" + std::to_string(a) + "]"},
-                              "is not a finite number", "write a decimal number");
-    }
-    (*out)[a] = c.get<double>();
-  }
+Status ReadVector3(const JsonFields& f, const std::string& key, Eigen::Vector3d* out) {
+  std::vector<double> v;
+  FL_RETURN_IF_ERROR(f.NumberArray(key, &v, 3));
+  *out = Eigen::Vector3d(v[0], v[1], v[2]);
   return Status::Ok();
 }
 
@@ -45,16 +34,11 @@ Result<metrology::ProbingPlan> ReadPlanJsonFile(const std::string& path) {
   }
   JsonFields top(json, path);
   FL_RETURN_IF_ERROR(top.CheckKnown({"count", "points"}));
+  std::vector<JsonFields> points;
+  FL_RETURN_IF_ERROR(top.ObjectArray("points", &points));
   metrology::ProbingPlan plan;
   std::set<std::int64_t> ids;
-  const nlohmann::json& points = json["points"];
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    const std::string prefix = "points[" + std::to_string(i) + "].";
-    if (!points[i].is_object()) {
-      return Status::BadInput(Where{.file = path, .field = "points[" + std::to_string(i) + "]"}, "is not an object",
-                              "write {\"id\": .., \"u\": .., \"v\": .., \"point\": [..], \"normal\": [..]}");
-    }
-    JsonFields f(points[i], path, prefix);
+  for (const JsonFields& f : points) {
     FL_RETURN_IF_ERROR(f.CheckKnown({"id", "u", "v", "point", "normal"}));
     metrology::ProbePoint p;
     long long id = 0;
@@ -62,22 +46,23 @@ Result<metrology::ProbingPlan> ReadPlanJsonFile(const std::string& path) {
     p.id = id;
     FL_RETURN_IF_ERROR(f.Number("u", &p.u));
     FL_RETURN_IF_ERROR(f.Number("v", &p.v));
-    FL_RETURN_IF_ERROR(ReadVector3(points[i], path, prefix, "point", &p.point));
-    FL_RETURN_IF_ERROR(ReadVector3(points[i], path, prefix, "normal", &p.normal));
+    FL_RETURN_IF_ERROR(ReadVector3(f, "point", &p.point));
+    FL_RETURN_IF_ERROR(ReadVector3(f, "normal", &p.normal));
     const double length = p.normal.norm();
     if (!(length > 0.5 && length < 1.5)) {
-      return Status::BadInput(Where{.file = path, .field = prefix + "normal"}, "is not a unit vector",
+      return Status::BadInput(Where{.file = path, .field = f.Path("normal")}, "is not a unit vector",
                               "write the unit outward normal of Q at the point");
     }
     p.normal /= length;
     if (!ids.insert(p.id).second) {
-      return Status::BadInput(Where{.file = path, .field = prefix + "id"}, "id " + std::to_string(p.id) + " is repeated",
+      return Status::BadInput(Where{.file = path, .field = f.Path("id")}, "id " + std::to_string(p.id) + " is repeated",
                               "give every planned point its own id");
     }
     plan.points.push_back(p);
   }
-  if (json.contains("count") && (!json["count"].is_number_integer() || json["count"].get<long long>() !=
-                                                                            static_cast<long long>(plan.points.size()))) {
+  long long count = static_cast<long long>(plan.points.size());
+  FL_RETURN_IF_ERROR(top.OptionalInteger("count", &count));
+  if (count != static_cast<long long>(plan.points.size())) {
     return Status::BadInput(Where{.file = path, .field = "count"},
                             "does not match the " + std::to_string(plan.points.size()) + " points",
                             "write the number of points, or leave 'count' out");

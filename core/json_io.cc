@@ -63,36 +63,46 @@ Status JsonFields::TypeError(const std::string& key, const char* expected) const
 }
 
 Status JsonFields::Number(const std::string& key, double* out, const NumberRange& range) const {
-  if (!Has(key)) {
-    return Status::BadInput(Where{.file = source_, .field = Path(key)}, "required field is missing",
-                            "add \"" + key + "\": <number>");
+  if (!Has(key)) return Missing(key, "<number>");
+  return CheckNumber(object_.at(key), Path(key), range, out);
+}
+
+Status JsonFields::CheckNumber(const Json& value, const std::string& field, const NumberRange& range,
+                               double* out) const {
+  if (!value.is_number() || !std::isfinite(value.get<double>())) {
+    const char* expected = value.is_number() ? "a finite number" : "a number";
+    return Status::BadInput(Where{.file = source_, .field = field},
+                            std::string("expected ") + expected + ", got " + value.type_name() + " " + value.dump(),
+                            std::string("write ") + expected);
   }
-  const Json& value = object_.at(key);
-  if (!value.is_number()) return TypeError(key, "a number");
   const double x = value.get<double>();
-  if (!std::isfinite(x)) return TypeError(key, "a finite number");
   const bool below = range.exclusive_min ? !(x > range.min) : x < range.min;
   if (below || x > range.max) {
     std::string allowed = range.exclusive_min ? "> " : ">= ";
     allowed += nlohmann::json(range.min).dump();
     if (std::isfinite(range.max)) allowed += " and <= " + nlohmann::json(range.max).dump();
-    return Status::BadInput(Where{.file = source_, .field = Path(key)},
-                            "value " + value.dump() + " is out of range", "use a value " + allowed);
+    return Status::BadInput(Where{.file = source_, .field = field}, "value " + value.dump() + " is out of range",
+                            "use a value " + allowed);
   }
   *out = x;
   return Status::Ok();
 }
 
 Status JsonFields::Integer(const std::string& key, long long* out, long long min, long long max) const {
-  if (!Has(key)) {
-    return Status::BadInput(Where{.file = source_, .field = Path(key)}, "required field is missing",
-                            "add \"" + key + "\": <integer>");
+  if (!Has(key)) return Missing(key, "<integer>");
+  return CheckInteger(object_.at(key), Path(key), min, max, out);
+}
+
+Status JsonFields::CheckInteger(const Json& value, const std::string& field, long long min, long long max,
+                                long long* out) const {
+  if (!value.is_number_integer()) {
+    return Status::BadInput(Where{.file = source_, .field = field},
+                            std::string("expected an integer, got ") + value.type_name() + " " + value.dump(),
+                            "write an integer");
   }
-  const Json& value = object_.at(key);
-  if (!value.is_number_integer()) return TypeError(key, "an integer");
   const long long x = value.get<long long>();
   if (x < min || x > max) {
-    return Status::BadInput(Where{.file = source_, .field = Path(key)}, "value " + value.dump() + " is out of range",
+    return Status::BadInput(Where{.file = source_, .field = field}, "value " + value.dump() + " is out of range",
                             "use an integer from " + std::to_string(min) + " to " + std::to_string(max));
   }
   *out = x;
@@ -132,6 +142,123 @@ Status JsonFields::OptionalString(const std::string& key, std::string* out) cons
 }
 Status JsonFields::OptionalBool(const std::string& key, bool* out) const {
   return Has(key) ? Bool(key, out) : Status::Ok();
+}
+
+Status JsonFields::Missing(const std::string& key, const char* what) const {
+  return Status::BadInput(Where{.file = source_, .field = Path(key)}, "required field is missing",
+                          "add \"" + key + "\": " + what);
+}
+
+Status JsonFields::Unsigned(const std::string& key, std::uint64_t* out) const {
+  if (!Has(key)) return Missing(key, "<non-negative integer>");
+  const Json& value = object_.at(key);
+  if (!value.is_number_unsigned() && !(value.is_number_integer() && value.get<long long>() >= 0)) {
+    return TypeError(key, "a non-negative integer");
+  }
+  *out = value.get<std::uint64_t>();
+  return Status::Ok();
+}
+
+Status ReadNumberArray(const Json& value, const std::string& source, const std::string& field,
+                       std::vector<double>* out, std::optional<std::size_t> size, const NumberRange& range) {
+  const JsonFields wrapper(value, source);
+  return wrapper.CheckNumberArray(value, field, size, range, out);
+}
+
+Status JsonFields::NumberArray(const std::string& key, std::vector<double>* out, std::optional<std::size_t> size,
+                               const NumberRange& range) const {
+  if (!Has(key)) return Missing(key, "[<number>, ...]");
+  return CheckNumberArray(object_.at(key), Path(key), size, range, out);
+}
+
+Status JsonFields::CheckNumberArray(const Json& value, const std::string& field, std::optional<std::size_t> size,
+                                    const NumberRange& range, std::vector<double>* out) const {
+  if (!value.is_array()) {
+    return Status::BadInput(Where{.file = source_, .field = field},
+                            std::string("expected an array of numbers, got ") + value.type_name(),
+                            "write [<number>, ...]");
+  }
+  if (size && value.size() != *size) {
+    return Status::BadInput(Where{.file = source_, .field = field},
+                            "expected " + std::to_string(*size) + " numbers, got " + std::to_string(value.size()),
+                            "write an array of " + std::to_string(*size) + " numbers");
+  }
+  std::vector<double> result(value.size());
+  for (std::size_t k = 0; k < value.size(); ++k) {
+    FL_RETURN_IF_ERROR(CheckNumber(value[k], field + "[" + std::to_string(k) + "]", range, &result[k]));
+  }
+  *out = std::move(result);
+  return Status::Ok();
+}
+
+Status JsonFields::OptionalNumberArray(const std::string& key, std::vector<double>* out,
+                                       std::optional<std::size_t> size, const NumberRange& range) const {
+  return Has(key) ? NumberArray(key, out, size, range) : Status::Ok();
+}
+
+Status ReadIntegerArray(const Json& value, const std::string& source, const std::string& field,
+                        std::vector<long long>* out, long long min, long long max) {
+  const JsonFields wrapper(value, source);
+  return wrapper.CheckIntegerArray(value, field, min, max, out);
+}
+
+Status JsonFields::IntegerArray(const std::string& key, std::vector<long long>* out, long long min,
+                                long long max) const {
+  if (!Has(key)) return Missing(key, "[<integer>, ...]");
+  return CheckIntegerArray(object_.at(key), Path(key), min, max, out);
+}
+
+Status JsonFields::CheckIntegerArray(const Json& value, const std::string& field, long long min, long long max,
+                                     std::vector<long long>* out) const {
+  if (!value.is_array()) {
+    return Status::BadInput(Where{.file = source_, .field = field},
+                            std::string("expected an array of integers, got ") + value.type_name(),
+                            "write [<integer>, ...]");
+  }
+  std::vector<long long> result(value.size());
+  for (std::size_t k = 0; k < value.size(); ++k) {
+    FL_RETURN_IF_ERROR(CheckInteger(value[k], field + "[" + std::to_string(k) + "]", min, max, &result[k]));
+  }
+  *out = std::move(result);
+  return Status::Ok();
+}
+
+Status JsonFields::StringArray(const std::string& key, std::vector<std::string>* out) const {
+  if (!Has(key)) return Missing(key, "[\"...\", ...]");
+  const Json& value = object_.at(key);
+  if (!value.is_array()) return TypeError(key, "an array of strings");
+  std::vector<std::string> result;
+  for (std::size_t k = 0; k < value.size(); ++k) {
+    if (!value[k].is_string()) {
+      return Status::BadInput(Where{.file = source_, .field = Path(key) + "[" + std::to_string(k) + "]"},
+                              std::string("expected a string, got ") + value[k].type_name() + " " + value[k].dump(),
+                              "write a string");
+    }
+    result.push_back(value[k].get<std::string>());
+  }
+  *out = std::move(result);
+  return Status::Ok();
+}
+
+Status JsonFields::RequiredObject(const std::string& key, std::optional<JsonFields>* out) const {
+  if (!Has(key)) return Missing(key, "{...}");
+  return Object(key, out);
+}
+
+Status JsonFields::ObjectArray(const std::string& key, std::vector<JsonFields>* out) const {
+  if (!Has(key)) return Missing(key, "[{...}, ...]");
+  const Json& value = object_.at(key);
+  if (!value.is_array()) return TypeError(key, "an array of objects");
+  out->clear();
+  for (std::size_t k = 0; k < value.size(); ++k) {
+    const std::string element = Path(key) + "[" + std::to_string(k) + "]";
+    if (!value[k].is_object()) {
+      return Status::BadInput(Where{.file = source_, .field = element},
+                              std::string("expected an object, got ") + value[k].type_name(), "write {...}");
+    }
+    out->emplace_back(value[k], source_, element + ".");
+  }
+  return Status::Ok();
 }
 
 Status JsonFields::Object(const std::string& key, std::optional<JsonFields>* out) const {

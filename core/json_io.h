@@ -7,6 +7,7 @@
 //   FL_RETURN_IF_ERROR(f.Number("tolerance_mm", &tol_mm, {.min = 0, .exclusive_min = true}));
 //   -> "part.json: field 'tolerance_mm': must be > 0, got -1. Fix: ..."
 
+#include <cstdint>
 #include <filesystem>
 #include <limits>
 #include <optional>
@@ -34,6 +35,16 @@ struct NumberRange {
   bool exclusive_min = false;
 };
 
+// A JSON value that must be an array of finite numbers in `range` (of length `size` when given); the
+// messages name `source` and `field` (and "field[i]" for an element). JsonFields::NumberArray for members.
+Status ReadNumberArray(const Json& value, const std::string& source, const std::string& field,
+                       std::vector<double>* out, std::optional<std::size_t> size = {}, const NumberRange& range = {});
+
+// The same for an array of integers in [min, max].
+Status ReadIntegerArray(const Json& value, const std::string& source, const std::string& field,
+                        std::vector<long long>* out, long long min = std::numeric_limits<long long>::min(),
+                        long long max = std::numeric_limits<long long>::max());
+
 // Typed access to the members of one JSON object. `source` is the file (or stage) and `prefix` the
 // key path of this object inside it ("tool."), both used in messages. Unknown keys are reported by
 // CheckKnown so typos do not silently fall back to defaults.
@@ -54,8 +65,23 @@ class JsonFields {
                          long long max = std::numeric_limits<long long>::max()) const;
   Status OptionalString(const std::string& key, std::string* out) const;
   Status OptionalBool(const std::string& key, bool* out) const;
-  // A nested object (required / optional). Returns its fields accessor via *out.
+  // A non-negative integer that may exceed long long (seeds).
+  Status Unsigned(const std::string& key, std::uint64_t* out) const;
+  // Arrays of finite numbers / integers; `size` (when given) is the required length.
+  Status NumberArray(const std::string& key, std::vector<double>* out, std::optional<std::size_t> size = {},
+                     const NumberRange& range = {}) const;
+  Status IntegerArray(const std::string& key, std::vector<long long>* out,
+                      long long min = std::numeric_limits<long long>::min(),
+                      long long max = std::numeric_limits<long long>::max()) const;
+  Status OptionalNumberArray(const std::string& key, std::vector<double>* out, std::optional<std::size_t> size = {},
+                             const NumberRange& range = {}) const;
+  Status StringArray(const std::string& key, std::vector<std::string>* out) const;
+  // A nested object (required / optional). Returns its fields accessor via *out; the optional form
+  // leaves *out empty when the member is absent.
+  Status RequiredObject(const std::string& key, std::optional<JsonFields>* out) const;
   Status Object(const std::string& key, std::optional<JsonFields>* out) const;
+  // An array of objects (required), one accessor per element with the prefix "key[i].".
+  Status ObjectArray(const std::string& key, std::vector<JsonFields>* out) const;
   // Reports the first member whose key is not in `known`.
   Status CheckKnown(const std::vector<std::string>& known) const;
 
@@ -65,6 +91,18 @@ class JsonFields {
 
  private:
   Status TypeError(const std::string& key, const char* expected) const;
+  Status Missing(const std::string& key, const char* what) const;
+  Status CheckNumber(const Json& value, const std::string& field, const NumberRange& range, double* out) const;
+  Status CheckInteger(const Json& value, const std::string& field, long long min, long long max,
+                      long long* out) const;
+  Status CheckNumberArray(const Json& value, const std::string& field, std::optional<std::size_t> size,
+                          const NumberRange& range, std::vector<double>* out) const;
+  Status CheckIntegerArray(const Json& value, const std::string& field, long long min, long long max,
+                           std::vector<long long>* out) const;
+  friend Status ReadIntegerArray(const Json& value, const std::string& source, const std::string& field,
+                                 std::vector<long long>* out, long long min, long long max);
+  friend Status ReadNumberArray(const Json& value, const std::string& source, const std::string& field,
+                                std::vector<double>* out, std::optional<std::size_t> size, const NumberRange& range);
   const Json& object_;
   std::string source_;
   std::string prefix_;

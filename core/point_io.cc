@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "core/atomic_file.h"
+#include "core/csv.h"
 #include "core/log.h"
 
 namespace formloop {
@@ -23,70 +24,11 @@ namespace {
 // ---------------------------------------------------------------------------------------------
 // Shared text helpers
 
-std::string_view Trim(std::string_view text) {
-  const auto begin = text.find_first_not_of(" \t\r");
-  if (begin == std::string_view::npos) return {};
-  const auto end = text.find_last_not_of(" \t\r");
-  return text.substr(begin, end - begin + 1);
-}
-
 // Quotes a value for a message, shortened so that a binary blob does not flood the terminal.
 std::string Quote(std::string_view text) {
   constexpr std::size_t kMax = 40;
   if (text.size() <= kMax) return "'" + std::string(text) + "'";
   return "'" + std::string(text.substr(0, kMax)) + "...'";
-}
-
-bool IsBlankOrComment(std::string_view line) {
-  const std::string_view trimmed = Trim(line);
-  return trimmed.empty() || trimmed.front() == '#';
-}
-
-// Walks the lines of a text ('\n' separated; a trailing '\r' is dropped), counting from 1.
-class LineReader {
- public:
-  explicit LineReader(std::string_view text) : text_(text) {}
-
-  bool Next(std::string_view* line) {
-    if (pos_ >= text_.size()) return false;
-    const std::size_t end = text_.find('\n', pos_);
-    const std::size_t stop = end == std::string_view::npos ? text_.size() : end;
-    std::string_view out = text_.substr(pos_, stop - pos_);
-    if (!out.empty() && out.back() == '\r') out.remove_suffix(1);
-    pos_ = end == std::string_view::npos ? text_.size() : end + 1;
-    ++line_number_;
-    *line = out;
-    return true;
-  }
-  // Skips blank and '#' lines.
-  bool NextContent(std::string_view* line) {
-    while (Next(line)) {
-      if (!IsBlankOrComment(*line)) return true;
-    }
-    return false;
-  }
-  long line_number() const { return line_number_; }
-  // Byte offset of the first character not yet returned.
-  std::size_t position() const { return pos_; }
-
- private:
-  std::string_view text_;
-  std::size_t pos_ = 0;
-  long line_number_ = 0;
-};
-
-void SplitOn(std::string_view line, char separator, std::vector<std::string_view>* fields) {
-  fields->clear();
-  std::size_t start = 0;
-  while (true) {
-    const std::size_t end = line.find(separator, start);
-    if (end == std::string_view::npos) {
-      fields->push_back(Trim(line.substr(start)));
-      return;
-    }
-    fields->push_back(Trim(line.substr(start, end - start)));
-    start = end + 1;
-  }
 }
 
 void SplitWhitespace(std::string_view line, std::vector<std::string_view>* tokens) {
@@ -344,7 +286,7 @@ Status CheckScalarNames(const std::string& file, const PointSet& points, bool al
                         const std::string& format) {
   for (const auto& column : points.scalars) {
     const std::string& name = column.name;
-    bool bad = name.find_first_of(",\n\r#") != std::string::npos || Trim(name) != name;
+    bool bad = name.find_first_of(",\n\r#") != std::string::npos || TrimBlanks(name) != name;
     if (!allow_inner_space && name.find_first_of(" \t") != std::string::npos) bad = true;
     if (bad) {
       return Status::BadInput(Where{.file = file, .field = name},
@@ -457,13 +399,13 @@ struct PlyHeader {
 
 Status ParsePlyHeader(const std::string& file, std::string_view text, PlyHeader* header) {
   const std::string kFixHeader = "write a PLY header as in http://paulbourke.net/dataformats/ply/";
-  LineReader lines(text);
+  TextLines lines(text);
   std::string_view line;
   if (!lines.Next(&line)) {
     return Status::BadInput(Where{.file = file}, "no points: the file is empty",
                             "export the point cloud again; a PLY file starts with the line 'ply'");
   }
-  if (Trim(line) != "ply") {
+  if (TrimBlanks(line) != "ply") {
     return Status::BadInput(Where{.file = file, .line = 1},
                             "not a PLY file: the first line is " + Quote(line),
                             "a PLY file starts with the line 'ply'; check the file or its extension");
@@ -573,43 +515,6 @@ bool SkipBinaryElement(std::string_view data, const PlyElement& element, bool sw
 
 }  // namespace
 
-// ---------------------------------------------------------------------------------------------
-// Numbers
-
-std::string FormatFixed(double value, int decimals) {
-  decimals = std::max(decimals, 0);
-  std::string out(static_cast<std::size_t>(decimals) + 330, '\0');
-  const auto result =
-      std::to_chars(out.data(), out.data() + out.size(), value, std::chars_format::fixed, decimals);
-  out.resize(static_cast<std::size_t>(result.ptr - out.data()));
-  // "-0.000" (a tiny negative or -0) reads as a sign error in a report or an NC block: drop the sign.
-  if (!out.empty() && out.front() == '-' && out.find_first_not_of("0.", 1) == std::string::npos) {
-    out.erase(0, 1);
-  }
-  return out;
-}
-
-std::string FormatExact(double value) {
-  char buffer[64];
-  const auto result = std::to_chars(buffer, buffer + sizeof(buffer), value);
-  return std::string(buffer, result.ptr);
-}
-
-bool ParseDouble(std::string_view text, double* value) {
-  const char* first = text.data();
-  const char* last = text.data() + text.size();
-  if (first != last && *first == '+') {
-    ++first;
-    if (first != last && (*first == '-' || *first == '+')) return false;
-  }
-  if (first == last) return false;
-  double parsed = 0;
-  const auto [ptr, ec] = std::from_chars(first, last, parsed);
-  if (ec != std::errc() || ptr != last) return false;
-  *value = parsed;
-  return true;
-}
-
 Result<PointFormat> PointFormatFromPath(const std::filesystem::path& path) {
   std::string extension = path.extension().string();
   std::transform(extension.begin(), extension.end(), extension.begin(),
@@ -627,27 +532,29 @@ Result<PointFormat> PointFormatFromPath(const std::filesystem::path& path) {
 // ---------------------------------------------------------------------------------------------
 // CSV
 
-Result<PointSet> ReadCsv(const std::filesystem::path& path) {
+Result<PointSet> ReadCsv(const std::filesystem::path& path, CsvLayout* layout) {
   const std::string file = path.string();
   FL_ASSIGN_OR_RETURN(const std::string text, ReadFile(path));
-  LineReader lines(text);
-  std::string_view line;
-  if (!lines.NextContent(&line)) {
+  CsvReader rows(text);
+  if (!rows.Next()) {
     return Status::BadInput(Where{.file = file}, "no points: the file has no header row and no data",
                             "write a header row such as 'x,y,z' followed by one row per point");
   }
-  const long header_line = lines.line_number();
-  std::vector<std::string_view> fields;
-  SplitOn(line, ',', &fields);
-  std::vector<std::string> names(fields.begin(), fields.end());
+  const long header_line = rows.line_number();
+  std::vector<std::string> names(rows.cells().begin(), rows.cells().end());
+  if (layout != nullptr) {
+    layout->header_line = header_line;
+    layout->header_text = std::string(rows.line());
+    layout->row_lines.clear();
+  }
   ColumnPlan plan;
   FL_RETURN_IF_ERROR(MakeColumnPlan(names, Where{.file = file, .line = header_line}, "column", &plan));
 
   PointSet points = EmptySetFor(plan, std::min<std::size_t>(text.size() / (2 * names.size() + 1), 1 << 24));
   std::vector<double> values(names.size(), 0.0);
-  while (lines.NextContent(&line)) {
-    const long number = lines.line_number();
-    SplitOn(line, ',', &fields);
+  while (rows.Next()) {
+    const long number = rows.line_number();
+    const std::vector<std::string_view>& fields = rows.cells();
     if (fields.size() != names.size()) {
       return Status::BadInput(Where{.file = file, .line = number},
                               "the row has " + std::to_string(fields.size()) +
@@ -664,6 +571,7 @@ Result<PointSet> ReadCsv(const std::filesystem::path& path) {
       }
     }
     AppendRow(plan, values.data(), id, &points);
+    if (layout != nullptr) layout->row_lines.push_back(number);
   }
   if (points.empty()) {
     return Status::BadInput(Where{.file = file, .line = header_line},
@@ -697,7 +605,7 @@ Result<PointSet> ReadXyz(const std::filesystem::path& path) {
   static const std::vector<std::string> kNames = {"x", "y", "z", "nx", "ny", "nz"};
   const std::string file = path.string();
   FL_ASSIGN_OR_RETURN(const std::string text, ReadFile(path));
-  LineReader lines(text);
+  TextLines lines(text);
   std::string_view line;
   std::vector<std::string_view> tokens;
   std::size_t columns = 0;
@@ -797,7 +705,7 @@ Result<PointSet> ReadPly(const std::filesystem::path& path) {
   PointSet points;
 
   if (header.encoding == PlyEncoding::kAscii) {
-    LineReader lines(std::string_view(text).substr(header.data_offset));
+    TextLines lines(std::string_view(text).substr(header.data_offset));
     const long line_base = header.data_line - 1;
     std::string_view line;
     std::vector<std::string_view> tokens;

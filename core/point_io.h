@@ -1,9 +1,10 @@
 #pragma once
 // Point-set files: CSV, XYZ, PLY (ASCII and binary) and PCD (through PCL).
 //
-// CSV: a header row naming the columns, ',' separated; lines starting with '#' and blank lines are
-//   comments. Columns x, y, z are required; nx, ny, nz (all three or none), id and t are optional;
-//   every other column becomes a named scalar. Numbers are parsed without the locale.
+// CSV: read by the one CSV reader (core/csv.h: '#' and blank lines skipped, cells trimmed): a header
+//   row naming the columns, then one row per point. Columns x, y, z are required; nx, ny, nz (all
+//   three or none), id and t are optional; every other column becomes a named scalar. Numbers are
+//   parsed without the locale.
 // XYZ: whitespace-separated "x y z" or "x y z nx ny nz" per line, '#' comments, no header.
 // PLY: element "vertex" with properties x, y, z, optional nx, ny, nz, id, t and any other scalar
 //   properties (char..double types); ascii, binary_little_endian and binary_big_endian are read;
@@ -16,7 +17,9 @@
 
 #include <filesystem>
 #include <string>
+#include <vector>
 
+#include "core/number_text.h"
 #include "core/point_set.h"
 #include "core/status.h"
 
@@ -33,7 +36,13 @@ struct PointWriteOptions {
                         // negative: shortest text that reads back exactly (FormatExact)
 };
 
-Result<PointSet> ReadCsv(const std::filesystem::path& path);
+// Where the rows of a CSV point file stand in it, for messages about them (ReadCsv fills it).
+struct CsvLayout {
+  long header_line = 0;
+  std::string header_text;      // the header line as written (trimmed)
+  std::vector<long> row_lines;  // 1-based file line of each point
+};
+Result<PointSet> ReadCsv(const std::filesystem::path& path, CsvLayout* layout = nullptr);
 Result<PointSet> ReadXyz(const std::filesystem::path& path);
 Result<PointSet> ReadPly(const std::filesystem::path& path);
 Result<PointSet> ReadPcd(const std::filesystem::path& path);
@@ -49,14 +58,5 @@ Status WritePoints(const std::filesystem::path& path, const PointSet& points, co
 // Binary PLY/PCD store ids as 4-byte ints when every id fits, else as doubles (exact to ±2^53).
 // Returns whether they fit; BadInput naming the file when an id cannot be stored exactly.
 Result<bool> IdsFitInt32(const PointSet& points, const std::string& file, const std::string& format);
-
-// Locale-independent number formatting and parsing shared by every text writer in formloop.
-// FormatFixed(1.5, 3) == "1.500"; never "1,500" whatever the global locale. A result that rounds to
-// zero carries no sign ("0.000", not "-0.000"). decimals < 0 counts as 0.
-std::string FormatFixed(double value, int decimals);
-// Shortest text that reads back to exactly the same double.
-std::string FormatExact(double value);
-// Parses the whole string as a finite or non-finite double; false on anything else (" 1", "1x", "").
-bool ParseDouble(std::string_view text, double* value);
 
 }  // namespace formloop

@@ -36,98 +36,60 @@ bool ValidFacet(const std::string& facet) {
   return std::all_of(facet.begin(), facet.end(), [](char c) { return (c >= 'a' && c <= 'z') || c == '_'; });
 }
 
-Status NonEmptyString(const json& j, const std::string& key, const Where& source, std::string* out) {
-  if (!j.contains(key)) return FieldError(source, key, "missing", "add \"" + key + "\": \"...\"");
-  if (!j[key].is_string() || j[key].get<std::string>().empty()) {
-    return FieldError(source, key, "must be a non-empty string");
-  }
-  *out = j[key].get<std::string>();
-  return Status::Ok();
-}
-
-Status RequireObject(const json& j, const std::string& key, const Where& source, json* out) {
-  if (!j.contains(key)) return FieldError(source, key, "missing", "add \"" + key + "\": {...} (may be empty)");
-  if (!j[key].is_object()) return FieldError(source, key, "must be a JSON object");
-  *out = j[key];
-  return Status::Ok();
-}
-
-Status OptionalPositive(const json& obj, const std::string& key, const std::string& path, const Where& source) {
-  if (!obj.contains(key)) return Status::Ok();
-  const json& v = obj[key];
-  if (!v.is_number() || !std::isfinite(v.get<double>()) || v.get<double>() <= 0) {
-    return FieldError(source, path + "." + key, "must be a positive number");
+Status NonEmptyString(const JsonFields& f, const std::string& key, std::string* out) {
+  FL_RETURN_IF_ERROR(f.String(key, out));
+  if (out->empty()) {
+    return Status::BadInput(Where{.file = f.source(), .field = f.Path(key)}, "must be a non-empty string");
   }
   return Status::Ok();
 }
 
-Status OptionalType(const json& obj, const std::string& key, const std::string& path, const Where& source,
-                    json::value_t type, const char* type_name) {
-  if (!obj.contains(key)) return Status::Ok();
-  if (obj[key].type() != type) return FieldError(source, path + "." + key, std::string("must be a JSON ") + type_name);
-  return Status::Ok();
+// The three knowledge parts are free-form JSON; what formloop itself reads from them is checked here.
+constexpr NumberRange kPositive{.min = 0, .exclusive_min = true};
+
+Status ValidatePart(const JsonFields& part) {
+  double number = 0;
+  long long integer = 0;
+  std::string text;
+  FL_RETURN_IF_ERROR(part.OptionalNumber("tolerance_mm", &number, kPositive));
+  FL_RETURN_IF_ERROR(part.OptionalNumber("finish_ra_um", &number, kPositive));
+  FL_RETURN_IF_ERROR(part.OptionalInteger("batch_size", &integer, 1));
+  return part.OptionalString("material", &text);
 }
 
-Status ValidatePart(const json& part, const Where& source) {
-  FL_RETURN_IF_ERROR(OptionalPositive(part, "tolerance_mm", "part", source));
-  FL_RETURN_IF_ERROR(OptionalPositive(part, "finish_ra_um", "part", source));
-  if (part.contains("batch_size") && (!part["batch_size"].is_number_integer() || part["batch_size"].get<long long>() < 1)) {
-    return FieldError(source, "part.batch_size", "must be an integer of at least 1");
-  }
-  FL_RETURN_IF_ERROR(OptionalType(part, "material", "part", source, json::value_t::string, "string"));
-  return Status::Ok();
-}
-
-Status ValidateSimulation(const json& sim, const Where& source) {
-  if (!sim.contains("effect_models")) return Status::Ok();
-  if (!sim["effect_models"].is_array()) return FieldError(source, "simulation.effect_models", "must be a JSON array");
-  for (std::size_t m = 0; m < sim["effect_models"].size(); ++m) {
-    const json& model = sim["effect_models"][m];
-    const std::string mpath = "simulation.effect_models[" + std::to_string(m) + "]";
-    if (!model.is_object()) return FieldError(source, mpath, "must be a JSON object");
-    if (!model.contains("effects")) continue;
-    if (!model["effects"].is_array()) return FieldError(source, mpath + ".effects", "must be a JSON array");
-    for (std::size_t e = 0; e < model["effects"].size(); ++e) {
-      const json& effect = model["effects"][e];
-      const std::string epath = mpath + ".effects[" + std::to_string(e) + "]";
-      if (!effect.is_object()) return FieldError(source, epath, "must be a JSON object");
-      if (!effect.contains("name") || !effect["name"].is_string() || effect["name"].get<std::string>().empty()) {
-        return FieldError(source, epath + ".name", "must be a non-empty string");
-      }
-      if (!effect.contains("estimate") || !effect["estimate"].is_number()) {
-        return FieldError(source, epath + ".estimate", "must be a number");
-      }
-      if (!effect.contains("standard_error") || !effect["standard_error"].is_number() ||
-          !(effect["standard_error"].get<double>() >= 0)) {
-        return FieldError(source, epath + ".standard_error", "must be a number >= 0",
-                          "give the coefficient's standard error from the fit");
-      }
+Status ValidateSimulation(const JsonFields& sim) {
+  if (!sim.Has("effect_models")) return Status::Ok();
+  std::vector<JsonFields> models;
+  FL_RETURN_IF_ERROR(sim.ObjectArray("effect_models", &models));
+  for (const JsonFields& model : models) {
+    if (!model.Has("effects")) continue;
+    std::vector<JsonFields> effects;
+    FL_RETURN_IF_ERROR(model.ObjectArray("effects", &effects));
+    for (const JsonFields& effect : effects) {
+      std::string name;
+      double number = 0;
+      FL_RETURN_IF_ERROR(NonEmptyString(effect, "name", &name));
+      FL_RETURN_IF_ERROR(effect.Number("estimate", &number));
+      FL_RETURN_IF_ERROR(effect.Number("standard_error", &number, {.min = 0}));
     }
   }
   return Status::Ok();
 }
 
-Status ValidateManufacturing(const json& mfg, const Where& source) {
-  if (mfg.contains("tools")) {
-    if (!mfg["tools"].is_array()) return FieldError(source, "manufacturing.tools", "must be a JSON array");
-    for (std::size_t t = 0; t < mfg["tools"].size(); ++t) {
-      const std::string tpath = "manufacturing.tools[" + std::to_string(t) + "]";
-      if (!mfg["tools"][t].is_object()) return FieldError(source, tpath, "must be a JSON object");
-      FL_RETURN_IF_ERROR(OptionalPositive(mfg["tools"][t], "radius_mm", tpath, source));
-    }
+Status ValidateManufacturing(const JsonFields& mfg) {
+  if (mfg.Has("tools")) {
+    std::vector<JsonFields> tools;
+    FL_RETURN_IF_ERROR(mfg.ObjectArray("tools", &tools));
+    double radius = 0;
+    for (const JsonFields& tool : tools) FL_RETURN_IF_ERROR(tool.OptionalNumber("radius_mm", &radius, kPositive));
   }
-  for (const char* key : {"strategy", "reconstruction", "compensation"}) {
-    FL_RETURN_IF_ERROR(OptionalType(mfg, key, "manufacturing", source, json::value_t::object, "object"));
-  }
-  if (mfg.contains("compensation") && mfg["compensation"].contains("loops")) {
-    const json& loops = mfg["compensation"]["loops"];
-    if (!loops.is_array()) return FieldError(source, "manufacturing.compensation.loops", "must be a JSON array");
-    for (std::size_t i = 0; i < loops.size(); ++i) {
-      if (!loops[i].is_object()) {
-        return FieldError(source, "manufacturing.compensation.loops[" + std::to_string(i) + "]",
-                          "must be a JSON object");
-      }
-    }
+  std::optional<JsonFields> part;
+  for (const char* key : {"strategy", "reconstruction"}) FL_RETURN_IF_ERROR(mfg.Object(key, &part));
+  std::optional<JsonFields> compensation;
+  FL_RETURN_IF_ERROR(mfg.Object("compensation", &compensation));
+  if (compensation && compensation->Has("loops")) {
+    std::vector<JsonFields> loops;
+    FL_RETURN_IF_ERROR(compensation->ObjectArray("loops", &loops));
   }
   return Status::Ok();
 }
@@ -173,60 +135,47 @@ json CaseRecord::ToJson() const {
 
 Result<CaseRecord> CaseRecord::FromJson(const json& j, const Where& source) {
   if (!j.is_object()) return Status::BadInput(source, "a case must be a JSON object", "see kb/library.h");
-  static const std::set<std::string> kKeys = {"uid",        "name",          "family",     "part",
-                                              "simulation", "manufacturing", "descriptor", "concepts",
-                                              "created_at", "updated_at"};
-  for (const auto& [key, value] : j.items()) {
-    if (kKeys.count(key) == 0) {
-      return FieldError(source, key, "unknown field",
-                        "use uid, name, family, part, simulation, manufacturing, descriptor, concepts");
-    }
-  }
+  // The source as messages name it ("cases.jsonl:3" for a line of an export file).
+  const JsonFields f(j, source.line > 0 ? source.file + ":" + std::to_string(source.line) : source.file);
+  FL_RETURN_IF_ERROR(f.CheckKnown({"uid", "name", "family", "part", "simulation", "manufacturing", "descriptor",
+                                   "concepts", "created_at", "updated_at"}));
   CaseRecord r;
-  FL_RETURN_IF_ERROR(NonEmptyString(j, "uid", source, &r.uid));
+  FL_RETURN_IF_ERROR(NonEmptyString(f, "uid", &r.uid));
   if (!ValidUid(r.uid)) {
     return FieldError(source, "uid", "'" + r.uid + "' is not a valid uid",
                       "use 1-128 characters from A-Z a-z 0-9 . _ : -");
   }
-  FL_RETURN_IF_ERROR(NonEmptyString(j, "name", source, &r.name));
-  FL_RETURN_IF_ERROR(NonEmptyString(j, "family", source, &r.family));
-  FL_RETURN_IF_ERROR(RequireObject(j, "part", source, &r.part));
-  FL_RETURN_IF_ERROR(RequireObject(j, "simulation", source, &r.simulation));
-  FL_RETURN_IF_ERROR(RequireObject(j, "manufacturing", source, &r.manufacturing));
-  FL_RETURN_IF_ERROR(ValidatePart(r.part, source));
-  FL_RETURN_IF_ERROR(ValidateSimulation(r.simulation, source));
-  FL_RETURN_IF_ERROR(ValidateManufacturing(r.manufacturing, source));
-  if (j.contains("descriptor") && !j["descriptor"].is_null()) {
-    const json& d = j["descriptor"];
-    if (!d.is_array() || d.empty()) return FieldError(source, "descriptor", "must be a non-empty array of numbers");
+  FL_RETURN_IF_ERROR(NonEmptyString(f, "name", &r.name));
+  FL_RETURN_IF_ERROR(NonEmptyString(f, "family", &r.family));
+  std::optional<JsonFields> part, simulation, manufacturing;
+  FL_RETURN_IF_ERROR(f.RequiredObject("part", &part));
+  FL_RETURN_IF_ERROR(f.RequiredObject("simulation", &simulation));
+  FL_RETURN_IF_ERROR(f.RequiredObject("manufacturing", &manufacturing));
+  FL_RETURN_IF_ERROR(ValidatePart(*part));
+  FL_RETURN_IF_ERROR(ValidateSimulation(*simulation));
+  FL_RETURN_IF_ERROR(ValidateManufacturing(*manufacturing));
+  r.part = part->json();
+  r.simulation = simulation->json();
+  r.manufacturing = manufacturing->json();
+  if (f.Has("descriptor") && !j["descriptor"].is_null()) {
     std::vector<double> values;
-    values.reserve(d.size());
-    for (std::size_t i = 0; i < d.size(); ++i) {
-      if (!d[i].is_number() || !std::isfinite(d[i].get<double>())) {
-        return FieldError(source, "descriptor[" + std::to_string(i) + "]", "must be a finite number");
-      }
-      values.push_back(d[i].get<double>());
-    }
+    FL_RETURN_IF_ERROR(f.NumberArray("descriptor", &values));
+    if (values.empty()) return FieldError(source, "descriptor", "must be a non-empty array of numbers");
     r.descriptor = std::move(values);
   }
-  if (j.contains("concepts")) {
-    if (!j["concepts"].is_object()) return FieldError(source, "concepts", "must be a JSON object facet -> concept");
-    for (const auto& [facet, concept_value] : j["concepts"].items()) {
+  std::optional<JsonFields> concepts;
+  FL_RETURN_IF_ERROR(f.Object("concepts", &concepts));
+  if (concepts) {
+    for (const auto& [facet, concept_value] : concepts->json().items()) {
       if (!ValidFacet(facet)) {
         return FieldError(source, "concepts." + facet, "facet names are lowercase letters and '_'",
                           "known facets: shape, material, tolerance, finish, machine_tool");
       }
-      if (!concept_value.is_string() || concept_value.get<std::string>().empty()) {
-        return FieldError(source, "concepts." + facet, "must be a non-empty string");
-      }
-      r.concepts[facet] = concept_value.get<std::string>();
+      FL_RETURN_IF_ERROR(NonEmptyString(*concepts, facet, &r.concepts[facet]));
     }
   }
-  for (const char* key : {"created_at", "updated_at"}) {
-    if (!j.contains(key)) continue;
-    if (!j[key].is_string()) return FieldError(source, key, "must be an ISO 8601 UTC string");
-    (std::string(key) == "created_at" ? r.created_at : r.updated_at) = j[key].get<std::string>();
-  }
+  FL_RETURN_IF_ERROR(f.OptionalString("created_at", &r.created_at));
+  FL_RETURN_IF_ERROR(f.OptionalString("updated_at", &r.updated_at));
   return r;
 }
 
@@ -728,41 +677,35 @@ Result<RuleSet> Library::GetRules() {
 
 namespace {
 
+}  // namespace
+
 Result<std::vector<Rule>> ParseRules(const json& input, const std::string& source) {
   const json* list = &input;
   if (input.is_object()) {
     if (!input.contains("rules")) return Status::BadInput(Where{.file = source, .field = "rules"}, "missing");
     list = &input["rules"];
   }
-  if (!list->is_array()) return Status::BadInput(Where{.file = source, .field = "rules"}, "must be a JSON array");
+  const json wrapper = {{"rules", *list}};
+  std::vector<JsonFields> items;
+  FL_RETURN_IF_ERROR(JsonFields(wrapper, source).ObjectArray("rules", &items));
   std::vector<Rule> rules;
   std::set<std::string> names;
-  for (std::size_t i = 0; i < list->size(); ++i) {
-    const json& r = (*list)[i];
-    const std::string path = "rules[" + std::to_string(i) + "]";
-    if (!r.is_object()) return Status::BadInput(Where{.file = source, .field = path}, "must be a JSON object");
+  for (const JsonFields& r : items) {
     Rule rule;
-    if (!r.contains("name") || !r["name"].is_string() || r["name"].get<std::string>().empty()) {
-      return Status::BadInput(Where{.file = source, .field = path + ".name"}, "must be a non-empty string");
-    }
-    rule.name = r["name"].get<std::string>();
+    FL_RETURN_IF_ERROR(NonEmptyString(r, "name", &rule.name));
     if (!names.insert(rule.name).second) {
-      return Status::BadInput(Where{.file = source, .field = path + ".name"}, "'" + rule.name + "' appears twice");
+      return Status::BadInput(Where{.file = source, .field = r.Path("name")}, "'" + rule.name + "' appears twice");
     }
-    for (const char* key : {"condition", "choice"}) {
-      if (!r.contains(key) || !r[key].is_object()) {
-        return Status::BadInput(Where{.file = source, .field = path + "." + key}, "must be a JSON object");
-      }
-    }
-    rule.condition = r["condition"];
-    rule.choice = r["choice"];
+    std::optional<JsonFields> condition, choice;
+    FL_RETURN_IF_ERROR(r.RequiredObject("condition", &condition));
+    FL_RETURN_IF_ERROR(r.RequiredObject("choice", &choice));
+    rule.condition = condition->json();
+    rule.choice = choice->json();
     rule.active = true;
     rules.push_back(std::move(rule));
   }
   return rules;
 }
-
-}  // namespace
 
 Result<int> Library::SetRules(const json& input, const std::string& source) {
   FL_ASSIGN_OR_RETURN(std::vector<Rule> rules, ParseRules(input, source));

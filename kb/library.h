@@ -98,6 +98,9 @@ struct RuleSet {
 // Sanity of a rule set: route.direct / route.simulate / route.default present and consistent, thresholds
 // 0 < low < high <= 1, facet.weights non-negative numbers with a positive sum. Returns every problem found.
 std::vector<std::string> RuleSetProblems(const std::vector<Rule>& rules);
+// A rule base as JSON ({"rules": [...]} or the bare array; each {"name", "condition", "choice"}, names
+// unique), read with the errors naming `source` and the rule's index. Does not check RuleSetProblems.
+Result<std::vector<Rule>> ParseRules(const nlohmann::json& input, const std::string& source);
 // The route thresholds of a sane rule set (BadInput listing the problems otherwise).
 Result<RouteThresholds> ThresholdsOf(const std::vector<Rule>& rules);
 

@@ -3,11 +3,12 @@
 #include <Eigen/Cholesky>
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <limits>
 #include <numeric>
+#include <optional>
 
-#include "core/random.h"
+#include "core/number_text.h"
+#include "metrology/spatial_cv.h"
 
 namespace formloop::metrology {
 namespace {
@@ -40,11 +41,7 @@ double PeakAbs(const std::vector<double>& v) {
   return m;
 }
 
-std::string Num(double x) {
-  char buffer[32];
-  std::snprintf(buffer, sizeof buffer, "%.4g", x);
-  return buffer;
-}
+std::string Num(double x) { return FormatSignificant(x, 4); }
 
 Status CheckDomain(const recon::ParamDomain& d) {
   if (!std::isfinite(d.u_min) || !std::isfinite(d.u_max) || !std::isfinite(d.v_min) || !std::isfinite(d.v_max) ||
@@ -109,31 +106,16 @@ Eigen::MatrixXd DifferencePenalty(int net) {
   return penalty;
 }
 
-// Spatial block CV of a model given its rows: the held-out squared error of every point and their
-// RMS. fold[i] ∈ [0, folds). rms = +inf (and squared errors empty) when a training fit cannot be solved.
-struct CvErrors {
-  double rms = std::numeric_limits<double>::infinity();
-  std::vector<double> squared;  // (y_i − ŷ_i)², ŷ_i from the fit without point i's fold
-};
-
-CvErrors BlockCv(const Rows& rows, const Eigen::VectorXd& y, const std::vector<int>& fold, int folds, int p,
-                 const Eigen::MatrixXd* penalty) {
-  const int n = static_cast<int>(y.size());
+// Spatial block CV of a model given its rows (metrology/spatial_cv.h): the fit on a fold's complement
+// solves the normal equations by Cholesky, accumulated from the sparse rows, with the second-difference
+// penalty for B-spline nets; fails when the training points cannot determine the model.
+HeldOutErrors BlockCv(const Rows& rows, const Eigen::VectorXd& y, const std::vector<int>& fold, int folds, int p,
+                      const Eigen::MatrixXd* penalty) {
   const auto nnz = static_cast<std::size_t>(rows.nnz);
-  CvErrors out;
-  std::vector<double> squared(static_cast<std::size_t>(n), 0.0);
-  double sse = 0;
-  int held = 0;
-  for (int f = 0; f < folds; ++f) {
+  return SpatialBlockCv(fold, folds, y, [&](const std::vector<int>& training) -> std::optional<HeldOutPredictor> {
     Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(p, p);
     Eigen::VectorXd rhs = Eigen::VectorXd::Zero(p);
-    int training = 0, testing = 0;
-    for (int i = 0; i < n; ++i) {
-      if (fold[static_cast<std::size_t>(i)] == f) {
-        ++testing;
-        continue;
-      }
-      ++training;
+    for (int i : training) {
       const std::size_t base = static_cast<std::size_t>(i) * nnz;
       for (std::size_t a = 0; a < nnz; ++a) {
         const int ia = rows.index[base + a];
@@ -142,122 +124,19 @@ CvErrors BlockCv(const Rows& rows, const Eigen::VectorXd& y, const std::vector<i
         for (std::size_t b = 0; b < nnz; ++b) gram(ia, rows.index[base + b]) += va * rows.value[base + b];
       }
     }
-    if (testing == 0) continue;
-    if (training < p && penalty == nullptr) return out;
+    if (static_cast<int>(training.size()) < p && penalty == nullptr) return std::nullopt;
     if (penalty != nullptr) gram += kCvPenalty * gram.trace() / penalty->trace() * *penalty;
     const Eigen::LLT<Eigen::MatrixXd> llt(gram);
-    if (llt.info() != Eigen::Success) return out;
-    const Eigen::VectorXd c = llt.solve(rhs);
-    if (!c.allFinite()) return out;
-    for (int i = 0; i < n; ++i) {
-      if (fold[static_cast<std::size_t>(i)] != f) continue;
+    if (llt.info() != Eigen::Success) return std::nullopt;
+    Eigen::VectorXd c = llt.solve(rhs);
+    if (!c.allFinite()) return std::nullopt;
+    return [&rows, nnz, c = std::move(c)](int i) {
       const std::size_t base = static_cast<std::size_t>(i) * nnz;
       double prediction = 0;
       for (std::size_t a = 0; a < nnz; ++a) prediction += rows.value[base + a] * c[rows.index[base + a]];
-      squared[static_cast<std::size_t>(i)] = (y[i] - prediction) * (y[i] - prediction);
-      sse += squared[static_cast<std::size_t>(i)];
-      ++held;
-    }
-  }
-  if (held == 0) return out;
-  out.rms = std::sqrt(sse / held);
-  out.squared = std::move(squared);
-  return out;
-}
-
-// Paired comparison of two models' held-out errors (richer minus current), in mean square over the
-// points: the difference Δ = (Σ_i e²_rich,i − Σ_i e²_cur,i) / n and its standard error from the
-// spread of the per-unit sums D_u = Σ_{i ∈ u} (e²_rich,i − e²_cur,i) over the units u (CV blocks or
-// folds) that hold points: SE(Δ) = √(U/(U − 1) · Σ_u (D_u − D̄)²) / n. The units are treated as
-// independent replicates, as in the one-standard-error rule of Breiman et al. (1984, Classification
-// and Regression Trees, §3.4.3) and Hastie, Tibshirani & Friedman (2009, Elements of Statistical
-// Learning, §7.10).
-struct PairedCvDifference {
-  double difference = 0;  // Δ, mm²
-  double standard_error = 0;
-};
-
-PairedCvDifference ComparePaired(const CvErrors& rich, const CvErrors& current, const std::vector<int>& unit,
-                                 int units) {
-  PairedCvDifference out;
-  if (rich.squared.empty() || current.squared.empty()) {
-    out.difference = std::numeric_limits<double>::infinity();
-    return out;
-  }
-  const std::size_t n = rich.squared.size();
-  std::vector<double> sum(static_cast<std::size_t>(units), 0.0);
-  std::vector<int> count(static_cast<std::size_t>(units), 0);
-  double total = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const double d = rich.squared[i] - current.squared[i];
-    sum[static_cast<std::size_t>(unit[i])] += d;
-    ++count[static_cast<std::size_t>(unit[i])];
-    total += d;
-  }
-  int used = 0;
-  for (int c : count) used += c > 0 ? 1 : 0;
-  const double mean = total / std::max(1, used);
-  double spread = 0;
-  for (std::size_t k = 0; k < sum.size(); ++k) {
-    if (count[k] > 0) spread += (sum[k] - mean) * (sum[k] - mean);
-  }
-  out.difference = total / static_cast<double>(n);
-  out.standard_error = used > 1 ? std::sqrt(used / (used - 1.0) * spread) / static_cast<double>(n) : 0.0;
-  return out;
-}
-
-// Blocks of the points' bounding box dealt to folds; returns the fold of each point. The blocks are
-// visited in a seeded random order and each goes to the least-filled fold not already used by one of
-// its 8 neighbouring blocks (ties broken at random), so a held-out region is one block wide wherever
-// the fold count allows (with fewer than 9 folds a block may have to share a fold with a neighbour).
-std::vector<int> AssignFolds(const Eigen::MatrixXd& uv, int blocks, int folds, std::uint64_t seed,
-                             std::vector<int>* block_of_point) {
-  const Eigen::Vector2d lo = uv.rowwise().minCoeff(), hi = uv.rowwise().maxCoeff();
-  std::vector<int> order(static_cast<std::size_t>(blocks * blocks));
-  std::iota(order.begin(), order.end(), 0);
-  Rng rng(seed);
-  for (std::size_t k = order.size(); k > 1; --k) std::swap(order[k - 1], order[rng.UniformIndex(k)]);
-  std::vector<int> block_fold(order.size(), -1);
-  std::vector<int> filled(static_cast<std::size_t>(folds), 0);
-  for (std::size_t k = 0; k < order.size(); ++k) {
-    const int b = order[k], bu = b / blocks, bv = b % blocks;
-    std::vector<bool> used(static_cast<std::size_t>(folds), false);
-    for (int du = -1; du <= 1; ++du) {
-      for (int dv = -1; dv <= 1; ++dv) {
-        const int nu = bu + du, nv = bv + dv;
-        if (nu < 0 || nv < 0 || nu >= blocks || nv >= blocks) continue;
-        const int f = block_fold[static_cast<std::size_t>(nu * blocks + nv)];
-        if (f >= 0) used[static_cast<std::size_t>(f)] = true;
-      }
-    }
-    int best = -1, ties = 0;
-    for (int pass = 0; pass < 2 && best < 0; ++pass) {
-      for (int f = 0; f < folds; ++f) {
-        if (pass == 0 && used[static_cast<std::size_t>(f)]) continue;
-        if (best < 0 || filled[static_cast<std::size_t>(f)] < filled[static_cast<std::size_t>(best)]) {
-          best = f;
-          ties = 1;
-        } else if (filled[static_cast<std::size_t>(f)] == filled[static_cast<std::size_t>(best)] &&
-                   rng.UniformIndex(static_cast<std::uint64_t>(++ties)) == 0) {
-          best = f;
-        }
-      }
-    }
-    block_fold[static_cast<std::size_t>(b)] = best;
-    ++filled[static_cast<std::size_t>(best)];
-  }
-  auto cell = [&](double x, double a, double c) {
-    if (!(c > a)) return 0;
-    return std::clamp(static_cast<int>(std::floor((x - a) / (c - a) * blocks)), 0, blocks - 1);
-  };
-  std::vector<int> fold(static_cast<std::size_t>(uv.cols()));
-  block_of_point->resize(static_cast<std::size_t>(uv.cols()));
-  for (Eigen::Index i = 0; i < uv.cols(); ++i) {
-    const int bu = cell(uv(0, i), lo[0], hi[0]), bv = cell(uv(1, i), lo[1], hi[1]);
-    fold[static_cast<std::size_t>(i)] = block_fold[static_cast<std::size_t>(bu * blocks + bv)];
-    (*block_of_point)[static_cast<std::size_t>(i)] = bu * blocks + bv;
-  }
-  return fold;
+      return prediction;
+    };
+  });
 }
 
 // Blocks per direction when the options leave it to the data: about 4 points per block, so a held-out
@@ -558,8 +437,11 @@ Result<Decomposition> Decompose(const std::vector<Deviation>& deviations, const 
   FL_ASSIGN_OR_RETURN(SpatialWeights weights, KnnWeights(uv, options.neighbours, WeightStyle::kRowStandardised));
   const int blocks = options.cv_blocks > 0 ? options.cv_blocks : AutoBlocks(n);
   result.cv_blocks = blocks;
-  std::vector<int> block_of_point;
-  const std::vector<int> fold = AssignFolds(uv, blocks, options.cv_folds, options.cv_seed, &block_of_point);
+  // Blocks of the points' bounding box in (u, v), dealt to folds (metrology/spatial_cv.h).
+  const std::vector<int> block_of_point = GridBlocks(uv.row(0).transpose(), uv.row(1).transpose(), blocks);
+  const std::vector<int> block_fold = DealBlocksToFolds(blocks, options.cv_folds, options.cv_seed);
+  std::vector<int> fold(block_of_point.size());
+  for (std::size_t i = 0; i < fold.size(); ++i) fold[i] = block_fold[static_cast<std::size_t>(block_of_point[i])];
   {
     std::vector<int> count(static_cast<std::size_t>(options.cv_folds), 0);
     for (int f : fold) ++count[static_cast<std::size_t>(f)];
@@ -590,7 +472,7 @@ Result<Decomposition> Decompose(const std::vector<Deviation>& deviations, const 
     result.raw.n = n;
   } else {
     FL_ASSIGN_OR_RETURN(result.raw, MoranI(y, weights));
-    CvErrors current_cv;
+    HeldOutErrors current_cv;
     const bool by_folds = options.cv_guard == CvGuard::kOneStandardErrorFolds;
     const std::vector<int>& se_unit = by_folds ? fold : block_of_point;
     const int se_units = by_folds ? options.cv_folds : blocks * blocks;
@@ -624,7 +506,7 @@ Result<Decomposition> Decompose(const std::vector<Deviation>& deviations, const 
       }
       Eigen::MatrixXd penalty;
       if (model.kind() == FieldModel::Kind::kBSpline) penalty = DifferencePenalty(model.net());
-      CvErrors cv = BlockCv(rows, y, fold, options.cv_folds, p, penalty.size() > 0 ? &penalty : nullptr);
+      HeldOutErrors cv = BlockCv(rows, y, fold, options.cv_folds, p, penalty.size() > 0 ? &penalty : nullptr);
       DecompositionStep step;
       step.model = model.name();
       step.parameters = p;
@@ -735,8 +617,7 @@ Result<Decomposition> Decompose(const std::vector<Deviation>& deviations, const 
 
 std::string FineScaleAssessment(double field_residual_z) {
   const double p = NormalUpperTail(field_residual_z);
-  char p_text[32];
-  std::snprintf(p_text, sizeof p_text, "%.2g", p);
+  const std::string p_text = FormatSignificant(p, 2);
   if (field_residual_z <= kFineScaleChanceZ) {
     return "consistent with chance: an independent residual reaches the field's z = " + Num(field_residual_z) +
            " with probability " + p_text;

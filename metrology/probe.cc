@@ -9,6 +9,7 @@
 
 #include "core/atomic_file.h"
 #include "core/json_io.h"
+#include "core/number_text.h"
 #include "core/point_io.h"
 
 namespace formloop::metrology {
@@ -52,66 +53,22 @@ namespace {
 
 constexpr const char* kLogColumnsFix = "a probe log has the header row id,x,y,z,ax,ay,az,t (any order)";
 
-// Calls visit(number, line) for each content line of a CSV text in order: 1-based line numbers,
-// blank lines and '#' comments skipped, the line trimmed of leading and trailing blanks and '\r'.
-// visit returns false to stop. Same line rules as core/point_io.cc's ReadCsv.
-template <typename Visit>
-void ForEachCsvContentLine(std::string_view text, Visit visit) {
-  long number = 0;
-  std::size_t pos = 0;
-  while (pos < text.size()) {
-    const std::size_t end = text.find('\n', pos);
-    const std::size_t stop = end == std::string_view::npos ? text.size() : end;
-    std::string_view line = text.substr(pos, stop - pos);
-    pos = end == std::string_view::npos ? text.size() : end + 1;
-    ++number;
-    const std::size_t first = line.find_first_not_of(" \t\r");
-    if (first == std::string_view::npos || line[first] == '#') continue;
-    line.remove_prefix(first);
-    while (line.back() == '\r' || line.back() == ' ' || line.back() == '\t') line.remove_suffix(1);
-    if (!visit(number, line)) return;
-  }
-}
-
-// The header row of a CSV text: its 1-based line number and its text; {0, ""} when there is none.
-std::pair<long, std::string> CsvHeaderLine(std::string_view text) {
-  std::pair<long, std::string> header{0, ""};
-  ForEachCsvContentLine(text, [&](long number, std::string_view line) {
-    header = {number, std::string(line)};
-    return false;
-  });
-  return header;
-}
-
-// 1-based line numbers of the data rows of a CSV text, in order: the lines ReadCsv reads as rows
-// (content lines after the header).
-std::vector<long> CsvDataLines(std::string_view text) {
-  std::vector<long> lines;
-  bool header_seen = false;
-  ForEachCsvContentLine(text, [&](long number, std::string_view) {
-    if (header_seen) lines.push_back(number);
-    header_seen = true;
-    return true;
-  });
-  return lines;
-}
-
 }  // namespace
 
 Result<ProbeLog> ReadProbeLog(const std::filesystem::path& path) {
   const std::string file = path.string();
-  FL_ASSIGN_OR_RETURN(PointSet points, ReadCsv(path));
+  CsvLayout layout;
+  FL_ASSIGN_OR_RETURN(PointSet points, ReadCsv(path, &layout));
   std::string missing;
   for (const char* column : {"ax", "ay", "az"}) {
     if (points.FindScalar(column) == nullptr) missing += std::string(missing.empty() ? "" : ", ") + column;
   }
   if (!points.has_ids()) missing = "id" + std::string(missing.empty() ? "" : ", ") + missing;
   if (!points.has_times()) missing += std::string(missing.empty() ? "" : ", ") + "t";
-  // ReadCsv does not keep line numbers; recount them on the same text so errors can name the line.
-  FL_ASSIGN_OR_RETURN(const std::string text, ReadFile(path));
   if (!missing.empty()) {
     // Name the header line and what it holds, so the user can see at once which name is wrong.
-    const auto [header_line, header_text] = CsvHeaderLine(text);
+    const long header_line = layout.header_line;
+    const std::string& header_text = layout.header_text;
     const bool several = missing.find(',') != std::string::npos;
     return Status::BadInput(
         Where{.file = file, .line = header_line, .field = missing},
@@ -123,8 +80,7 @@ Result<ProbeLog> ReadProbeLog(const std::filesystem::path& path) {
   const auto& ax = *points.FindScalar("ax");
   const auto& ay = *points.FindScalar("ay");
   const auto& az = *points.FindScalar("az");
-  std::vector<long> lines = CsvDataLines(text);
-  if (lines.size() != points.size()) lines.assign(points.size(), 0);  // cannot happen; keep messages safe
+  const std::vector<long>& lines = layout.row_lines;
 
   ProbeLog log;
   log.source = file;

@@ -10,7 +10,7 @@
 #include <Eigen/Dense>
 
 #include "core/log.h"
-#include "core/point_io.h"
+#include "core/number_text.h"
 #include "core/random.h"
 
 namespace formloop::metrology {

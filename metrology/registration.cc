@@ -7,7 +7,7 @@
 
 #include <Eigen/Dense>
 
-#include "core/point_io.h"
+#include "core/number_text.h"
 
 namespace formloop::metrology {
 namespace {

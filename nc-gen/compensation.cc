@@ -3,12 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
-#include <sstream>
 #include <system_error>
 
 #include "core/atomic_file.h"
-#include "core/point_io.h"
-#include "nc-gen/csv_cells.h"
+#include "core/csv.h"
+#include "core/number_text.h"
 #include "nc-gen/toolpath_io.h"
 
 namespace formloop::nc {
@@ -21,9 +20,6 @@ std::vector<const ProgramMove*> FeedMoves(const std::vector<ProgramMove>& moves)
   }
   return feeds;
 }
-
-using internal::SplitComma;
-std::string Trim(const std::string& s) { return internal::TrimCell(s); }
 
 std::string Vec(const Eigen::Vector3d& v_mm) {
   return "(" + FormatFixed(1e3 * v_mm.x(), 3) + ", " + FormatFixed(1e3 * v_mm.y(), 3) + ", " +
@@ -136,20 +132,17 @@ Result<double> VerifyCompensation(const std::vector<ProgramMove>& nominal, const
 
 Result<SideFile> ParseSideFile(const std::string& text, const std::string& source) {
   SideFile side;
-  std::istringstream in(text);
-  std::string line;
+  CsvReader rows(text, /*comments=*/true);
   long number = 0;
   std::map<std::string, std::size_t> column;
   std::size_t columns = 0;
-  while (std::getline(in, line)) {
-    ++number;
-    const std::string t = Trim(line);
-    if (t.empty()) continue;
-    if (t[0] == '#') {
-      if (t.rfind("# source:", 0) == 0) side.source = Trim(t.substr(9));
+  while (rows.Next()) {
+    number = rows.line_number();
+    if (rows.is_comment()) {
+      if (rows.line().rfind("# source:", 0) == 0) side.source = std::string(TrimBlanks(rows.line().substr(9)));
       continue;
     }
-    const auto cells = SplitComma(t);
+    const std::vector<std::string> cells(rows.cells().begin(), rows.cells().end());
     if (columns == 0) {
       for (std::size_t c = 0; c < cells.size(); ++c) column[cells[c]] = c;
       for (const char* name : kSideColumns) {

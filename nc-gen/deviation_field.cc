@@ -3,23 +3,20 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
-#include <sstream>
 #include <tuple>
 #include <utility>
 
 #include <Eigen/Dense>
 
 #include "core/atomic_file.h"
-#include "core/point_io.h"
-#include "nc-gen/csv_cells.h"
+#include "core/csv.h"
+#include "core/number_text.h"
 
 namespace formloop::nc {
 namespace {
 
 double Kernel(double r2) { return r2 > 0 ? 0.5 * r2 * std::log(r2) : 0.0; }  // r² log r
 
-using internal::SplitComma;
-std::string Trim(const std::string& s) { return internal::TrimCell(s); }
 
 }  // namespace
 
@@ -122,17 +119,14 @@ SystematicField DeviationField::AsSystematicField() const {
 Result<std::vector<DeviationSample>> ReadDeviationSamples(const std::filesystem::path& path) {
   FL_ASSIGN_OR_RETURN(std::string text, ReadFile(path));
   const std::string file = path.string();
-  std::istringstream in(text);
-  std::string line;
+  CsvReader rows(text);
   long number = 0;
   int col_u = -1, col_v = -1, col_ds = -1;
   std::size_t columns = 0;
   std::vector<DeviationSample> samples;
-  while (std::getline(in, line)) {
-    ++number;
-    const std::string t = Trim(line);
-    if (t.empty() || t[0] == '#') continue;
-    const auto cells = SplitComma(t);
+  while (rows.Next()) {
+    number = rows.line_number();
+    const std::vector<std::string> cells(rows.cells().begin(), rows.cells().end());
     if (columns == 0) {
       for (std::size_t c = 0; c < cells.size(); ++c) {
         if (cells[c] == "u") col_u = static_cast<int>(c);

@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-#include "core/point_io.h"
+#include "core/number_text.h"
 #include "nc-gen/post.h"
 
 namespace formloop::nc {

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <utility>
 
-#include "core/point_io.h"
+#include "core/number_text.h"
 #include "nc-gen/post_text.h"
 
 namespace formloop::nc {
@@ -160,6 +160,12 @@ void ProgramText::Emit(const std::string& text, bool numbered) {
 }
 
 void ProgramText::Raw(const std::string& text) { Emit(text, false); }
+void ProgramText::Continuation(const std::string& text) {
+  const Numbering numbering = numbering_;
+  numbering_ = Numbering::kBlocks;  // unnumbered in either scheme: Emit(.., false) adds no number for kBlocks
+  Emit("    " + text, false);
+  numbering_ = numbering;
+}
 void ProgramText::Block(const std::string& text) { Emit(text, true); }
 
 void ProgramText::Comment(const std::string& text) {

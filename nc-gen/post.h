@@ -27,7 +27,13 @@
 #include "nc-gen/moves.h"
 #include "nc-gen/toolpath.h"
 
+namespace formloop::metrology {
+struct ProbingPlan;
+}  // namespace formloop::metrology
+
 namespace formloop::nc {
+
+struct ProbeProgramOptions;  // nc-gen/probe_program.h
 
 struct MachineLimits {
   Eigen::Vector3d travel_min_mm{-300, -300, -200};  // tip position limits in the part (work) frame
@@ -74,6 +80,10 @@ class PostDialect {
   // The list has passed CheckMoveList and the options Validate when this is called.
   virtual Result<std::string> Format(const MoveList& list, const PostOptions& options) const = 0;
   virtual Result<std::vector<ProgramMove>> Read(const std::string& text, const std::string& source) const = 0;
+  // The dialect's probing program for a plan (nc-gen/probe_program.h: the format, its conventions and
+  // what is checked before any text).
+  virtual Result<std::string> FormatProbing(const metrology::ProbingPlan& plan,
+                                            const ProbeProgramOptions& options) const = 0;
 };
 
 // The registry: every dialect by name, in a fixed order.

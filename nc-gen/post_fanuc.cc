@@ -6,10 +6,19 @@
 // <= 3; F and S are whole mm/min and rpm. Codes written: G21 mm, G90 absolute, G17 XY plane, G40/G49/G80
 // cancel radius compensation, length compensation and canned cycles, G00/G01, T.. M06, S.. M03, M05, M30.
 
+// Probing (FormatProbing):
+// Fanuc 0i/30i: G31 is the one-shot skip function (group 00): a linear move at F that stops when the skip
+//   signal (probe) arrives, the rest of the move is discarded, and the position at the signal is stored in
+//   system variables #5061..#5063 (axes 1..3, workpiece coordinate system). Without a signal the move ends
+//   at the programmed point and #5061.. hold that point: no alarm, so a miss shows up as a result equal to
+//   the search end. Results are copied into common variables (#100..#199 are cleared at power-off,
+//   #500..#999 are kept). Comments upper case in parentheses, '%' and the O-number as in the cutting post.
+//
+
 #include <cctype>
 #include <string>
 
-#include "core/point_io.h"
+#include "core/number_text.h"
 #include "nc-gen/post.h"
 #include "nc-gen/post_text.h"
 
@@ -65,6 +74,52 @@ class FanucPost : public PostDialect {
     static const WordDialect kDialect{
         .name = "Fanuc", .paren_comments = true, .g_codes = {0, 1, 17, 21, 40, 49, 80, 90}, .other_letters = "NMSTO"};
     return ReadWordAddress(text, source, kDialect);
+  }
+
+  Result<std::string> FormatProbing(const metrology::ProbingPlan& plan,
+                                    const ProbeProgramOptions& options) const override {
+    FL_RETURN_IF_ERROR(options.post.Validate());
+    const long base = options.fanuc_result_base;
+    const long last = base + 3 * static_cast<long>(plan.points.size()) - 1;
+    const bool volatile_range = base >= 100 && base <= 199;
+    if (!(volatile_range || (base >= 500 && base <= 999))) {
+      return Status::BadInput(Where{.field = "probe.fanuc_result_base"},
+                              "#" + std::to_string(base) + " is not a common macro variable",
+                              "use a base in #100..#199 or #500..#999");
+    }
+    if (last > (volatile_range ? 199 : 999)) {
+      return Status::BadInput(Where{.field = "probe.fanuc_result_base"},
+                              std::to_string(plan.points.size()) + " probe points need #" + std::to_string(base) +
+                                  "..#" + std::to_string(last) + ", beyond #" + (volatile_range ? "199" : "999") +
+                                  "; no probing program was written",
+                              "lower the base or split the plan");
+    }
+    const auto stations = ProbeStations(plan, options);
+    if (!stations.ok()) return stations.status();
+    ProgramText w(options.post, Numbering::kBlocks, "(", ")");
+    w.Raw("%");
+    const std::string number = std::to_string(options.post.program_number);
+    w.Raw("O" + std::string(4 - number.size(), '0') + number);
+    w.Comment(FanucComment(options.post.title));
+    w.Comment(FanucComment(ProbeHeader(options, plan.points.size())));
+    w.Comment(FanucComment("results X Y Z per point in macro variables " + std::to_string(base) + " - " +
+                           std::to_string(last)));
+    w.Block("G21 G90 G17 G94 G40 G49 G80");
+    w.Block("G00 Z" + w.Num(options.safe_z_mm));
+    const std::string feed = " F" + FormatFixed(options.probe_feed_mm_per_min, 0);
+    long var = base;
+    for (const ProbeStation& s : *stations) {
+      w.Comment(FanucComment("point " + std::to_string(s.id)));
+      w.Block("G00 X" + w.Num(s.start.x()) + " Y" + w.Num(s.start.y()));
+      w.Block("G00 Z" + w.Num(s.start.z()));
+      w.Block("G31 " + XyzWords(w, s.target) + feed);
+      for (int axis = 0; axis < 3; ++axis) w.Block("#" + std::to_string(var++) + "=#" + std::to_string(5061 + axis));
+      w.Block("G00 " + XyzWords(w, s.start));
+      w.Block("G00 Z" + w.Num(options.safe_z_mm));
+    }
+    w.Block("M30");
+    w.Raw("%");
+    return w.Finish();
   }
 };
 

@@ -10,18 +10,42 @@
 //   - "; text" is a comment line.
 // BLK FORM (the graphics' workpiece blank) is not written: the control does not need it to run.
 
+// Probing (FormatProbing):
+// Heidenhain TNC 640: TCH PROBE 444 (PROBING IN 3-D), from the TNC 640 "Programming of measuring cycles
+//   for workpieces and tools" manual as far as recalled here; the parameter numbers below are NOT checked
+//   against the manual of a particular software version and must be verified on the control before use:
+//     Q263 / Q264 / Q294   nominal point on the surface, 1st / 2nd / 3rd axis (the cycle adds the stylus
+//                          radius itself, so the surface point, not the ball centre, is programmed)
+//     Q581 / Q582 / Q583   components of the surface normal (the probing direction is −n)
+//     Q320                 set-up clearance along the normal (added to SET_UP of the touch-probe table)
+//     Q260                 clearance height (absolute, in the probe axis)
+//     Q281                 measuring log (0 none, 1 log file TCHPR444.TXT)
+//   The brief that started this post named Q265 for the 3rd axis and Q271..Q273 for the normal; this post
+//   uses Q294 and Q581..Q583, which is the recollection of the cycle 444 screen, not a verified fact. The
+//   cycle's other parameters (tolerances Q280, program stop Q309, tool monitoring Q330, ...) are not
+//   written; a control that needs them refuses the block when the program is loaded, it does not move.
+//   The probing feed and the search distance come from the touch-probe table (F, DIST), not the program;
+//   probe_feed_mm_per_min and search_mm are still checked against the limits like in the other dialects.
+//   M30 rides on the last retract (an L block), as in the cutting post. The cycle block is written in the
+//   TNC 640 multi-line form: the block's first line carries the number, each parameter follows on an
+//   unnumbered indented line "Q263=+1.000 ;1ST POINT 1ST AXIS", and lines end with " ~" while the block
+//   continues (the older iTNC form has no "~"; which form a given software version wants is unverified).
+//
+
 #include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <sstream>
 #include <string>
 
-#include "core/point_io.h"
+#include "core/number_text.h"
 #include "nc-gen/post.h"
 #include "nc-gen/post_text.h"
 
 namespace formloop::nc::internal {
 namespace {
+
+std::string WithSign(const std::string& s) { return s.front() == '-' ? s : "+" + s; }
 
 std::string Signed(const ProgramText& w, double value) {
   const std::string s = w.Num(value);
@@ -153,6 +177,44 @@ class HeidenhainPost : public PostDialect {
     }
     if (!ended) return Status::BadInput(Where{.file = source, .line = line_no}, "no END PGM line", fix);
     return moves;
+  }
+
+  Result<std::string> FormatProbing(const metrology::ProbingPlan& plan,
+                                    const ProbeProgramOptions& options) const override {
+    FL_RETURN_IF_ERROR(options.post.Validate());
+    const auto stations = ProbeStations(plan, options);
+    if (!stations.ok()) return stations.status();
+    const int dec = options.post.decimals;
+    auto num = [dec](double v) { return WithSign(FormatFixed(v, dec)); };
+    auto unit = [](double v) { return WithSign(FormatFixed(v, 6)); };
+    ProgramText w(options.post, Numbering::kAllLines, "; ", "");
+    w.Block("BEGIN PGM " + options.post.program_name + " MM");
+    w.Comment(PlainComment(options.post.title));
+    w.Comment("touch probe ball radius " + FormatFixed(options.ball_radius_mm, 4) +
+              " mm; cycle 444 at the nominal surface point along -n; " + std::to_string(plan.points.size()) +
+              " points");
+    // formloop has not checked these Q-parameter numbers against a TNC 640 manual: the program says
+    // so, so that nobody runs it on a machine before a dry run and a check of the cycle on the control.
+    w.Comment("CHECK BEFORE USE: cycle 444 Q-parameter numbers not verified against the TNC manual; dry run first");
+    w.Block("L Z" + num(options.safe_z_mm) + " R0 FMAX");
+    for (const ProbeStation& s : *stations) {
+      w.Comment("point " + std::to_string(s.id));
+      w.Block("L X" + num(s.above.x()) + " Y" + num(s.above.y()) + " R0 FMAX");
+      w.Block("TCH PROBE 444 PROBING IN 3-D ~");
+      w.Continuation("Q263=" + num(s.surface.x()) + " ;1ST POINT 1ST AXIS ~");
+      w.Continuation("Q264=" + num(s.surface.y()) + " ;1ST POINT 2ND AXIS ~");
+      w.Continuation("Q294=" + num(s.surface.z()) + " ;1ST POINT 3RD AXIS ~");
+      w.Continuation("Q581=" + unit(s.normal.x()) + " ;NORMAL VECTOR 1ST AXIS ~");
+      w.Continuation("Q582=" + unit(s.normal.y()) + " ;NORMAL VECTOR 2ND AXIS ~");
+      w.Continuation("Q583=" + unit(s.normal.z()) + " ;NORMAL VECTOR 3RD AXIS ~");
+      w.Continuation("Q320=" + num(options.clearance_mm) + " ;SET-UP CLEARANCE ~");
+      w.Continuation("Q260=" + num(options.safe_z_mm) + " ;CLEARANCE HEIGHT ~");
+      w.Continuation("Q281=+1 ;MEASURING LOG");
+      // M30 (program end) rides on the last positioning block, as in the cutting post.
+      w.Block("L Z" + num(options.safe_z_mm) + " R0 FMAX" + (&s == &stations->back() ? " M30" : ""));
+    }
+    w.Block("END PGM " + options.post.program_name + " MM");
+    return w.Finish();
   }
 };
 

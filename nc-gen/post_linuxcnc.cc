@@ -2,9 +2,10 @@
 // may not nest; '%' lines bracket a program; N words are optional; G64 P sets the path blending
 // tolerance). Accepted by LinuxCNC's own rs274 interpreter (tests/nc-gen/post_test.cc).
 
+#include <sstream>
 #include <string>
 
-#include "core/point_io.h"
+#include "core/number_text.h"
 #include "nc-gen/post.h"
 #include "nc-gen/post_text.h"
 
@@ -54,6 +55,33 @@ class LinuxCncPost : public PostDialect {
                                       .g_codes = {0, 1, 17, 21, 40, 49, 64, 80, 90, 94},
                                       .other_letters = "NMSTP"};
     return ReadWordAddress(text, source, kDialect);
+  }
+
+  // G38.2 probing toward the search end; the results are logged between (PROBEOPEN file) and (PROBECLOSE).
+  Result<std::string> FormatProbing(const metrology::ProbingPlan& plan,
+                                    const ProbeProgramOptions& options) const override {
+    const auto stations = ProbeStations(plan, options);
+    if (!stations.ok()) return stations.status();
+    const int dec = options.post.decimals;
+    auto xyz = [dec](const Eigen::Vector3d& p) {
+      return "X" + FormatFixed(p.x(), dec) + " Y" + FormatFixed(p.y(), dec) + " Z" + FormatFixed(p.z(), dec);
+    };
+    std::ostringstream out;
+    out << "%\n(" << CommentText(options.post.title) << ")\n";
+    out << "(" << ProbeHeader(options, plan.points.size()) << ")\n";
+    out << "G21 G90 G17 G94 G40 G49 G80\n";
+    out << "G0 Z" << FormatFixed(options.safe_z_mm, dec) << "\n";
+    out << "(PROBEOPEN " << CommentText(options.results_file) << ")\n";
+    for (const ProbeStation& s : *stations) {
+      out << "(point " << s.id << ")\n";
+      out << "G0 X" << FormatFixed(s.start.x(), dec) << " Y" << FormatFixed(s.start.y(), dec) << "\n";
+      out << "G0 Z" << FormatFixed(s.start.z(), dec) << "\n";
+      out << "G38.2 " << xyz(s.target) << " F" << FormatFixed(options.probe_feed_mm_per_min, 0) << "\n";
+      out << "G0 " << xyz(s.start) << "\n";
+      out << "G0 Z" << FormatFixed(options.safe_z_mm, dec) << "\n";
+    }
+    out << "(PROBECLOSE)\nM30\n%\n";
+    return out.str();
   }
 };
 

@@ -10,6 +10,7 @@
 
 #include "core/status.h"
 #include "nc-gen/post.h"
+#include "nc-gen/probe_program.h"
 
 namespace formloop::nc::internal {
 
@@ -25,6 +26,9 @@ class ProgramText {
   void Raw(const std::string& text);      // never numbered in kBlocks ('%', "O1234", ...)
   void Block(const std::string& text);    // an NC block
   void Comment(const std::string& text);  // sanitised text; wrapped at spaces to fit the line length
+  // A continuation line of the block before, never numbered, indented by four spaces (Heidenhain's
+  // multi-line cycle blocks).
+  void Continuation(const std::string& text);
   // The coordinate value with PostOptions::decimals; never "-0.000".
   std::string Num(double value) const;
   // The program, or the first line-length refusal.
@@ -66,6 +70,20 @@ struct WordDialect {
 
 Result<std::vector<ProgramMove>> ReadWordAddress(const std::string& text, const std::string& source,
                                                  const WordDialect& dialect);
+
+// One probe point's positions (ball centre) for the probing posts (nc-gen/probe_program.h): above it at
+// safe Z, the clearance start along +n, the search end along −n.
+struct ProbeStation {
+  std::int64_t id = 0;
+  Eigen::Vector3d surface, normal, above, start, target;
+};
+// Every station of the plan, each position checked against the limits (SafetyLimit names the point id),
+// after the options and the probe feed.
+Result<std::vector<ProbeStation>> ProbeStations(const metrology::ProbingPlan& plan, const ProbeProgramOptions& options);
+// "stylus ball radius R mm; programmed point = ball centre; N points".
+std::string ProbeHeader(const ProbeProgramOptions& options, std::size_t points);
+// "X.. Y.. Z.." with the program's decimals.
+std::string XyzWords(const ProgramText& w, const Eigen::Vector3d& p);
 
 // Registry entries (one per dialect file).
 std::unique_ptr<PostDialect> MakeLinuxCncPost();

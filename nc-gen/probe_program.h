@@ -1,5 +1,7 @@
 #pragma once
-// Probing programs from a probing plan (spec/nc-gen.md §5), in the four post dialects. Every dialect has
+// Probing programs from a probing plan (spec/nc-gen.md §5), in the four post dialects: each dialect's
+// probing format is part of its post (PostDialect::FormatProbing, nc-gen/post_<dialect>.cc, where its
+// conventions and sources are written down), so a new dialect brings its probing with it. Every dialect has
 // the same structure: per point a rapid at safe Z over a clearance point that lies clearance_mm above the
 // surface along +n, down to it, a probing move along −n that ends search_mm beyond the nominal surface, a
 // retract along +n and up to safe Z, and the point id in a comment ("point <id>"), so logs map back to the
@@ -7,8 +9,7 @@
 // written, the probe feed and every position (above, clearance, search end) of every point are checked
 // against MachineLimits; a refusal names the probe point id and no program is returned.
 //
-//   "linuxcnc"   G38.2 probing, results logged between (PROBEOPEN file) and (PROBECLOSE)
-//                (PostLinuxCncProbing; unchanged).
+//   "linuxcnc"   G38.2 probing, results logged between (PROBEOPEN file) and (PROBECLOSE).
 //   "fanuc"      G31 skip function; after each probe the skip position #5061..#5063 (workpiece frame) is
 //                copied into common variables #[base+3k], #[base+3k+1], #[base+3k+2] for the k-th point
 //                (k from 0 in plan order). The range must lie in #100..#199 or #500..#999.
@@ -43,7 +44,7 @@ struct ProbeProgramOptions {
   Status Validate() const;
 };
 
-// The dialects PostProbing knows, in registry order: linuxcnc, fanuc, heidenhain, sinumerik.
+// The dialects PostProbing knows: every post (PostNames()), in registry order.
 std::vector<std::string> ProbingDialectNames();
 
 // The probing program for `plan` in `dialect` (a name of PostNames()); unknown dialects are refused.

@@ -11,7 +11,6 @@
 #include <Eigen/LU>
 #include <Eigen/Cholesky>
 
-#include "core/point_io.h"
 
 namespace formloop::nc {
 

@@ -2,13 +2,12 @@
 
 #include <cmath>
 #include <map>
-#include <sstream>
 #include <vector>
 
 #include "core/atomic_file.h"
+#include "core/csv.h"
 #include "core/json_io.h"
-#include "core/point_io.h"
-#include "nc-gen/csv_cells.h"
+#include "core/number_text.h"
 
 namespace formloop::nc {
 namespace {
@@ -95,18 +94,16 @@ Status WriteToolpathFile(const std::filesystem::path& path, const Toolpath& t) {
 
 Result<Toolpath> ParseToolpath(const std::string& text, const std::string& source) {
   Toolpath t;
-  std::istringstream in(text);
-  std::string line;
+  CsvReader rows(text, /*comments=*/true);
   long number = 0;
   bool have_options = false;
   std::map<std::string, std::size_t> column;
   std::size_t columns = 0;
   int last_pass = -1;
-  while (std::getline(in, line)) {
-    ++number;
-    const std::string s = internal::TrimCell(line);
-    if (s.empty()) continue;
-    if (s[0] == '#') {
+  while (rows.Next()) {
+    number = rows.line_number();
+    const std::string s(rows.line());
+    if (rows.is_comment()) {
       const auto json_after = [&](const char* prefix) -> Result<nlohmann::json> {
         return ParseJson(s.substr(std::string(prefix).size()), source + ":" + std::to_string(number));
       };
@@ -122,9 +119,9 @@ Result<Toolpath> ParseToolpath(const std::string& text, const std::string& sourc
       }
       continue;
     }
-    const std::vector<std::string> cells = internal::SplitComma(s);
+    const std::vector<std::string> cells(rows.cells().begin(), rows.cells().end());
     if (columns == 0) {
-      for (std::size_t c = 0; c < cells.size(); ++c) column[internal::TrimCell(cells[c])] = c;
+      for (std::size_t c = 0; c < cells.size(); ++c) column[cells[c]] = c;
       for (const char* name : kColumns) {
         if (!column.count(name)) {
           return Status::BadInput(Where{.file = source, .line = number, .field = name}, "the header lacks this column",
@@ -138,7 +135,7 @@ Result<Toolpath> ParseToolpath(const std::string& text, const std::string& sourc
       return Status::BadInput(Where{.file = source, .line = number},
                               "has " + std::to_string(cells.size()) + " fields, the header " + std::to_string(columns));
     }
-    const auto cell = [&](const char* name) { return internal::TrimCell(cells[column[name]]); };
+    const auto cell = [&](const char* name) { return cells[column[name]]; };
     const auto num = [&](const char* name, double* out) -> Status {
       if (!ParseDouble(cell(name), out) || !std::isfinite(*out)) {
         return Status::BadInput(Where{.file = source, .line = number, .field = name},

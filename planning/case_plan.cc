@@ -5,23 +5,11 @@
 
 #include <fmt/format.h>
 
+#include "core/json_io.h"
 #include "core/log.h"
 #include "metrology/probe.h"
 
 namespace formloop::planning {
-namespace {
-
-double NumberAt(const nlohmann::json& j, std::initializer_list<const char*> path, double fallback) {
-  const nlohmann::json* node = &j;
-  for (const char* key : path) {
-    if (!node->is_object() || !node->contains(key)) return fallback;
-    node = &(*node)[key];
-  }
-  return node->is_number() ? node->get<double>() : fallback;
-}
-
-}  // namespace
-
 std::string ToolKey(double radius_mm) { return fmt::format("ball r{:g}", radius_mm); }
 
 nc::BallEndTool NearestTool(const nc::BallEndTool& own, const std::vector<nc::BallEndTool>& magazine,
@@ -38,32 +26,44 @@ nc::BallEndTool NearestTool(const nc::BallEndTool& own, const std::vector<nc::Ba
   return best;
 }
 
-nc::ToolpathOptions PlanFromCase(const kb::CaseRecord& record, const PartPlanBasis& part, nlohmann::json* notes) {
+Result<nc::ToolpathOptions> PlanFromCase(const kb::CaseRecord& record, const PartPlanBasis& part,
+                                         nlohmann::json* notes) {
   nc::ToolpathOptions plan = part.plan;
-  const nlohmann::json& m = record.manufacturing;
+  const JsonFields m(record.manufacturing, "case " + record.uid, "manufacturing.");
   nlohmann::json from_case = nlohmann::json::object();
-  if (m.contains("tools") && m["tools"].is_array() && !m["tools"].empty()) {
-    const double r = NumberAt(m["tools"][0], {"radius_mm"}, plan.tool.radius_mm);
+  std::vector<JsonFields> tools;
+  if (m.Has("tools")) FL_RETURN_IF_ERROR(m.ObjectArray("tools", &tools));
+  if (!tools.empty()) {
+    double r = plan.tool.radius_mm;
+    FL_RETURN_IF_ERROR(tools.front().OptionalNumber("radius_mm", &r));
     plan.tool = NearestTool(part.plan.tool, part.magazine, r);
     from_case["tool"] = {{"case_radius_mm", r}, {"magazine_tool", plan.tool.number},
                          {"radius_mm", plan.tool.radius_mm}};
   }
-  const double scallop = NumberAt(m, {"strategy", "scallop_um"}, -1);
+  std::optional<JsonFields> strategy, feeds;
+  FL_RETURN_IF_ERROR(m.Object("strategy", &strategy));
+  FL_RETURN_IF_ERROR(m.Object("feeds", &feeds));
+  double scallop = -1, angle = std::nan(""), feed = -1, rpm = -1;
+  if (strategy) {
+    FL_RETURN_IF_ERROR(strategy->OptionalNumber("scallop_um", &scallop));
+    FL_RETURN_IF_ERROR(strategy->OptionalNumber("raster_angle_deg", &angle));
+  }
+  if (feeds) {
+    FL_RETURN_IF_ERROR(feeds->OptionalNumber("feed_mm_per_min", &feed));
+    FL_RETURN_IF_ERROR(feeds->OptionalNumber("spindle_rpm", &rpm));
+  }
   if (scallop > 0) {
     plan.scallop_um = scallop;
     from_case["scallop_um"] = scallop;
   }
-  const double angle = NumberAt(m, {"strategy", "raster_angle_deg"}, std::nan(""));
   if (std::isfinite(angle)) {
     plan.raster_angle_deg = angle;
     from_case["raster_angle_deg"] = angle;
   }
-  const double feed = NumberAt(m, {"feeds", "feed_mm_per_min"}, -1);
   if (feed > 0) {
     plan.feed_mm_per_min = std::min(feed, part.limits.max_feed_mm_per_min);
     from_case["feed_mm_per_min"] = plan.feed_mm_per_min;
   }
-  const double rpm = NumberAt(m, {"feeds", "spindle_rpm"}, -1);
   if (rpm > 0) {
     plan.spindle_rpm = std::min(rpm, part.limits.max_spindle_rpm);
     from_case["spindle_rpm"] = plan.spindle_rpm;
@@ -102,7 +102,7 @@ Result<PlanChoice> ChoosePlan(const PlanRequest& request) {
     return c;
   }
   nlohmann::json notes;
-  c.plan = PlanFromCase(*r.best, r.part, &notes);
+  FL_ASSIGN_OR_RETURN(c.plan, PlanFromCase(*r.best, r.part, &notes));
   c.learned = LearnedModelOf(*r.best, r.machine, ToolKey(c.plan.tool.radius_mm), r.material);
   c.source = "case " + r.best->uid;
   c.precompensation_scale = c.learned && r.learn ? 1.0 : 0.0;

@@ -47,8 +47,9 @@ nc::BallEndTool NearestTool(const nc::BallEndTool& own, const std::vector<nc::Ba
 
 // The part's plan with the case's choices: tool (nearest in the magazine), scallop target, raster angle,
 // feed and spindle speed (capped by the limits). `notes` lists what came from the case and what stayed
-// the part's.
-nc::ToolpathOptions PlanFromCase(const kb::CaseRecord& record, const PartPlanBasis& part, nlohmann::json* notes);
+// the part's. BadInput naming the case when a field it gives has the wrong type.
+Result<nc::ToolpathOptions> PlanFromCase(const kb::CaseRecord& record, const PartPlanBasis& part,
+                                         nlohmann::json* notes);
 
 // The case's learned model for machine / tool / material (simulation.effect_models[].model), if stored.
 std::optional<sim::Model> LearnedModelOf(const kb::CaseRecord& record, const std::string& machine,

@@ -6,7 +6,7 @@
 
 #include <Eigen/Geometry>
 
-#include "core/point_io.h"
+#include "core/number_text.h"
 #include "core/random.h"
 #include "nc-gen/cutter_locations.h"
 #include "nc-gen/moves.h"

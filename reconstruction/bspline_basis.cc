@@ -19,7 +19,7 @@ namespace {
 // OpenCASCADE's limit (Geom_BSplineSurface::MaxDegree()); nothing here needs more.
 constexpr int kMaxDegree = 25;
 
-std::string Num(double value) { return NumberText(value, 12); }
+std::string Num(double value) { return FormatSignificant(value, 12); }
 
 Status CheckDegree(int degree) {
   if (degree < 1 || degree > kMaxDegree) {

@@ -63,7 +63,7 @@ constexpr int kNeighbours = 16;
 // Start grid of the one-point Project(surface, p).
 constexpr int kOneShotGrid = 33;
 
-std::string Num(double value) { return NumberText(value, 10); }
+std::string Num(double value) { return FormatSignificant(value, 10); }
 
 Vector3d ToEigen(const gp_XYZ& p) { return {p.X(), p.Y(), p.Z()}; }
 

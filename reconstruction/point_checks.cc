@@ -4,22 +4,13 @@
 #include <cmath>
 #include <locale>
 #include <numeric>
-#include <sstream>
 
 #include <Eigen/Eigenvalues>
 
 namespace formloop::recon {
 
-std::string NumberText(double value, int precision) {
-  std::ostringstream out;
-  out.imbue(std::locale::classic());
-  out.precision(precision);
-  out << value;
-  return out.str();
-}
-
 std::string PointText(const Eigen::Vector3d& p) {
-  return "(" + NumberText(p.x(), 10) + ", " + NumberText(p.y(), 10) + ", " + NumberText(p.z(), 10) + ") mm";
+  return "(" + FormatSignificant(p.x(), 10) + ", " + FormatSignificant(p.y(), 10) + ", " + FormatSignificant(p.z(), 10) + ") mm";
 }
 
 Status CheckFiniteAndDistinct(const std::vector<Eigen::Vector3d>& points) {
@@ -30,7 +21,7 @@ Status CheckFiniteAndDistinct(const std::vector<Eigen::Vector3d>& points) {
       if (!std::isfinite(points[k](axis))) {
         return Status::BadInput(Where{.field = "points[" + std::to_string(k) + "]." + kAxis[axis]},
                                 "point " + std::to_string(k) + " has " + kAxis[axis] + " = " +
-                                    NumberText(points[k](axis)) + ": the point is not finite",
+                                    FormatSignificant(points[k](axis)) + ": the point is not finite",
                                 "remove or re-measure that point");
       }
     }
@@ -82,8 +73,8 @@ Status CheckSpansASurface(const std::vector<Eigen::Vector3d>& points) {
   }
   if (extent(1) < 1e-6 * extent(2)) {
     return Status::BadInput(Where{.field = "points"},
-                            "the points are collinear (principal extents " + NumberText(extent(2)) + " and " +
-                                NumberText(extent(1)) + " mm): they determine no surface",
+                            "the points are collinear (principal extents " + FormatSignificant(extent(2)) + " and " +
+                                FormatSignificant(extent(1)) + " mm): they determine no surface",
                             "the points must sample a surface, not a line");
   }
   return Status::Ok();

@@ -8,12 +8,11 @@
 
 #include <Eigen/Core>
 
+#include "core/number_text.h"
 #include "core/status.h"
 
 namespace formloop::recon {
 
-// Locale-free "%.{precision}g".
-std::string NumberText(double value, int precision = 6);
 // "(x, y, z) mm" with 10 significant digits.
 std::string PointText(const Eigen::Vector3d& p);
 

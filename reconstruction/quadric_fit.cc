@@ -22,7 +22,7 @@ using Eigen::Vector3d;
 constexpr double kEps = std::numeric_limits<double>::epsilon();
 constexpr const char* kAxisName[3] = {"x", "y", "z"};
 
-std::string Num(double value, int precision = 6) { return NumberText(value, precision); }
+std::string Num(double value, int precision = 6) { return FormatSignificant(value, precision); }
 
 std::string TupleText(const Vector3d& v, int precision) {
   return "(" + Num(v.x(), precision) + ", " + Num(v.y(), precision) + ", " + Num(v.z(), precision) + ")";

@@ -7,8 +7,8 @@
 #include <cmath>
 #include <functional>
 #include <numbers>
-#include <sstream>
 
+#include "core/number_text.h"
 #include "reconstruction/analytic_surface.h"
 
 namespace formloop::recon {
@@ -29,12 +29,7 @@ SurfaceDerivatives GraphDerivatives(double x, double y, double f, double fx, dou
   return d;
 }
 
-std::string Num(double value) {
-  std::ostringstream out;
-  out.imbue(std::locale::classic());
-  out << value;
-  return out.str();
-}
+std::string Num(double value) { return FormatSignificant(value); }
 
 std::string DomainText(const ParamDomain& d, const char* u, const char* v) {
   return std::string(u) + " in [" + Num(d.u_min) + ", " + Num(d.u_max) + "], " + v + " in [" + Num(d.v_min) + ", " +

@@ -94,7 +94,7 @@ constexpr double kCorrectionStall = 1e-3;
 constexpr double kToleranceMatch = 5e-3;
 
 // Messages print numbers like the other fits.
-std::string Num(double value, int precision = 6) { return NumberText(value, precision); }
+std::string Num(double value, int precision = 6) { return FormatSignificant(value, precision); }
 
 nlohmann::json JsonVector(const Vector3d& v) { return {v.x(), v.y(), v.z()}; }
 

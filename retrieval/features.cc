@@ -5,7 +5,7 @@
 #include <cmath>
 #include <numbers>
 
-#include "core/point_io.h"
+#include "core/number_text.h"
 
 namespace formloop::retrieval {
 namespace {

@@ -11,6 +11,8 @@
 #include <set>
 #include <utility>
 
+#include "core/json_io.h"
+#include "core/number_text.h"
 #include "core/random.h"
 
 namespace formloop::retrieval {
@@ -29,11 +31,7 @@ constexpr double kNoSpread = 1e-24;
 // Offset scale when the parent's inputs have no spread at all (z-score units).
 constexpr double kDegenerateOffset = 1e-3;
 
-std::string Num(double x) {
-  char buffer[32];
-  std::snprintf(buffer, sizeof buffer, "%.6g", x);
-  return buffer;
-}
+std::string Num(double x) { return FormatSignificant(x, 6); }
 
 Status Bad(const std::string& field, const std::string& what, const std::string& fix = "") {
   return Status::BadInput(Where{.field = field}, "ghsom: " + what, fix);
@@ -294,62 +292,46 @@ Status CheckMatrix(const Eigen::MatrixXd& x, const std::string& what) {
 
 // ---- JSON reading with paths ----
 
-Result<const json*> Field(const json& j, const std::string& path, const char* key) {
-  if (!j.is_object()) return Bad(path, "expected an object");
-  const auto it = j.find(key);
-  if (it == j.end()) return Bad(path.empty() ? key : path + "." + key, "missing");
-  return &*it;
-}
+// Typed reading of a stored map through core's JsonFields; messages name the key path ("maps[2].rows").
+constexpr const char* kSource = "ghsom";
+
+JsonFields FieldsAt(const json& j, const std::string& path) { return JsonFields(j, kSource, path.empty() ? "" : path + "."); }
 
 std::string Join(const std::string& path, const char* key) { return path.empty() ? key : path + "." + key; }
 
+Result<const json*> Field(const json& j, const std::string& path, const char* key) {
+  if (!j.is_object()) return Bad(path, "expected an object");
+  const auto it = j.find(key);
+  if (it == j.end()) return Bad(Join(path, key), "missing");
+  return &*it;
+}
+
 Status ReadDouble(const json& j, const std::string& path, const char* key, double* out) {
-  FL_ASSIGN_OR_RETURN(const json* v, Field(j, path, key));
-  if (!v->is_number()) return Bad(Join(path, key), "expected a number");
-  *out = v->get<double>();
-  if (!std::isfinite(*out)) return Bad(Join(path, key), "not finite");
-  return Status::Ok();
+  return FieldsAt(j, path).Number(key, out);
 }
 
 Status ReadInt(const json& j, const std::string& path, const char* key, int* out) {
-  FL_ASSIGN_OR_RETURN(const json* v, Field(j, path, key));
-  if (!v->is_number_integer()) return Bad(Join(path, key), "expected an integer");
-  const auto value = v->get<std::int64_t>();
-  if (value < std::numeric_limits<int>::min() || value > std::numeric_limits<int>::max()) {
-    return Bad(Join(path, key), "integer out of range");
-  }
+  long long value = 0;
+  FL_RETURN_IF_ERROR(
+      FieldsAt(j, path).Integer(key, &value, std::numeric_limits<int>::min(), std::numeric_limits<int>::max()));
   *out = static_cast<int>(value);
   return Status::Ok();
 }
 
 Status ReadVector(const json& v, const std::string& path, Eigen::Index expected, Eigen::VectorXd* out) {
-  if (!v.is_array()) return Bad(path, "expected an array of numbers");
-  if (expected >= 0 && static_cast<Eigen::Index>(v.size()) != expected) {
-    return Bad(path, "expected " + std::to_string(expected) + " numbers, got " + std::to_string(v.size()));
-  }
-  out->resize(static_cast<Eigen::Index>(v.size()));
-  for (std::size_t k = 0; k < v.size(); ++k) {
-    if (!v[k].is_number()) return Bad(path + "[" + std::to_string(k) + "]", "expected a number");
-    (*out)(static_cast<Eigen::Index>(k)) = v[k].get<double>();
-    if (!std::isfinite((*out)(static_cast<Eigen::Index>(k)))) {
-      return Bad(path + "[" + std::to_string(k) + "]", "not finite");
-    }
-  }
+  std::vector<double> values;
+  FL_RETURN_IF_ERROR(ReadNumberArray(v, kSource, path, &values,
+                                     expected >= 0 ? std::optional<std::size_t>(static_cast<std::size_t>(expected))
+                                                   : std::nullopt));
+  *out = Eigen::Map<const Eigen::VectorXd>(values.data(), static_cast<Eigen::Index>(values.size()));
   return Status::Ok();
 }
 
 Status ReadIntArray(const json& v, const std::string& path, std::vector<int>* out) {
-  if (!v.is_array()) return Bad(path, "expected an array of integers");
-  out->clear();
-  out->reserve(v.size());
-  for (std::size_t k = 0; k < v.size(); ++k) {
-    if (!v[k].is_number_integer()) return Bad(path + "[" + std::to_string(k) + "]", "expected an integer");
-    const auto value = v[k].get<std::int64_t>();
-    if (value < std::numeric_limits<int>::min() || value > std::numeric_limits<int>::max()) {
-      return Bad(path + "[" + std::to_string(k) + "]", "integer out of range");
-    }
-    out->push_back(static_cast<int>(value));
-  }
+  std::vector<long long> values;
+  FL_RETURN_IF_ERROR(
+      ReadIntegerArray(v, kSource, path, &values, std::numeric_limits<int>::min(), std::numeric_limits<int>::max()));
+  out->assign(values.begin(), values.end());
   return Status::Ok();
 }
 
@@ -488,11 +470,7 @@ Result<GhsomOptions> GhsomOptions::FromJson(const nlohmann::json& j) {
   FL_RETURN_IF_ERROR(ReadDouble(j, p, "sigma_start_units", &o.sigma_start_units));
   FL_RETURN_IF_ERROR(ReadDouble(j, p, "sigma_end_units", &o.sigma_end_units));
   FL_RETURN_IF_ERROR(ReadDouble(j, p, "init_offset", &o.init_offset));
-  FL_ASSIGN_OR_RETURN(const json* seed_json, Field(j, p, "seed"));
-  if (!seed_json->is_number_unsigned() && !(seed_json->is_number_integer() && seed_json->get<std::int64_t>() >= 0)) {
-    return Bad("options.seed", "expected a non-negative integer");
-  }
-  o.seed = seed_json->get<std::uint64_t>();
+  FL_RETURN_IF_ERROR(FieldsAt(j, p).Unsigned("seed", &o.seed));
   FL_RETURN_IF_ERROR(o.Validate().WithContext("options"));
   return o;
 }

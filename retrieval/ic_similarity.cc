@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "core/point_io.h"
+#include "core/number_text.h"
 
 namespace formloop::retrieval {
 namespace {

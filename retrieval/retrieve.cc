@@ -2,8 +2,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <set>
 #include <unordered_map>
+
+#include "core/json_io.h"
+#include "core/log.h"
 
 namespace formloop::retrieval {
 namespace {
@@ -52,11 +56,9 @@ std::vector<const kb::CaseRecord*> WithDescriptor(const std::vector<kb::CaseReco
 }
 
 Result<Eigen::VectorXd> StoredInputWeights(const json& parameters, int dimension) {
-  if (!parameters.contains("input_weights")) return Eigen::VectorXd(Eigen::VectorXd::Ones(dimension));
-  const auto v = parameters["input_weights"].get<std::vector<double>>();
-  if (static_cast<int>(v.size()) != dimension) {
-    return Status::BadInput(Where{.field = "ghsom.parameters.input_weights"}, "size differs from the descriptor");
-  }
+  std::vector<double> v(static_cast<std::size_t>(dimension), 1.0);
+  const JsonFields f(parameters, "case library", "ghsom.parameters.");
+  FL_RETURN_IF_ERROR(f.OptionalNumberArray("input_weights", &v, static_cast<std::size_t>(dimension)));
   return Eigen::Map<const Eigen::VectorXd>(v.data(), dimension).eval();
 }
 
@@ -105,18 +107,12 @@ json DescriptorTransform::ToJson() const {
 }
 
 Result<DescriptorTransform> DescriptorTransform::FromJson(const json& j, int dimension) {
-  const Where where{.field = "ghsom.parameters.descriptor_transform.eps"};
-  if (!j.is_object() || !j.contains("eps") || !j["eps"].is_array() || static_cast<int>(j["eps"].size()) != dimension) {
-    return Status::BadInput(where, "expected an array of " + std::to_string(dimension) + " numbers");
-  }
+  const JsonFields f(j, "case library", "ghsom.parameters.descriptor_transform.");
+  FL_RETURN_IF_ERROR(f.CheckKnown({"kind", "eps"}));
+  std::vector<double> eps;
+  FL_RETURN_IF_ERROR(f.NumberArray("eps", &eps, static_cast<std::size_t>(dimension), {.min = 0}));
   DescriptorTransform t = Identity(dimension);
-  for (int k = 0; k < dimension; ++k) {
-    const json& v = j["eps"][static_cast<size_t>(k)];
-    if (!v.is_number() || !(v.get<double>() >= 0) || !std::isfinite(v.get<double>())) {
-      return Status::BadInput(where, "entry " + std::to_string(k) + " is not a finite number >= 0");
-    }
-    t.eps(k) = v.get<double>();
-  }
+  for (int k = 0; k < dimension; ++k) t.eps(k) = eps[static_cast<std::size_t>(k)];
   return t;
 }
 
@@ -164,20 +160,7 @@ GhsomOptions LibraryGhsomDefaults() {
 }
 
 Result<std::vector<kb::Rule>> RulesFromJson(const json& j, const std::string& source) {
-  const json& list = j.is_object() && j.contains("rules") ? j["rules"] : j;
-  if (!list.is_array()) return Status::BadInput(Where{.file = source, .field = "rules"}, "expected an array of rules");
-  std::vector<kb::Rule> rules;
-  for (const json& r : list) {
-    if (!r.is_object() || !r.contains("name") || !r["name"].is_string()) {
-      return Status::BadInput(Where{.file = source, .field = "rules"}, "each rule needs a string \"name\"");
-    }
-    kb::Rule rule;
-    rule.name = r["name"].get<std::string>();
-    rule.condition = r.value("condition", json::object());
-    rule.choice = r.value("choice", json::object());
-    rule.active = true;
-    rules.push_back(std::move(rule));
-  }
+  FL_ASSIGN_OR_RETURN(std::vector<kb::Rule> rules, kb::ParseRules(j, source));
   const auto problems = kb::RuleSetProblems(rules);
   if (!problems.empty()) return Status::BadInput(Where{.file = source}, problems.front());
   return rules;
@@ -686,6 +669,15 @@ Result<json> InsertCaseIntoGhsom(kb::Library& library, const kb::CaseRecord& rec
               {"new_maps", ins.new_maps},
               {"leaf_mqe", ins.leaf_mqe},
               {"depth_threshold", ins.threshold}};
+}
+
+Result<json> AddCaseAndGrowGhsom(kb::Library& library, const kb::CaseRecord& record, bool replace) {
+  FL_ASSIGN_OR_RETURN(long long changes_before, library.ChangeCounter());
+  FL_RETURN_IF_ERROR(library.AddCase(record, replace));
+  auto inserted = InsertCaseIntoGhsom(library, record, changes_before);
+  if (inserted.ok()) return std::move(inserted).value();
+  log::Warn("case {} not inserted into the GHSOM: {}", record.uid, inserted.status().ToString());
+  return json{{"inserted", false}, {"reason", inserted.status().ToString()}};
 }
 
 }  // namespace formloop::retrieval

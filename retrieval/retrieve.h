@@ -96,6 +96,12 @@ Result<nlohmann::json> TrainLibraryGhsom(kb::Library& library, const GhsomOption
 Result<nlohmann::json> InsertCaseIntoGhsom(kb::Library& library, const kb::CaseRecord& record,
                                            long long changes_before_add);
 
+// Adds (or, with `replace`, replaces) a case in its own transaction, then grows the GHSOM with it
+// (InsertCaseIntoGhsom). The case stays committed whatever the insertion does: a failed insertion only
+// leaves the GHSOM stale (kb check reports it); it is logged and returned as {"inserted": false, "reason"}.
+// `formloop kb add` and the retain step of `formloop run` both store cases this way.
+Result<nlohmann::json> AddCaseAndGrowGhsom(kb::Library& library, const kb::CaseRecord& record, bool replace);
+
 struct RetrieveOptions {
   int breadth = 1;
   int min_candidates = 1;

@@ -10,6 +10,9 @@
 #include <numbers>
 #include <sstream>
 
+#include "core/json_io.h"
+#include "core/number_text.h"
+
 namespace formloop::retrieval {
 namespace {
 
@@ -19,15 +22,24 @@ using nlohmann::json;
 #define FORMLOOP_STARTER_DATA_DIR "data"
 #endif
 
-Result<StarterRange> ReadRange(const json& j, const std::string& source, const std::string& field) {
-  if (!j.is_array() || j.size() != 2 || !j[0].is_number() || !j[1].is_number()) {
-    return Status::BadInput(Where{.file = source, .field = field}, "expected [lo, hi] numbers");
+// [lo, hi] with lo <= hi.
+Result<StarterRange> ReadRange(const JsonFields& f, const std::string& key) {
+  std::vector<double> v;
+  FL_RETURN_IF_ERROR(f.NumberArray(key, &v, 2));
+  if (!(v[0] <= v[1])) {
+    return Status::BadInput(Where{.file = f.source(), .field = f.Path(key)}, "expected [lo, hi] with lo <= hi");
   }
-  StarterRange r{j[0].get<double>(), j[1].get<double>()};
-  if (!(r.lo <= r.hi) || !std::isfinite(r.lo) || !std::isfinite(r.hi)) {
-    return Status::BadInput(Where{.file = source, .field = field}, "expected finite lo <= hi");
+  return StarterRange{v[0], v[1]};
+}
+
+// Every member of the object `key` as a range, by name.
+Status ReadRanges(const JsonFields& f, const std::string& key, std::map<std::string, StarterRange>* out) {
+  std::optional<JsonFields> ranges;
+  FL_RETURN_IF_ERROR(f.RequiredObject(key, &ranges));
+  for (const auto& [name, value] : ranges->json().items()) {
+    FL_ASSIGN_OR_RETURN((*out)[name], ReadRange(*ranges, name));
   }
-  return r;
+  return Status::Ok();
 }
 
 double Draw(Rng& rng, const StarterRange& r) { return r.lo + (r.hi - r.lo) * rng.Uniform(); }
@@ -65,12 +77,8 @@ json MaterialProperties(const std::string& material) {
   return {{"youngs_modulus_gpa", nullptr}, {"hardness_hv", nullptr}, {"specific_cutting_force_n_per_mm2", nullptr}};
 }
 
-// %.*g without the locale (std::to_chars), so the generated library is the same whatever LC_NUMERIC says.
-std::string Round(double x, int digits) {
-  char buf[64];
-  const auto r = std::to_chars(buf, buf + sizeof buf, x, std::chars_format::general, digits);
-  return std::string(buf, r.ptr);
-}
+// %.*g without the locale, so the generated library is the same whatever LC_NUMERIC says.
+std::string Round(double x, int digits) { return FormatSignificant(x, digits); }
 double R6(double x) {
   const std::string text = Round(x, 6);
   double value = 0;
@@ -90,41 +98,35 @@ Result<StarterSpec> StarterSpec::FromJson(const json& j, const std::string& sour
   if (!j.is_object() || j.value("format", "") != "formloop-starter-families") {
     return Status::BadInput(where, "not a starter families file (\"format\": \"formloop-starter-families\")");
   }
+  const JsonFields top(j, source);
   StarterSpec spec;
-  try {
-    spec.seed = j.at("seed").get<std::uint64_t>();
-    spec.cases_per_family = j.at("cases_per_family").get<int>();
-    spec.fit_samples = j.value("fit_samples", 21);
-    for (const json& f : j.at("families")) {
-      StarterFamily fam;
-      fam.name = f.at("name").get<std::string>();
-      fam.shape = f.at("shape").get<std::string>();
-      fam.kind = f.at("kind").get<std::string>();
-      const std::string at = "families." + fam.name;
-      for (const auto& [k, v] : f.at("params").items()) {
-        FL_ASSIGN_OR_RETURN(fam.params[k], ReadRange(v, source, at + ".params." + k));
-      }
-      fam.materials = f.at("materials").get<std::vector<std::string>>();
-      FL_ASSIGN_OR_RETURN(fam.tolerance_mm, ReadRange(f.at("tolerance_mm"), source, at + ".tolerance_mm"));
-      FL_ASSIGN_OR_RETURN(fam.ra_um, ReadRange(f.at("ra_um"), source, at + ".ra_um"));
-      FL_ASSIGN_OR_RETURN(fam.batch, ReadRange(f.at("batch"), source, at + ".batch"));
-      FL_ASSIGN_OR_RETURN(fam.tool_radius_mm, ReadRange(f.at("tool_radius_mm"), source, at + ".tool_radius_mm"));
-      FL_ASSIGN_OR_RETURN(fam.scallop_um, ReadRange(f.at("scallop_um"), source, at + ".scallop_um"));
-      fam.machine = f.at("machine").get<std::string>();
-      fam.strategy = f.at("strategy").get<std::string>();
-      for (const auto& [k, v] : f.at("effects").items()) {
-        FL_ASSIGN_OR_RETURN(fam.effects[k], ReadRange(v, source, at + ".effects." + k));
-      }
-      if (fam.materials.empty()) return Status::BadInput(Where{.file = source, .field = at}, "no materials");
-      spec.families.push_back(std::move(fam));
-    }
-  } catch (const json::exception& e) {
-    return Status::BadInput(where, std::string("malformed starter families file: ") + e.what());
+  long long cases = 0, fit_samples = spec.fit_samples;
+  FL_RETURN_IF_ERROR(top.Unsigned("seed", &spec.seed));
+  FL_RETURN_IF_ERROR(top.Integer("cases_per_family", &cases, 1, 100000));
+  FL_RETURN_IF_ERROR(top.OptionalInteger("fit_samples", &fit_samples, 4, recon::kMaxInterpolationSamples));
+  spec.cases_per_family = static_cast<int>(cases);
+  spec.fit_samples = static_cast<int>(fit_samples);
+  std::vector<JsonFields> families;
+  FL_RETURN_IF_ERROR(top.ObjectArray("families", &families));
+  for (const JsonFields& f : families) {
+    StarterFamily fam;
+    FL_RETURN_IF_ERROR(f.String("name", &fam.name));
+    FL_RETURN_IF_ERROR(f.String("shape", &fam.shape));
+    FL_RETURN_IF_ERROR(f.String("kind", &fam.kind));
+    FL_RETURN_IF_ERROR(ReadRanges(f, "params", &fam.params));
+    FL_RETURN_IF_ERROR(f.StringArray("materials", &fam.materials));
+    FL_ASSIGN_OR_RETURN(fam.tolerance_mm, ReadRange(f, "tolerance_mm"));
+    FL_ASSIGN_OR_RETURN(fam.ra_um, ReadRange(f, "ra_um"));
+    FL_ASSIGN_OR_RETURN(fam.batch, ReadRange(f, "batch"));
+    FL_ASSIGN_OR_RETURN(fam.tool_radius_mm, ReadRange(f, "tool_radius_mm"));
+    FL_ASSIGN_OR_RETURN(fam.scallop_um, ReadRange(f, "scallop_um"));
+    FL_RETURN_IF_ERROR(f.String("machine", &fam.machine));
+    FL_RETURN_IF_ERROR(f.String("strategy", &fam.strategy));
+    FL_RETURN_IF_ERROR(ReadRanges(f, "effects", &fam.effects));
+    if (fam.materials.empty()) return Status::BadInput(Where{.file = source, .field = f.Path("materials")}, "no materials");
+    spec.families.push_back(std::move(fam));
   }
-  if (spec.cases_per_family < 1 || spec.families.empty() || spec.fit_samples < 4 ||
-      spec.fit_samples > recon::kMaxInterpolationSamples) {
-    return Status::BadInput(where, "need cases_per_family >= 1, at least one family and 4 <= fit_samples <= 72");
-  }
+  if (spec.families.empty()) return Status::BadInput(Where{.file = source, .field = "families"}, "no families");
   return spec;
 }
 
@@ -321,26 +323,26 @@ nlohmann::json PartDescriptionToJson(const PartDescription& d) {
 Result<PartDescription> PartDescriptionFromJson(const nlohmann::json& j, const std::string& source) {
   PartDescription d;
   if (!j.is_object()) return Status::BadInput(Where{.file = source}, "the part description must be a JSON object");
-  try {
-    d.family_tag = j.value("family_tag", j.value("name", ""));
-    d.shape_family = j.at("shape_family").get<std::string>();
-    d.material = j.at("material").get<std::string>();
-    d.form_tolerance_mm = j.at("tolerance_mm").get<double>();
-    d.ra_um = j.contains("finish_ra_um") ? j.at("finish_ra_um").get<double>() : j.at("ra_um").get<double>();
-    d.batch_size = j.value("batch_size", 1);
-    d.machine_class = j.at("machine_class").get<std::string>();
-    if (j.contains("tool_radius_mm")) {
-      d.tool_radius_mm = j.at("tool_radius_mm").get<double>();
-    } else if (j.contains("tool") && j["tool"].contains("radius_mm")) {
-      d.tool_radius_mm = j["tool"]["radius_mm"].get<double>();
-    }
-    d.strategy = j.value("strategy", "");
-    d.raster_angle_deg = j.value("raster_angle_deg", 0.0);
-  } catch (const json::exception& e) {
-    return Status::BadInput(Where{.file = source},
-                            std::string("part description: ") + e.what(),
-                            "give shape_family, material, tolerance_mm, finish_ra_um, machine_class, tool_radius_mm");
+  const JsonFields f(j, source);
+  FL_RETURN_IF_ERROR(f.OptionalString("name", &d.family_tag));
+  FL_RETURN_IF_ERROR(f.OptionalString("family_tag", &d.family_tag));
+  FL_RETURN_IF_ERROR(f.String("shape_family", &d.shape_family));
+  FL_RETURN_IF_ERROR(f.String("material", &d.material));
+  FL_RETURN_IF_ERROR(f.Number("tolerance_mm", &d.form_tolerance_mm));
+  FL_RETURN_IF_ERROR(f.Has("finish_ra_um") ? f.Number("finish_ra_um", &d.ra_um) : f.Number("ra_um", &d.ra_um));
+  long long batch = d.batch_size;
+  FL_RETURN_IF_ERROR(f.OptionalInteger("batch_size", &batch, 1));
+  d.batch_size = static_cast<int>(batch);
+  FL_RETURN_IF_ERROR(f.String("machine_class", &d.machine_class));
+  if (f.Has("tool_radius_mm")) {
+    FL_RETURN_IF_ERROR(f.Number("tool_radius_mm", &d.tool_radius_mm));
+  } else {
+    std::optional<JsonFields> tool;
+    FL_RETURN_IF_ERROR(f.Object("tool", &tool));
+    if (tool) FL_RETURN_IF_ERROR(tool->OptionalNumber("radius_mm", &d.tool_radius_mm));
   }
+  FL_RETURN_IF_ERROR(f.OptionalString("strategy", &d.strategy));
+  FL_RETURN_IF_ERROR(f.OptionalNumber("raster_angle_deg", &d.raster_angle_deg));
   return d;
 }
 

@@ -6,7 +6,7 @@
 #include <limits>
 #include <sstream>
 
-#include "core/point_io.h"
+#include "core/number_text.h"
 
 namespace formloop::retrieval {
 namespace {

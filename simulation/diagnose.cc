@@ -6,6 +6,7 @@
 #include <functional>
 #include <limits>
 #include <map>
+#include <optional>
 #include <sstream>
 
 #include <Eigen/QR>
@@ -14,6 +15,7 @@
 
 #include "metrology/deviations.h"
 #include "metrology/morans_i.h"
+#include "metrology/spatial_cv.h"
 #include "metrology/spatial_weights.h"
 #include "simulation/virtual_machine.h"
 
@@ -194,40 +196,25 @@ double NuggetVariance(const Eigen::VectorXd& r, const std::vector<std::vector<in
   return n > 0 ? sum / n : 0.0;
 }
 
-// Spatial block CV: leave one x-y block out, refit the named columns on the rest, predict it.
+// Spatial block CV (metrology/spatial_cv.h): leave one x-y block out, refit the named columns on the rest,
+// predict it.
 double BlockCvRms(const Problem& prob, const Eigen::MatrixXd& design, int blocks) {
   const int n = prob.n();
   if (design.cols() == 0) return std::sqrt(prob.r.squaredNorm() / n);
-  const Eigen::Vector2d lo = prob.xy.colwise().minCoeff(), hi = prob.xy.colwise().maxCoeff();
-  std::vector<int> block(n);
-  for (int i = 0; i < n; ++i) {
-    int b[2];
-    for (int k = 0; k < 2; ++k) {
-      const double span = std::max(1e-12, hi[k] - lo[k]);
-      b[k] = std::clamp(static_cast<int>((prob.xy(i, k) - lo[k]) / span * blocks), 0, blocks - 1);
-    }
-    block[i] = b[0] * blocks + b[1];
-  }
-  double sse = 0;
-  for (int held = 0; held < blocks * blocks; ++held) {
-    std::vector<int> train, test;
-    for (int i = 0; i < n; ++i) (block[i] == held ? test : train).push_back(i);
-    if (test.empty()) continue;
-    Eigen::MatrixXd a(train.size(), design.cols());
-    Eigen::VectorXd y(train.size());
-    for (std::size_t t = 0; t < train.size(); ++t) {
-      a.row(t) = design.row(train[t]);
-      y[t] = prob.r[train[t]];
-    }
-    Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(a);
-    qr.setThreshold(1e-10);
-    const Eigen::VectorXd beta = qr.solve(y);
-    for (int i : test) {
-      const double e = prob.r[i] - design.row(i).dot(beta);
-      sse += e * e;
-    }
-  }
-  return std::sqrt(sse / n);
+  const std::vector<int> block = metrology::GridBlocks(prob.xy.col(0), prob.xy.col(1), blocks);
+  return metrology::SpatialBlockCv(block, blocks * blocks, prob.r, [&](const std::vector<int>& train) {
+           Eigen::MatrixXd a(train.size(), design.cols());
+           Eigen::VectorXd y(train.size());
+           for (std::size_t t = 0; t < train.size(); ++t) {
+             a.row(t) = design.row(train[t]);
+             y[t] = prob.r[train[t]];
+           }
+           Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(a);
+           qr.setThreshold(1e-10);
+           const Eigen::VectorXd beta = qr.solve(y);
+           return std::optional<metrology::HeldOutPredictor>([&design, beta](int i) { return design.row(i).dot(beta); });
+         })
+      .rms;
 }
 
 Result<Diagnosis> SelectCauses(const Problem& prob, const Model& baseline, const DiagnoseOptions& options) {

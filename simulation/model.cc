@@ -1,6 +1,7 @@
 #include "simulation/model.h"
 
 #include <cmath>
+#include <optional>
 
 #include "core/atomic_file.h"
 #include "core/json_io.h"
@@ -94,50 +95,49 @@ Result<Model> Model::FromJson(const nlohmann::json& json, const std::string& sou
     return Status::BadInput(Where{.file = source, .field = field}, what, fix);
   };
   if (!json.is_object()) return bad("", "a model must be a JSON object", "see simulation/model.h for the format");
-  if (json.value("format", std::string()) != kFormat) {
+  const JsonFields f(json, source);
+  std::string format;
+  FL_RETURN_IF_ERROR(f.OptionalString("format", &format));
+  if (format != kFormat) {
     return bad("format", "expected \"formloop-model\"", "write models with formloop or add \"format\": \"formloop-model\"");
   }
-  if (!json.contains("version") || !json["version"].is_number_integer()) return bad("version", "missing or not an integer");
-  if (json["version"].get<int>() > kVersion) {
-    return bad("version", "model format version " + std::to_string(json["version"].get<int>()) +
-                              " is newer than this formloop reads (" + std::to_string(kVersion) + ")",
+  long long version = 0;
+  FL_RETURN_IF_ERROR(f.Integer("version", &version, 1));
+  if (version > kVersion) {
+    return bad("version", "model format version " + std::to_string(version) + " is newer than this formloop reads (" +
+                              std::to_string(kVersion) + ")",
                "upgrade formloop");
   }
-  if (!json.contains("effects") || !json["effects"].is_array()) return bad("effects", "missing or not an array");
+  std::vector<JsonFields> items;
+  FL_RETURN_IF_ERROR(f.ObjectArray("effects", &items));
   Model model;
-  for (std::size_t i = 0; i < json["effects"].size(); ++i) {
-    const auto& item = json["effects"][i];
-    const std::string field = "effects[" + std::to_string(i) + "]";
-    if (!item.is_object() || !item.contains("name") || !item["name"].is_string()) {
-      return bad(field + ".name", "missing or not a string");
-    }
-    const std::string name = item["name"].get<std::string>();
+  for (const JsonFields& item : items) {
+    std::string name;
+    FL_RETURN_IF_ERROR(item.String("name", &name));
     const Effect* effect = FindEffect(name);
-    if (effect == nullptr) return bad(field + ".name", "unknown effect '" + name + "'", "use one of " + EffectNames());
-    if (model.Has(name)) return bad(field + ".name", "effect '" + name + "' is listed twice");
-    const nlohmann::json params = item.value("parameters", nlohmann::json::object());
-    const nlohmann::json errors = item.value("std_errors", nlohmann::json::object());
-    if (!params.is_object() || !errors.is_object()) return bad(field, "parameters and std_errors must be objects");
+    if (effect == nullptr) return bad(item.Path("name"), "unknown effect '" + name + "'", "use one of " + EffectNames());
+    if (model.Has(name)) return bad(item.Path("name"), "effect '" + name + "' is listed twice");
+    const nlohmann::json empty = nlohmann::json::object();
+    std::optional<JsonFields> params, errors;
+    FL_RETURN_IF_ERROR(item.Object("parameters", &params));
+    FL_RETURN_IF_ERROR(item.Object("std_errors", &errors));
+    if (!params) params.emplace(empty, source, item.Path("parameters."));
+    std::vector<std::string> names;
     std::vector<double> values, ses;
     for (const auto& p : effect->parameters()) {
-      if (!params.contains(p.name)) {
-        return bad(field + ".parameters." + p.name, "missing", "effect '" + name + "' needs it (" + p.doc + ")");
+      names.push_back(p.name);
+      if (!params->Has(p.name)) {
+        return bad(params->Path(p.name), "missing", "effect '" + name + "' needs it (" + p.doc + ")");
       }
-      if (!params[p.name].is_number() || !std::isfinite(params[p.name].get<double>())) {
-        return bad(field + ".parameters." + p.name, "must be a finite number");
-      }
-      values.push_back(params[p.name].get<double>());
-      const double se = errors.contains(p.name) && errors[p.name].is_number() ? errors[p.name].get<double>() : 0.0;
-      if (!(se >= 0) || !std::isfinite(se)) return bad(field + ".std_errors." + p.name, "must be a finite number >= 0");
+      double value = 0, se = 0;
+      FL_RETURN_IF_ERROR(params->Number(p.name, &value));
+      if (errors) FL_RETURN_IF_ERROR(errors->OptionalNumber(p.name, &se, {.min = 0}));
+      values.push_back(value);
       ses.push_back(se);
     }
-    for (const auto& [key, value] : params.items()) {
-      bool known = false;
-      for (const auto& p : effect->parameters()) known = known || p.name == key;
-      if (!known) return bad(field + ".parameters." + key, "effect '" + name + "' has no such parameter");
-    }
-    if (name == "noise" && (values[0] < 0 || values[1] < 0)) return bad(field + ".parameters", "sigmas must be >= 0");
-    if (name == "thermal_drift_z" && !(values[1] > 0)) return bad(field + ".parameters.tau_s", "must be > 0");
+    FL_RETURN_IF_ERROR(params->CheckKnown(names).WithContext("effect '" + name + "'"));
+    if (name == "noise" && (values[0] < 0 || values[1] < 0)) return bad(item.Path("parameters"), "sigmas must be >= 0");
+    if (name == "thermal_drift_z" && !(values[1] > 0)) return bad(item.Path("parameters.tau_s"), "must be > 0");
     model.effects.push_back({effect, std::move(values), std::move(ses)});
   }
   model.provenance = json.value("provenance", nlohmann::json::object());

@@ -22,6 +22,7 @@
 
 #include "core/json_io.h"
 #include "core/log.h"
+#include "core/number_text.h"
 #include "core/point_io.h"
 #include "core/random.h"
 #include "metrology/probe.h"

@@ -12,7 +12,7 @@
 #include <gtest/gtest.h>
 
 #include "core/atomic_file.h"
-#include "core/point_io.h"
+#include "core/number_text.h"
 #include "nc-gen/compensation.h"
 #include "nc-gen/deviation_field.h"
 #include "nc-gen/post.h"

@@ -18,7 +18,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "core/point_io.h"
+#include "core/number_text.h"
 #include "core/random.h"
 
 namespace formloop::testing {

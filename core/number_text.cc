@@ -1,0 +1,50 @@
+#include "core/number_text.h"
+
+#include <algorithm>
+#include <charconv>
+#include <system_error>
+
+namespace formloop {
+
+std::string FormatFixed(double value, int decimals) {
+  decimals = std::max(decimals, 0);
+  std::string out(static_cast<std::size_t>(decimals) + 330, '\0');
+  const auto result =
+      std::to_chars(out.data(), out.data() + out.size(), value, std::chars_format::fixed, decimals);
+  out.resize(static_cast<std::size_t>(result.ptr - out.data()));
+  // "-0.000" (a tiny negative or -0) reads as a sign error in a report or an NC block: drop the sign.
+  if (!out.empty() && out.front() == '-' && out.find_first_not_of("0.", 1) == std::string::npos) {
+    out.erase(0, 1);
+  }
+  return out;
+}
+
+std::string FormatSignificant(double value, int digits) {
+  char buffer[64];
+  const auto result =
+      std::to_chars(buffer, buffer + sizeof(buffer), value, std::chars_format::general, std::clamp(digits, 1, 40));
+  return std::string(buffer, result.ptr);
+}
+
+std::string FormatExact(double value) {
+  char buffer[64];
+  const auto result = std::to_chars(buffer, buffer + sizeof(buffer), value);
+  return std::string(buffer, result.ptr);
+}
+
+bool ParseDouble(std::string_view text, double* value) {
+  const char* first = text.data();
+  const char* last = text.data() + text.size();
+  if (first != last && *first == '+') {
+    ++first;
+    if (first != last && (*first == '-' || *first == '+')) return false;
+  }
+  if (first == last) return false;
+  double parsed = 0;
+  const auto [ptr, ec] = std::from_chars(first, last, parsed);
+  if (ec != std::errc() || ptr != last) return false;
+  *value = parsed;
+  return true;
+}
+
+}  // namespace formloop
