@@ -11,6 +11,13 @@
 //   the length units millimetres throughout.
 // Skipped, with the message, only where rs274 is not installed.
 
+#include "tests/support/rs274.h"
+
+#include <gtest/gtest-spi.h>
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <array>
 #include <cctype>
@@ -24,12 +31,6 @@
 #include <string>
 #include <vector>
 
-#include <sys/wait.h>
-#include <unistd.h>
-
-#include <gtest/gtest-spi.h>
-#include <gtest/gtest.h>
-
 #include "metrology/probe.h"
 #include "nc-gen/moves.h"
 #include "nc-gen/post.h"
@@ -42,117 +43,15 @@ namespace formloop::nc {
 namespace {
 
 using Eigen::Vector3d;
+using testing::Canon;
+using testing::CanonMove;
+using testing::ParseCanon;
+using testing::Rs274Installed;
+using testing::RunRs274;
+using Kind = testing::CanonKind;
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr int kPostDecimals = 4;  // PostOptions::decimals, set explicitly below
-
-bool Rs274Installed() { return std::system("command -v rs274 >/dev/null 2>&1") == 0; }
-
-// Runs `rs274 -g program canon` and returns the canonical commands; *exit_code and *console receive the
-// exit status and what rs274 printed.
-std::string RunRs274(const std::filesystem::path& program, int* exit_code, std::string* console) {
-  const std::filesystem::path canon = program.string() + ".canon";
-  const std::string command = "rs274 -g " + program.string() + " " + canon.string() + " </dev/null 2>&1";
-  FILE* pipe = ::popen(command.c_str(), "r");
-  std::array<char, 4096> buffer{};
-  std::size_t n;
-  console->clear();
-  while (pipe != nullptr && (n = std::fread(buffer.data(), 1, buffer.size(), pipe)) > 0) console->append(buffer.data(), n);
-  const int status = pipe != nullptr ? ::pclose(pipe) : -1;
-  *exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  std::ifstream in(canon);
-  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  std::filesystem::remove(canon);
-  return text;
-}
-
-enum class Kind { kTraverse, kFeed, kProbe };
-
-const char* KindName(Kind k) {
-  switch (k) {
-    case Kind::kTraverse:
-      return "STRAIGHT_TRAVERSE";
-    case Kind::kFeed:
-      return "STRAIGHT_FEED";
-    case Kind::kProbe:
-      return "STRAIGHT_PROBE";
-  }
-  return "?";
-}
-
-// One motion of rs274's canonical output.
-struct CanonMove {
-  Kind kind = Kind::kTraverse;
-  Vector3d p = Vector3d::Zero();
-  int decimals = 0;  // printed decimals of the positions
-  double feed = 0;   // modal SET_FEED_RATE when the move was issued
-  long line = 0;     // line of the canon output
-};
-
-struct Canon {
-  std::vector<CanonMove> moves;
-  int mm_units = 0, inch_units = 0, other_units = 0;  // USE_LENGTH_UNITS(...) lines
-  int unparsed_motion = 0;                            // motion lines this parser could not read
-};
-
-int DecimalsOf(const std::string& number) {
-  const auto dot = number.find('.');
-  if (dot == std::string::npos) return 0;
-  int d = 0;
-  for (std::size_t i = dot + 1; i < number.size() && std::isdigit(static_cast<unsigned char>(number[i])); ++i) ++d;
-  return d;
-}
-
-// Lines look like "   17 N..... STRAIGHT_TRAVERSE(1.2346, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)".
-Canon ParseCanon(const std::string& text) {
-  Canon out;
-  std::istringstream in(text);
-  std::string line;
-  long number = 0;
-  double feed = 0;
-  while (std::getline(in, line)) {
-    ++number;
-    const auto open = line.find('(');
-    const auto close = line.rfind(')');
-    if (open == std::string::npos || close == std::string::npos || close < open) continue;
-    const auto name_start = line.find_last_of(' ', open);
-    const std::string name = line.substr(name_start == std::string::npos ? 0 : name_start + 1,
-                                         open - (name_start == std::string::npos ? 0 : name_start + 1));
-    std::vector<std::string> args;
-    {
-      std::string arg;
-      std::istringstream a(line.substr(open + 1, close - open - 1));
-      while (std::getline(a, arg, ',')) {
-        arg.erase(0, arg.find_first_not_of(' '));
-        args.push_back(arg);
-      }
-    }
-    if (name == "USE_LENGTH_UNITS") {
-      if (!args.empty() && args[0] == "CANON_UNITS_MM") {
-        ++out.mm_units;
-      } else if (!args.empty() && args[0] == "CANON_UNITS_INCHES") {
-        ++out.inch_units;
-      } else {
-        ++out.other_units;
-      }
-    } else if (name == "SET_FEED_RATE" && !args.empty()) {
-      feed = std::strtod(args[0].c_str(), nullptr);
-    } else if (name == "STRAIGHT_TRAVERSE" || name == "STRAIGHT_FEED" || name == "STRAIGHT_PROBE") {
-      if (args.size() < 3) {
-        ++out.unparsed_motion;
-        continue;
-      }
-      CanonMove m;
-      m.kind = name == "STRAIGHT_TRAVERSE" ? Kind::kTraverse : name == "STRAIGHT_FEED" ? Kind::kFeed : Kind::kProbe;
-      for (int a = 0; a < 3; ++a) m.p[a] = std::strtod(args[a].c_str(), nullptr);
-      m.decimals = std::min({DecimalsOf(args[0]), DecimalsOf(args[1]), DecimalsOf(args[2])});
-      m.feed = feed;
-      m.line = number;
-      out.moves.push_back(m);
-    }
-  }
-  return out;
-}
 
 // A move formloop programmed; NaN for an axis whose value formloop does not know (before it is first
 // programmed, rs274 reports its own start position there).
@@ -219,10 +118,11 @@ Comparison Compare(const std::vector<ExpectedMove>& expected, const Canon& canon
   for (std::size_t k = 0; k < n && failures < 10; ++k) {
     const ExpectedMove& e = expected[k];
     const CanonMove& m = canon.moves[k];
-    const std::string where = name + " motion " + std::to_string(k) + " (" + e.what + "; canon line " +
-                              std::to_string(m.line) + ")";
+    const std::string where =
+        name + " motion " + std::to_string(k) + " (" + e.what + "; canon line " + std::to_string(m.line) + ")";
     if (m.kind != e.kind) {
-      ADD_FAILURE() << where << ": rs274 says " << KindName(m.kind) << ", formloop " << KindName(e.kind);
+      ADD_FAILURE() << where << ": rs274 says " << testing::CanonKindName(m.kind) << ", formloop "
+                    << testing::CanonKindName(e.kind);
       ++failures;
       continue;
     }
@@ -235,8 +135,9 @@ Comparison Compare(const std::vector<ExpectedMove>& expected, const Canon& canon
       const double d = std::abs(m.p[a] - e.p[a]);
       c.max_difference_mm = std::max(c.max_difference_mm, d);
       if (d > tolerance) {
-        ADD_FAILURE() << where << " axis " << "XYZ"[a] << ": rs274 " << m.p[a] << ", formloop " << e.p[a]
-                      << " (difference " << d << " mm > " << tolerance << ")";
+        ADD_FAILURE() << where << " axis "
+                      << "XYZ"[a] << ": rs274 " << m.p[a] << ", formloop " << e.p[a] << " (difference " << d << " mm > "
+                      << tolerance << ")";
         ++failures;
       }
     }
@@ -249,9 +150,10 @@ Comparison Compare(const std::vector<ExpectedMove>& expected, const Canon& canon
 }
 
 void Report(const std::string& name, const Comparison& c) {
-  std::printf("[rs274] %-8s %zu motions compared (%zu STRAIGHT_TRAVERSE, %zu STRAIGHT_FEED, %zu STRAIGHT_PROBE)"
-              "  max |difference| %.3g mm (allowed %.3g mm)\n",
-              name.c_str(), c.compared, c.traverses, c.feeds, c.probes, c.max_difference_mm, c.max_allowed_mm);
+  std::printf(
+      "[rs274] %-8s %zu motions compared (%zu STRAIGHT_TRAVERSE, %zu STRAIGHT_FEED, %zu STRAIGHT_PROBE)"
+      "  max |difference| %.3g mm (allowed %.3g mm)\n",
+      name.c_str(), c.compared, c.traverses, c.feeds, c.probes, c.max_difference_mm, c.max_allowed_mm);
   ::testing::Test::RecordProperty(name + "_compared", static_cast<int>(c.compared));
 }
 
