@@ -99,17 +99,18 @@ Status WriteSideFile(const std::filesystem::path& path, const Compensation& comp
   text += "# source: " + compensation.source + "\n";
   text +=
       "cl_index,pass,nominal_line,compensated_line,nominal_x,nominal_y,nominal_z,offset_x,offset_y,offset_z,ds_um,"
-      "u,v,nx,ny,nz,kind\n";
+      "u,v,nx,ny,nz,kind";
+  text += compensation.program_mapped ? ",lambda\n" : "\n";
   for (const auto& e : compensation.entries) {
-    const ClPoint& cl = compensation.path.points[e.cl_index];
-    text += std::to_string(e.cl_index) + "," + std::to_string(cl.pass) + "," + std::to_string(e.nominal_line) + "," +
+    text += std::to_string(e.cl_index) + "," + std::to_string(e.pass) + "," + std::to_string(e.nominal_line) + "," +
             std::to_string(e.compensated_line);
     for (int a = 0; a < 3; ++a) text += "," + FormatFixed(e.nominal_tip[a], 6);
     for (int a = 0; a < 3; ++a) text += "," + FormatFixed(e.offset_mm[a], 6);
     text += "," + FormatFixed(e.systematic_um, 4);
     text += "," + FormatExact(e.u) + "," + FormatExact(e.v);
     for (int a = 0; a < 3; ++a) text += "," + FormatFixed(e.normal[a], 9);
-    text += std::string(",") + ClKindName(e.kind) + "\n";
+    text += std::string(",") + ClKindName(e.kind);
+    text += compensation.program_mapped ? "," + FormatExact(e.lambda) + "\n" : "\n";
   }
   return WriteFileAtomic(path, text);
 }
@@ -204,9 +205,19 @@ Result<SideFile> ParseSideFile(const std::string& text, const std::string& sourc
         e.kind = ClKind::kLeadIn;
       } else if (kind == "lead-out") {
         e.kind = ClKind::kLeadOut;
+      } else if (kind == "off") {
+        e.kind = ClKind::kOff;
       } else if (kind != "cut") {
         return Status::BadInput(Where{.file = source, .line = number, .field = "kind"},
-                                "value '" + kind + "' is not cut, lead-in or lead-out");
+                                "value '" + kind + "' is not cut, lead-in, lead-out or off");
+      }
+    }
+    if (column.count("lambda")) {
+      side.has_lambda = true;
+      FL_RETURN_IF_ERROR(number_of("lambda", &e.lambda));
+      if (!(e.lambda > 0 && e.lambda <= 1)) {
+        return Status::BadInput(Where{.file = source, .line = number, .field = "lambda"},
+                                "value '" + cells[column["lambda"]] + "' is not in (0, 1]");
       }
     }
     e.has_field_point = side.has_field_points && e.kind == ClKind::kCut;

@@ -38,6 +38,9 @@ struct CompensationEntry {
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
   bool has_field_point = true;  // false for a lead (off Q) and for an old side file without u, v, nx..nz
   ClKind kind = ClKind::kCut;   // leads are never compensated (offset 0)
+  // For a program formloop did not write (program_compensation.h): the fraction of the nominal block's
+  // path at which this point lies (1 = its end; a split arc has one row per vertex).
+  double lambda = 1;
 };
 
 struct Compensation {
@@ -51,6 +54,9 @@ struct Compensation {
   std::string program;
   std::vector<ProgramMove> program_moves;
   double check_max_disagreement_um = 0;
+  // The entries map the blocks of a program formloop did not write: the side file gets a lambda column
+  // and `nc check` pairs rows with blocks by their lines (program_compensation.h).
+  bool program_mapped = false;
 };
 
 // d_s(u, v) in mm at the CC point's parameters; loops pass the sum of every loop's field.
@@ -69,14 +75,17 @@ Status AssignProgramLines(const std::vector<ProgramMove>& nominal, const std::ve
 //   cl_index,pass,nominal_line,compensated_line,nominal_x,nominal_y,nominal_z,offset_x,offset_y,offset_z,ds_um,u,v,nx,ny,nz,kind
 // nominal_* = nominal tip (mm, 6 decimals); offset_* = compensated − nominal tip (mm, 6 decimals);
 // ds_um = d_s at the CC point (µm, 4 decimals); u, v = CC parameters (shortest exact text); nx..nz = unit
-// normal at the CC point (9 decimals); kind = cut | lead-in | lead-out (leads are off Q and keep their
-// nominal place: offset 0, not checked against the field). The applied offset is −ds·n.
+// normal at the CC point (9 decimals); kind = cut | lead-in | lead-out | off (leads and points of a foreign
+// program where the tool does not touch Q keep their nominal place: offset 0, not checked against the
+// field). The applied offset is −ds·n. A program formloop did not write adds a last column lambda (the
+// point's fraction along its nominal block).
 Status WriteSideFile(const std::filesystem::path& path, const Compensation& compensation);
 
 struct SideFile {
   std::string source;                      // from the "# source:" line ("" when absent)
   std::vector<CompensationEntry> entries;  // in file order
   bool has_field_points = false;           // the u, v, nx, ny, nz columns are present
+  bool has_lambda = false;                 // the lambda column is present (a program formloop did not write)
 };
 
 // Reads what WriteSideFile writes (the u, v, nx, ny, nz and kind columns may be absent: older side files).

@@ -17,8 +17,6 @@ namespace {
 using internal::BlockRecord;
 using internal::ProgramWriter;
 
-constexpr double kTwoPi = 2 * std::numbers::pi;
-
 std::string Lower(std::string s) {
   for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   return s;
@@ -27,12 +25,6 @@ std::string Lower(std::string s) {
 std::string VecText(const Eigen::Vector3d& v, int decimals) {
   return FormatCoordinate(v.x(), decimals) + ", " + FormatCoordinate(v.y(), decimals) + ", " +
          FormatCoordinate(v.z(), decimals);
-}
-
-double Wrap2Pi(double a) {
-  a = std::fmod(a, kTwoPi);
-  if (a < 0) a += kTwoPi;
-  return a;
 }
 
 nlohmann::json Json(const Eigen::Vector3d& v) { return nlohmann::json::array({v.x(), v.y(), v.z()}); }
@@ -540,45 +532,12 @@ Status DeviationDistributor::Impl::EmitArc(const BlockRecord& r, const Eigen::Ve
   const PlaneAxes ax = AxesOf(arc.plane);
   const Eigen::Vector3d drift = delta - delta_prev;
   const double q = std::pow(10.0, -decimals);
-  bool keep = std::abs(drift[ax.u]) < 0.5 * q && std::abs(drift[ax.v]) < 0.5 * q;
-  if (keep) {
-    // KEEP_IF_EXACT: the arc moved by Δ_(k−1) in its plane, drifting along w. Check the arc the controller
-    // will run (from its rounded start, to the rounded end, about the centre the words give) sweeps the
-    // same angle; rounding can turn a full circle into a sliver, which must be split instead.
-    const Eigen::Vector3d start = writer.Controller(r.start);
-    Eigen::Vector3d end = r.end + delta;
-    for (int a = 0; a < 3; ++a) end[a] = RoundCoordinate(end[a], decimals);
-    Eigen::Vector2d c;
-    const Eigen::Vector2d s(start[ax.u], start[ax.v]), e(end[ax.u], end[ax.v]);
-    const Word* rw = r.Find('R');
-    const bool centre_form = r.Find(static_cast<char>('I' + ax.u)) || r.Find(static_cast<char>('I' + ax.v));
-    if (centre_form) {
-      c = r.arc_absolute ? Eigen::Vector2d(RoundCoordinate(arc.centre[ax.u] + delta_prev[ax.u], decimals),
-                                           RoundCoordinate(arc.centre[ax.v] + delta_prev[ax.v], decimals))
-                         : s + Eigen::Vector2d(arc.centre[ax.u] - arc.start[ax.u], arc.centre[ax.v] - arc.start[ax.v]);
-    } else {
-      const double radius = (rw != nullptr ? rw->value : arc.radius());
-      const double chord = (e - s).norm();
-      if (chord <= 0 || chord > 2 * std::abs(radius)) {
-        keep = false;
-      } else {
-        const Eigen::Vector2d t = (e - s) / chord;
-        const double d = std::sqrt(std::max(0.0, radius * radius - 0.25 * chord * chord));
-        c = 0.5 * (s + e) + ((arc.ccw != (radius < 0)) ? 1.0 : -1.0) * d * Eigen::Vector2d(-t.y(), t.x());
-      }
-    }
-    if (keep) {
-      const double rs = (s - c).norm(), re = (e - c).norm();
-      const double ts = std::atan2(s.y() - c.y(), s.x() - c.x()), te = std::atan2(e.y() - c.y(), e.x() - c.x());
-      double sweep = (e - s).norm() < 1e-12 ? kTwoPi : (arc.ccw ? Wrap2Pi(te - ts) : Wrap2Pi(ts - te));
-      const double turns = std::floor(arc.sweep_rad / kTwoPi - 1e-9);
-      sweep += kTwoPi * std::max(0.0, turns);
-      const double tol_units = options.reader.arc_radius_tolerance_mm / (r.units == Units::kInch ? kMmPerInch : 1.0);
-      keep = std::abs(rs - re) <= tol_units && std::abs(sweep - arc.sweep_rad) * arc.radius() <= 2 * q;
-    }
-  }
-  if (keep) {
-    const Eigen::Vector3d centre = arc.centre + delta_prev;
+  const double unit_mm = r.units == Units::kInch ? kMmPerInch : 1.0;
+  // KEEP_IF_EXACT: the arc moved by Δ_(k−1) in its plane, drifting along w, when the in-plane drift is
+  // below q/2 and the controller will run the same arc from its rounded ends.
+  const Eigen::Vector3d centre = arc.centre + delta_prev;
+  if (std::abs(drift[ax.u]) < 0.5 * q && std::abs(drift[ax.v]) < 0.5 * q &&
+      writer.KeepsArc(r, r.end + delta, centre, decimals, options.reader.arc_radius_tolerance_mm / unit_mm)) {
     *changed = writer.MoveEnd(r, r.end + delta, &centre, decimals);
     ++ir->arcs_kept;
     return Status::Ok();
@@ -588,13 +547,9 @@ Status DeviationDistributor::Impl::EmitArc(const BlockRecord& r, const Eigen::Ve
                  "an arc under inverse-time feed (G93) would have to be split, and its F word is its time",
                  "program the region in G94");
   }
-  // SEGMENT: chords within ε of the corrected curve.
-  const double unit_mm = r.units == Units::kInch ? kMmPerInch : 1.0;
-  const double eps = options.chord_tolerance_mm / unit_mm;
-  const double radius = std::max(arc.radius_start, arc.radius_end);
-  const double theta_max =
-      eps >= radius ? std::numbers::pi / 2 : std::min(std::numbers::pi / 2, 2 * std::acos(1 - eps / radius));
-  const int n = std::max(1, static_cast<int>(std::ceil(arc.sweep_rad / theta_max - 1e-12)));
+  // SEGMENT: chords within ε of the corrected curve (spec §5: the drift is linear in λ on the curve and
+  // on each chord, so the gap is the arc's own sagitta).
+  const int n = internal::ChordSegments(arc, options.chord_tolerance_mm / unit_mm);
   vertices.resize(static_cast<std::size_t>(n));
   for (int i = 1; i <= n; ++i) {
     const double lambda = static_cast<double>(i) / n;

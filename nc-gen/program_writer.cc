@@ -2,11 +2,19 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 
 namespace formloop::nc::internal {
 namespace {
 
 constexpr const char* kAxis = "XYZ";
+constexpr double kTwoPi = 2 * std::numbers::pi;
+
+double Wrap2Pi(double a) {
+  a = std::fmod(a, kTwoPi);
+  if (a < 0) a += kTwoPi;
+  return a;
+}
 
 // v on the grid of `decimals`, as an integer count of steps (the rounding FormatCoordinate does).
 long long Ticks(double v, int decimals) {
@@ -82,6 +90,44 @@ const Word* BlockRecord::Find(char letter) const {
     if (w.letter == letter) return &w;
   }
   return nullptr;
+}
+
+int ChordSegments(const ArcGeometry& arc, double chord_tolerance) {
+  const double radius = std::max(arc.radius_start, arc.radius_end);
+  const double theta_max = chord_tolerance >= radius
+                               ? std::numbers::pi / 2
+                               : std::min(std::numbers::pi / 2, 2 * std::acos(1 - chord_tolerance / radius));
+  return std::max(1, static_cast<int>(std::ceil(arc.sweep_rad / theta_max - 1e-12)));
+}
+
+bool ProgramWriter::KeepsArc(const BlockRecord& block, const Eigen::Vector3d& end, const Eigen::Vector3d& centre,
+                             int decimals, double radius_tolerance) const {
+  const ArcGeometry& arc = block.arc;
+  const PlaneAxes ax = AxesOf(arc.plane);
+  const double q = std::pow(10.0, -decimals);
+  const Eigen::Vector3d start = Controller(block.start);
+  const Eigen::Vector2d s(start[ax.u], start[ax.v]);
+  const Eigen::Vector2d e(RoundCoordinate(end[ax.u], decimals), RoundCoordinate(end[ax.v], decimals));
+  Eigen::Vector2d c;
+  const bool centre_form = block.Find(static_cast<char>('I' + ax.u)) || block.Find(static_cast<char>('I' + ax.v));
+  if (centre_form) {
+    c = block.arc_absolute
+            ? Eigen::Vector2d(RoundCoordinate(centre[ax.u], decimals), RoundCoordinate(centre[ax.v], decimals))
+            : s + Eigen::Vector2d(arc.centre[ax.u] - arc.start[ax.u], arc.centre[ax.v] - arc.start[ax.v]);
+  } else {
+    const Word* rw = block.Find('R');
+    const double radius = rw != nullptr ? rw->value : arc.radius();
+    const double chord = (e - s).norm();
+    if (chord <= 0 || chord > 2 * std::abs(radius)) return false;
+    const Eigen::Vector2d t = (e - s) / chord;
+    const double d = std::sqrt(std::max(0.0, radius * radius - 0.25 * chord * chord));
+    c = 0.5 * (s + e) + ((arc.ccw != (radius < 0)) ? 1.0 : -1.0) * d * Eigen::Vector2d(-t.y(), t.x());
+  }
+  const double rs = (s - c).norm(), re = (e - c).norm();
+  const double ts = std::atan2(s.y() - c.y(), s.x() - c.x()), te = std::atan2(e.y() - c.y(), e.x() - c.x());
+  double sweep = (e - s).norm() < 1e-12 ? kTwoPi : (arc.ccw ? Wrap2Pi(te - ts) : Wrap2Pi(ts - te));
+  sweep += kTwoPi * std::max(0.0, std::floor(arc.sweep_rad / kTwoPi - 1e-9));
+  return std::abs(rs - re) <= radius_tolerance && std::abs(sweep - arc.sweep_rad) * arc.radius() <= 2 * q;
 }
 
 ProgramWriter::ProgramWriter(GcodeDialect dialect, Sink sink) : dialect_(dialect), sink_(std::move(sink)) {}

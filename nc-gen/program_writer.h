@@ -48,6 +48,11 @@ struct BlockRecord {
   const Word* Find(char letter) const;
 };
 
+// Straight moves an arc is split into so that each chord stays within `chord_tolerance` (program
+// units) of it: n = max(1, ceil(φ/θ_max)), θ_max = min(π/2, 2 acos(1 − ε/r)) (π/2 when ε ≥ r), r the
+// larger of the start and end radii (spec §5 SEGMENT).
+int ChordSegments(const ArcGeometry& arc, double chord_tolerance);
+
 class ProgramWriter {
  public:
   using Sink = std::function<void(std::string_view)>;
@@ -60,6 +65,13 @@ class ProgramWriter {
   // with absolute centre words (G90.1) the centre words are set from `centre` (absolute u, v). Returns
   // true when the text changed.
   bool MoveEnd(const BlockRecord& block, const Eigen::Vector3d& end, const Eigen::Vector3d* centre, int decimals);
+  // True when the controller, reading the arc with its end at `end` (absolute, rounded to `decimals`)
+  // from where it stands after the previous block, with the block's centre words (I/J/K unchanged, or
+  // `centre` for absolute centres G90.1, or R), runs the same sweep (to within 2·10^-decimals of arc
+  // length) with start and end radii within `radius_tolerance`: rounding can turn a full circle into a
+  // sliver or move an R-form arc to the other side, and then the arc must be split instead.
+  bool KeepsArc(const BlockRecord& block, const Eigen::Vector3d& end, const Eigen::Vector3d& centre, int decimals,
+                double radius_tolerance) const;
   // The block replaced by straight feed moves through `vertices` (absolute, the last one is the end).
   void Split(const BlockRecord& block, const std::vector<Eigen::Vector3d>& vertices, int decimals);
   // A line of its own.

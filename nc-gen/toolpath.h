@@ -62,6 +62,7 @@ enum class ClKind {
   kCut,      // on Q: CC point, normal and (u, v) are Q's
   kLeadIn,   // start of the tangential lead-in of a pass, off Q: cc = tip, normal = ẑ
   kLeadOut,  // end of the lead-out of a pass, off Q: cc = tip, normal = ẑ
+  kOff,      // a point of a program formloop did not write where the tool does not touch Q (never moved)
 };
 
 // One cutter location with its provenance.

@@ -24,6 +24,8 @@ const char* ClKindName(ClKind kind) {
       return "lead-in";
     case ClKind::kLeadOut:
       return "lead-out";
+    case ClKind::kOff:
+      return "off";
     case ClKind::kCut:
       break;
   }
