@@ -4,6 +4,8 @@
 //                     [tool/path options: --raster-angle, --one-way, --lead-mm, ...]
 //   formloop nc post  --toolpath path.csv --out program --dialect D           (a planned path for a controller)
 //   formloop nc compensate --toolpath path.csv --field ds.csv --out P1 --side side.csv [--nominal P0] [--dialect D]
+//   formloop nc compensate --program SHOP.ngc --surface Q.step --ball-radius-mm R --field ds.csv --out P1 --side S
+//   formloop nc distribute PROGRAM --deviations D.csv --out OUT      (M57/M58/M59, app/cmd_nc_program.cc)
 //   formloop nc probe --surface Q.step --out probe.ngc   [--dialect D] [--grid NUxNV | --count N [--curvature-weight B]]
 //   formloop nc check --nominal P0 --compensated P1 --side side.csv [--field ds.csv] [--dialect D]
 //
@@ -28,6 +30,7 @@
 #include "nc-gen/moves.h"
 #include "nc-gen/post.h"
 #include "nc-gen/probe_program.h"
+#include "nc-gen/program_compensation.h"
 #include "nc-gen/toolpath.h"
 #include "nc-gen/toolpath_io.h"
 #include "reconstruction/cad_io.h"
@@ -172,11 +175,28 @@ struct CompensateArgs {
   double lambda = 0;
   double max_offset_um = 200;
   MachineArgs machine;
+  ShopProgramArgs shop;  // --program: a program formloop did not write
+  ShopProgramArgs Shop() const {
+    ShopProgramArgs s = shop;
+    s.field = field;
+    s.lambda = lambda;
+    s.out = out;
+    s.side = side;
+    s.max_offset_um = max_offset_um;
+    s.dialect = machine.dialect;
+    s.decimals = machine.decimals;
+    return s;
+  }
 };
 
 // Mirror compensation of a planned path by a systematic field: the compensated program and its side
 // file, both or neither, after the program has passed its own `nc check` (WriteCompensatedProgram).
 Status CompensateProgram(const CompensateArgs& args) {
+  if (!args.shop.program.empty()) return CompensateShopProgram(args.Shop());
+  if (args.toolpath.empty()) {
+    return Status::BadInput(Where{.field = "--toolpath"}, "nothing to compensate",
+                            "give --toolpath (a path formloop planned) or --program (a program it did not write)");
+  }
   FL_RETURN_IF_ERROR(CheckDialect(args.machine.dialect));
   FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::ReadToolpathFile(args.toolpath));
   FL_ASSIGN_OR_RETURN(nc::DeviationField field, nc::ReadDeviationField(args.field, {.smoothing = args.lambda}));
@@ -248,8 +268,6 @@ struct CheckArgs {
 Status CheckPrograms(const CheckArgs& args) {
   FL_ASSIGN_OR_RETURN(const std::string nominal_text, ReadFile(args.nominal));
   FL_ASSIGN_OR_RETURN(const std::string compensated_text, ReadFile(args.compensated));
-  FL_ASSIGN_OR_RETURN(const auto nominal, nc::ReadProgram(nominal_text, args.dialect, args.nominal));
-  FL_ASSIGN_OR_RETURN(const auto compensated, nc::ReadProgram(compensated_text, args.dialect, args.compensated));
   FL_ASSIGN_OR_RETURN(const nc::SideFile side, nc::ReadSideFile(args.side));
   nc::SystematicField field;
   std::optional<nc::DeviationField> fitted;
@@ -258,8 +276,18 @@ Status CheckPrograms(const CheckArgs& args) {
     fitted = std::move(f);
     field = fitted->AsSystematicField();
   }
-  FL_ASSIGN_OR_RETURN(const nc::CheckReport report,
-                      nc::CheckCompensation(nominal, compensated, side, field, {.program_decimals = args.decimals}));
+  nc::CheckReport report;
+  if (side.has_lambda) {  // a program formloop did not write (`nc compensate --program`)
+    nc::ReaderOptions reader;
+    FL_ASSIGN_OR_RETURN(reader.dialect, nc::ParseGcodeDialect(args.dialect));
+    FL_ASSIGN_OR_RETURN(report, nc::CheckProgramCompensation(nominal_text, compensated_text, side, field, reader,
+                                                             {.program_decimals = args.decimals}));
+  } else {
+    FL_ASSIGN_OR_RETURN(const auto nominal, nc::ReadProgram(nominal_text, args.dialect, args.nominal));
+    FL_ASSIGN_OR_RETURN(const auto compensated, nc::ReadProgram(compensated_text, args.dialect, args.compensated));
+    FL_ASSIGN_OR_RETURN(report,
+                        nc::CheckCompensation(nominal, compensated, side, field, {.program_decimals = args.decimals}));
+  }
   std::cout << report.ToJson().dump(2) << "\n";
   std::cout.flush();
   if (report.ok()) {
@@ -316,7 +344,21 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
   CLI::App* comp = nc->add_subcommand(
       "compensate", "Mirror compensation: move every cutting CL point by -d_s*n of a systematic field, post the "
                     "program, check it against the nominal one and write it with its side file (both or neither).");
-  comp->add_option("--toolpath", comp_args->toolpath, "the nominal tool-path file")->required();
+  comp->add_option("--toolpath", comp_args->toolpath, "the nominal tool-path file (or --program)");
+  ShopProgramArgs& shop = comp_args->shop;
+  comp->add_option("--program", shop.program,
+                   "instead of --toolpath: a program formloop did not write (lines, arcs, helices), mapped to Q "
+                   "through the foot points of the ball centre; dialect linuxcnc or fanuc");
+  comp->add_option("--surface", shop.surface, "with --program: Q as a STEP or IGES file");
+  comp->add_option("--face", shop.face_index, "with --program: 0-based face index when the file has several faces");
+  comp->add_option("--face-name", shop.face_name, "with --program: face name");
+  comp->add_option("--ball-radius-mm", shop.ball_radius_mm,
+                   "with --program: ball radius, mm (the program's point is the ball tip)");
+  comp->add_option("--chord-tol", shop.chord_tol_mm, "with --program: chord tolerance of split arcs, mm")
+      ->capture_default_str();
+  comp->add_option("--contact-tol-mm", shop.contact_tol_mm,
+                   "with --program: the tool touches Q within this of the ball radius (else the point is not moved)")
+      ->capture_default_str();
   comp->add_option("--field", comp_args->field, "the systematic field as CSV u,v,ds_um (thin-plate interpolated)")
       ->required();
   comp->add_option("--lambda", comp_args->lambda, "smoothing of the field (0 = interpolate)")->capture_default_str();
@@ -350,6 +392,8 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
   probe->add_option("--safe-z-mm", o.safe_z_mm, "rapid height between points, mm")->capture_default_str();
   probe->add_option("--out", probe_args->out, "the program")->required();
   probe->callback([action, probe_args] { *action = [probe_args] { return PlanAndPostProbing(*probe_args); }; });
+
+  AddNcDistributeCommand(nc, action);
 
   auto check_args = std::make_shared<CheckArgs>();
   CLI::App* check = nc->add_subcommand(

@@ -31,6 +31,17 @@ Status ParseLayout(const std::string& text, const std::string& option, int* nu, 
 void AddFitCommand(CLI::App& root, CommandAction* action);
 // `nc path` and `nc probe` (app/cmd_nc.cc).
 void AddNcCommand(CLI::App& root, CommandAction* action);
+// `nc distribute` (app/cmd_nc_program.cc), added to the `nc` subcommand.
+void AddNcDistributeCommand(CLI::App* nc, CommandAction* action);
+// `nc compensate --program`: a program formloop did not write, mapped to Q and mirror-compensated
+// (app/cmd_nc_program.cc; the options are declared with the rest of `nc compensate` in cmd_nc.cc).
+struct ShopProgramArgs {
+  std::string program, surface, face_name, field, out, side, dialect = "linuxcnc";
+  int face_index = -1;
+  int decimals = 4;
+  double lambda = 0, ball_radius_mm = 0, chord_tol_mm = 0.001, contact_tol_mm = 0.01, max_offset_um = 200;
+};
+Status CompensateShopProgram(const ShopProgramArgs& args);
 // `analyse moran` (app/cmd_analyse.cc).
 void AddAnalyseCommand(CLI::App& root, CommandAction* action);
 // `calibrate sphere` and `calibrate synth-sphere` (app/cmd_calibrate.cc).

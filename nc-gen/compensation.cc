@@ -306,53 +306,63 @@ Result<CheckReport> CheckCompensation(const std::vector<ProgramMove>& nominal,
   report.field_checked = static_cast<bool>(field) && side.has_field_points;
   report.tolerance_um =
       options.tolerance_um > 0 ? options.tolerance_um : ProgramOffsetToleranceUm(options.program_decimals);
-  const double tol = report.tolerance_um;
   for (std::size_t k = 0; k < a.size(); ++k) {
-    const CompensationEntry& e = side.entries[k];
-    BlockCheck block;
-    block.cl_index = k;
-    block.pass = e.pass;
-    block.nominal_line = a[k]->line;
-    block.compensated_line = b[k]->line;
     if (!a[k]->tip.allFinite() || !b[k]->tip.allFinite()) {
+      BlockCheck block;
+      block.cl_index = k;
+      block.pass = side.entries[k].pass;
+      block.nominal_line = a[k]->line;
+      block.compensated_line = b[k]->line;
       block.problems.push_back("a feed block does not program all three axes");
       report.disagreeing.push_back(block);
       continue;
     }
-    block.program_offset_mm = b[k]->tip - a[k]->tip;
-    block.side_offset_mm = e.offset_mm;
-    block.side_difference_um = 1e3 * (block.program_offset_mm - e.offset_mm).norm();
-    report.max_side_difference_um = std::max(report.max_side_difference_um, block.side_difference_um);
-    if (block.side_difference_um > tol) {
-      block.problems.push_back("program offset " + Vec(block.program_offset_mm) + " vs side file " +
-                               Vec(e.offset_mm) + ": differ by " + FormatFixed(block.side_difference_um, 3) + " um");
-    }
-    block.nominal_tip_difference_um = 1e3 * (a[k]->tip - e.nominal_tip).norm();
-    if (block.nominal_tip_difference_um > tol) {
-      block.problems.push_back("nominal program tip differs from the side file's by " +
-                               FormatFixed(block.nominal_tip_difference_um, 3) + " um");
-    }
-    if ((e.nominal_line != 0 && e.nominal_line != a[k]->line) ||
-        (e.compensated_line != 0 && e.compensated_line != b[k]->line)) {
-      block.problems.push_back("side file names lines " + std::to_string(e.nominal_line) + "/" +
-                               std::to_string(e.compensated_line) + ", the programs " + std::to_string(a[k]->line) +
-                               "/" + std::to_string(b[k]->line));
-    }
-    if (report.field_checked && e.has_field_point) {
-      block.field_checked = true;
-      const double ds_mm = field(e.u, e.v);
-      block.field_offset_mm = -ds_mm * e.normal;
-      block.field_difference_um = 1e3 * (block.program_offset_mm - block.field_offset_mm).norm();
-      report.max_field_difference_um = std::max(report.max_field_difference_um, block.field_difference_um);
-      if (!(block.field_difference_um <= tol)) {
-        block.problems.push_back("program offset " + Vec(block.program_offset_mm) + " vs -d_s*n from the field " +
-                                 Vec(block.field_offset_mm) + " (d_s " + FormatFixed(1e3 * ds_mm, 3) +
-                                 " um): differ by " + FormatFixed(block.field_difference_um, 3) + " um");
-      }
-    }
-    if (!block.problems.empty()) report.disagreeing.push_back(block);
+    CheckRow(k, side.entries[k], a[k]->tip, a[k]->line, b[k]->tip, b[k]->line, field, &report);
   }
   return report;
+}
+
+void CheckRow(std::size_t index, const CompensationEntry& e, const Eigen::Vector3d& nominal_tip, long nominal_line,
+              const Eigen::Vector3d& compensated_tip, long compensated_line, const SystematicField& field,
+              CheckReport* report) {
+  const double tol = report->tolerance_um;
+  BlockCheck block;
+  block.cl_index = index;
+  block.pass = e.pass;
+  block.nominal_line = nominal_line;
+  block.compensated_line = compensated_line;
+  block.program_offset_mm = compensated_tip - nominal_tip;
+  block.side_offset_mm = e.offset_mm;
+  block.side_difference_um = 1e3 * (block.program_offset_mm - e.offset_mm).norm();
+  report->max_side_difference_um = std::max(report->max_side_difference_um, block.side_difference_um);
+  if (block.side_difference_um > tol) {
+    block.problems.push_back("program offset " + Vec(block.program_offset_mm) + " vs side file " + Vec(e.offset_mm) +
+                             ": differ by " + FormatFixed(block.side_difference_um, 3) + " um");
+  }
+  block.nominal_tip_difference_um = 1e3 * (nominal_tip - e.nominal_tip).norm();
+  if (block.nominal_tip_difference_um > tol) {
+    block.problems.push_back("nominal program tip differs from the side file's by " +
+                             FormatFixed(block.nominal_tip_difference_um, 3) + " um");
+  }
+  if ((e.nominal_line != 0 && e.nominal_line != nominal_line) ||
+      (e.compensated_line != 0 && e.compensated_line != compensated_line)) {
+    block.problems.push_back("side file names lines " + std::to_string(e.nominal_line) + "/" +
+                             std::to_string(e.compensated_line) + ", the programs " + std::to_string(nominal_line) +
+                             "/" + std::to_string(compensated_line));
+  }
+  if (report->field_checked && e.has_field_point) {
+    block.field_checked = true;
+    const double ds_mm = field(e.u, e.v);
+    block.field_offset_mm = -ds_mm * e.normal;
+    block.field_difference_um = 1e3 * (block.program_offset_mm - block.field_offset_mm).norm();
+    report->max_field_difference_um = std::max(report->max_field_difference_um, block.field_difference_um);
+    if (!(block.field_difference_um <= tol)) {
+      block.problems.push_back("program offset " + Vec(block.program_offset_mm) + " vs -d_s*n from the field " +
+                               Vec(block.field_offset_mm) + " (d_s " + FormatFixed(1e3 * ds_mm, 3) +
+                               " um): differ by " + FormatFixed(block.field_difference_um, 3) + " um");
+    }
+  }
+  if (!block.problems.empty()) report->disagreeing.push_back(block);
 }
 
 Result<Compensation> WriteCompensatedProgram(const Toolpath& nominal, const std::string& nominal_program,

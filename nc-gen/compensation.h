@@ -129,6 +129,15 @@ struct CheckReport {
   nlohmann::json ToJson() const;
 };
 
+// One side-file row checked against the points the two programs give for it (mm): program offset
+// against the side file's, the nominal point against the side file's, the lines (when the row names
+// them), and −d_s(u, v)·n from `field` when report->field_checked and the row is on Q. A row with a
+// problem is appended to report->disagreeing; the maxima are updated. CheckCompensation and
+// CheckProgramCompensation (program_compensation.h) check every row through it.
+void CheckRow(std::size_t index, const CompensationEntry& entry, const Eigen::Vector3d& nominal_tip, long nominal_line,
+              const Eigen::Vector3d& compensated_tip, long compensated_line, const SystematicField& field,
+              CheckReport* report);
+
 // `formloop nc check`: for every feed block k (the k-th feed move of each program is side entry k),
 // recomputes the offset b_k − a_k from the two programs and compares it (a) with the side file's
 // offset, (b) with −d_s(u_k, v_k)·n_k from `field` (mm) when `field` is non-empty and the side file

@@ -34,17 +34,18 @@
 // Streaming: GcodeReader::Read takes one line at a time and keeps only the modal state, so a program of
 // any length is read in constant memory (LineSource reads a file in chunks).
 
-#include <Eigen/Core>
 #include <array>
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <limits>
 #include <map>
-#include <nlohmann/json.hpp>
 #include <string>
 #include <string_view>
 #include <vector>
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
 
 #include "core/status.h"
 

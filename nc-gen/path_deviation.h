@@ -41,15 +41,16 @@
 // in G91 inside a region: this rewriter writes incremental output for straight moves only), and the
 // reader's E_ARC_* / E_SYNTAX / E_MODAL_GROUP / E_NO_MOTION_MODE.
 
-#include <Eigen/Core>
 #include <filesystem>
 #include <functional>
 #include <map>
 #include <memory>
-#include <nlohmann/json.hpp>
 #include <string>
 #include <string_view>
 #include <vector>
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
 
 #include "core/status.h"
 #include "nc-gen/gcode_reader.h"

@@ -16,11 +16,12 @@
 //     code is written into it, so the program still means what it meant.
 // Coordinates are written with a decimal point (FormatCoordinate), rounded once, halves away from zero.
 
-#include <Eigen/Core>
 #include <functional>
 #include <string>
 #include <string_view>
 #include <vector>
+
+#include <Eigen/Core>
 
 #include "nc-gen/gcode_reader.h"
 

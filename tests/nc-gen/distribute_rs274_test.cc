@@ -12,14 +12,14 @@
 //     kept arcs at λ = 0, 1/4, 1/2, 3/4, 1 within 2e-4 mm, split arcs with every vertex on the corrected
 //     curve and every chord within the chord tolerance ε = 0.001 mm (+ rounding) of it.
 
-#include <gtest/gtest.h>
-
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
 #include <vector>
+
+#include <gtest/gtest.h>
 
 #include "nc-gen/path_deviation.h"
 #include "tests/support/rs274.h"

@@ -2,16 +2,15 @@
 // number formats of both dialects, modal state, comments, block delete, what is reported with its line,
 // and the errors.
 
-#include "nc-gen/gcode_reader.h"
-
-#include <gtest/gtest.h>
-
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <numbers>
 #include <string>
 
+#include <gtest/gtest.h>
+
+#include "nc-gen/gcode_reader.h"
 #include "tests/support/test_dir.h"
 
 namespace formloop::nc {

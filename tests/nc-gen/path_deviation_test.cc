@@ -2,10 +2,6 @@
 // (output resolution q = 0.0001 mm, comparisons to ±q/2), the chord tolerance of split arcs against the
 // corrected curve computed here, and every refusal of §7 with its code, its line and no output file.
 
-#include "nc-gen/path_deviation.h"
-
-#include <gtest/gtest.h>
-
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -14,7 +10,10 @@
 #include <string>
 #include <vector>
 
+#include <gtest/gtest.h>
+
 #include "core/atomic_file.h"
+#include "nc-gen/path_deviation.h"
 #include "tests/support/test_dir.h"
 
 namespace formloop::nc {

@@ -13,8 +13,6 @@
 //   - where rs274 refuses the program, the reader refuses it at the same block, or reads it and reports
 //     what rs274 stopped at.
 
-#include <gtest/gtest.h>
-
 #include <algorithm>
 #include <cctype>
 #include <cmath>
@@ -24,6 +22,8 @@
 #include <set>
 #include <string>
 #include <vector>
+
+#include <gtest/gtest.h>
 
 #include "core/atomic_file.h"
 #include "nc-gen/gcode_reader.h"

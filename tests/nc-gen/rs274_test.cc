@@ -11,13 +11,6 @@
 //   the length units millimetres throughout.
 // Skipped, with the message, only where rs274 is not installed.
 
-#include "tests/support/rs274.h"
-
-#include <gtest/gtest-spi.h>
-#include <gtest/gtest.h>
-#include <sys/wait.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <array>
 #include <cctype>
@@ -31,6 +24,12 @@
 #include <string>
 #include <vector>
 
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <gtest/gtest-spi.h>
+#include <gtest/gtest.h>
+
 #include "metrology/probe.h"
 #include "nc-gen/moves.h"
 #include "nc-gen/post.h"
@@ -38,6 +37,7 @@
 #include "nc-gen/toolpath.h"
 #include "reconstruction/analytic_surface.h"
 #include "reconstruction/bspline_surface.h"
+#include "tests/support/rs274.h"
 
 namespace formloop::nc {
 namespace {

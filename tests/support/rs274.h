@@ -13,9 +13,6 @@
 //
 // Positions are in the program's units and its current work coordinate system (as rs274 prints them).
 
-#include <sys/wait.h>
-
-#include <Eigen/Core>
 #include <algorithm>
 #include <array>
 #include <cctype>
@@ -29,6 +26,10 @@
 #include <sstream>
 #include <string>
 #include <vector>
+
+#include <sys/wait.h>
+
+#include <Eigen/Core>
 
 namespace formloop::testing {
 
