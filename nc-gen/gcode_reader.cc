@@ -427,8 +427,12 @@ Status GcodeReader::Interpret(Block* block) {
   ++report_.blocks;
   const bool fanuc = options_.dialect == GcodeDialect::kFanuc;
   // Which words a G- or M-code of this block uses; a word nobody uses is reported.
-  std::string used;  // letters consumed
-  auto use = [&used](const char* letters) { used += letters; };
+  std::uint32_t used = 0;  // letters consumed, bit (letter - 'A'); '#' and 'O' words are always consumed
+  auto use = [&used](const char* letters) {
+    for (const char* c = letters; *c != 0; ++c) {
+      if (*c >= 'A' && *c <= 'Z') used |= 1u << (*c - 'A');
+    }
+  };
   double motion_code = -1;     // G0..G3 in this block
   bool axis_consumer = false;  // G4/G10/G28/G30/G52/G53/G92: axis words are data, not a move
   bool unknown_position_all = false;
@@ -867,7 +871,10 @@ Status GcodeReader::Interpret(Block* block) {
   if (arc_mode && !axis_consumer) use(fanuc ? "IJKR" : "IJKRP");
   for (const Word& w : block->words) {
     if (std::strchr("XYZABC", w.letter) != nullptr) continue;
-    if (used.find(w.letter) != std::string::npos) continue;
+    if (w.letter == '#' || w.letter == 'O' ||
+        (w.letter >= 'A' && w.letter <= 'Z' && (used & (1u << (w.letter - 'A'))))) {
+      continue;
+    }
     if (w.letter == 'U' || w.letter == 'V' || w.letter == 'W') {
       Note(block, NoteKind::kUnmodelled, std::string(1, w.letter), "extra linear axis: not modelled");
       continue;

@@ -14,6 +14,7 @@
 
 #include "core/atomic_file.h"
 #include "nc-gen/path_deviation.h"
+#include "tests/support/rs274.h"
 #include "tests/support/test_dir.h"
 
 namespace formloop::nc {
@@ -351,6 +352,172 @@ TEST(PathDeviationTest, ModalArcAfterASplitArcGetsItsMotionCode) {
   for (const auto& l : out) all += l + "\n";
   EXPECT_TRUE(found) << "no explicit G3 on the modal arc:\n" << all;
 }
+
+namespace large {
+
+// A real-sized program (issue 23, "What it must show" 5): 120,000 blocks of a finishing raster (1 mm
+// lines, a quarter arc of r = 2 every 10 blocks, a comment every 50), a key point every 1,000 blocks
+// and a region every 20 (closed by a 5 mm lift), with deviations of up to 30 µm, so arcs in intervals whose deviation
+// changes fast enough are split and the others kept. Every written block is checked against the corrected path computed
+// here from the program's own geometry; LinuxCNC's rs274 reads the result (when installed).
+struct Nominal {
+  bool arc = false;
+  Vector3d start = Vector3d::Zero(), end = Vector3d::Zero();
+  Vector2d centre = Vector2d::Zero();
+  bool ccw = true;
+  double length = 0;
+  Vector3d At(double lambda) const {
+    if (!arc) return start + lambda * (end - start);
+    const double t0 = std::atan2(start.y() - centre.y(), start.x() - centre.x());
+    const double t = t0 + (ccw ? 1 : -1) * lambda * std::numbers::pi / 2;
+    return Vector3d(centre.x() + 2 * std::cos(t), centre.y() + 2 * std::sin(t), 0);
+  }
+};
+
+TEST(PathDeviationTest, RealSizedProgramIsTransformedCorrectly) {
+  std::string program = "%\nG21 G90 G17 G94\nG0 X0 Y0 Z0\nF1200\n";
+  std::vector<Nominal> blocks;
+  std::vector<std::pair<std::size_t, long>> markers;  // (motion blocks before it, key index; 0 = M57, -1 = M58)
+  DeviationTable table;
+  double x = 0, y = 0;
+  int dir = 1;
+  long key = 0;
+  char line[128];
+  const long kBlocks = 120000;
+  long written = 0;
+  while (written < kBlocks) {
+    program += "M57\n";
+    markers.emplace_back(blocks.size(), 0);
+    for (int region_key = 0; region_key < 20 && written < kBlocks; ++region_key) {
+      for (int k = 0; k < 1000; ++k, ++written) {
+        if (k % 50 == 49) {
+          program += "(pass)\n";
+          continue;
+        }
+        Nominal b;
+        b.start = Vector3d(x, y, 0);
+        if (k % 10 == 9) {
+          b.arc = true;
+          b.ccw = dir > 0;
+          b.centre = Vector2d(x, y + 2);
+          x += dir * 2;
+          y += 2;
+          std::snprintf(line, sizeof(line), "%s X%.4f Y%.4f I0 J2.\n", dir > 0 ? "G3" : "G2", x, y);
+          b.length = std::numbers::pi;
+          if (std::abs(x) > 200) dir = -dir;
+        } else {
+          x += dir;
+          std::snprintf(line, sizeof(line), "G1 X%.4f Y%.4f\n", x, y);
+          b.length = 1;
+        }
+        b.end = Vector3d(x, y, 0);
+        program += line;
+        blocks.push_back(b);
+      }
+      ++key;
+      EXPECT_TRUE(
+          table.Add({.index = key, .d_mm = Vector3d(0.03 * std::sin(1.3 * key), 0.02 * std::cos(0.7 * key), 0)}).ok());
+      program += "M59 P" + std::to_string(key) + "\n";
+      markers.emplace_back(blocks.size(), key);
+    }
+    Nominal lift;  // the 5 mm lift that closes the region (the deviation returns to 0 along it)
+    lift.start = Vector3d(x, y, 0);
+    lift.end = Vector3d(x, y, 5);
+    lift.length = 5;
+    blocks.push_back(lift);
+    program += "G1 Z5.\nM58\nG0 Z0\n";  // (the rapid back down is outside the region)
+    markers.emplace_back(blocks.size(), -1);
+    Nominal down;
+    down.start = lift.end;
+    down.end = lift.start;
+    blocks.push_back(down);
+  }
+  program += "M30\n%\n";
+  ASSERT_GE(written, 100000);
+  // The deviation at the start and end of every motion block, from this test's own lengths.
+  std::vector<Vector3d> d_start(blocks.size(), Vector3d::Zero()), d_end(blocks.size(), Vector3d::Zero());
+  for (std::size_t m = 0; m + 1 < markers.size(); ++m) {
+    const auto [b, k0] = markers[m];
+    const auto [e, k1] = markers[m + 1];
+    if (k0 == -1) continue;  // from M58 to the next M57: outside every region
+    const Vector3d d0 = k0 == 0 ? Vector3d::Zero() : table.Find(k0)->d_mm;
+    const Vector3d d1 = k1 <= 0 ? Vector3d::Zero() : table.Find(k1)->d_mm;
+    double total = 0;
+    for (std::size_t i = b; i < e; ++i) total += blocks[i].length;
+    double s = 0;
+    for (std::size_t i = b; i < e; ++i) {
+      d_start[i] = d0 + (d1 - d0) * (s / total);
+      s += blocks[i].length;
+      d_end[i] = d0 + (d1 - d0) * (s / total);
+    }
+  }
+  DistributeReport report;
+  DistributeOptions options = FineOptions();
+  const auto out = DistributeText(program, table, options, &report);
+  ASSERT_TRUE(out.ok()) << out.status().message();
+  const auto path = ReadProgramPath(*out, {}, "out.ngc");
+  ASSERT_TRUE(path.ok()) << path.status().message();
+  const double q = 1e-4, tol = std::sqrt(3.0) * q / 2 + 1e-9;
+  std::size_t j = 1;  // after the first rapid
+  std::size_t kept = 0, split = 0, failures = 0;
+  double worst = 0;
+  for (std::size_t i = 0; i < blocks.size() && failures < 10; ++i) {
+    const Nominal& b = blocks[i];
+    const Vector3d target = b.end + d_end[i];
+    ASSERT_LT(j, path->moves.size());
+    const PathMove& m = path->moves[j];
+    if (!b.arc || m.has_arc) {
+      const double d = (m.end - target).norm();
+      worst = std::max(worst, d);
+      if (d > tol) {
+        ADD_FAILURE() << "block " << i << " (output line " << m.line << "): " << m.end.transpose() << " vs "
+                      << target.transpose();
+        ++failures;
+      }
+      if (b.arc) {
+        ++kept;
+        for (double lambda : {0.25, 0.5, 0.75}) {
+          const Vector3d expected = b.At(lambda) + d_start[i] + lambda * (d_end[i] - d_start[i]);
+          EXPECT_LE((m.arc.PointAt(lambda) - expected).norm(), 2 * q) << "kept arc " << i;
+        }
+      }
+      ++j;
+      continue;
+    }
+    ++split;
+    const std::size_t first = j;
+    while (j < path->moves.size() && (path->moves[j].end - target).norm() > tol) ++j;
+    ASSERT_LT(j, path->moves.size()) << "split arc " << i;
+    const std::size_t n = j - first + 1;
+    for (std::size_t k = 0; k < n; ++k) {
+      const double lambda = static_cast<double>(k + 1) / n;
+      const Vector3d expected = b.At(lambda) + d_start[i] + lambda * (d_end[i] - d_start[i]);
+      EXPECT_LE((path->moves[first + k].end - expected).norm(), tol) << "split arc " << i << " vertex " << k;
+    }
+    ++j;
+  }
+  EXPECT_EQ(j, path->moves.size());
+  EXPECT_GT(kept, 1000u);
+  EXPECT_GT(split, 1000u);
+  EXPECT_EQ(report.arcs_kept, kept);
+  EXPECT_EQ(report.arcs_split, split);
+  std::printf(
+      "[large] %ld blocks in, %zu lines out; %zu corrected, %zu arcs kept, %zu split into %zu moves; "
+      "max |written - expected| %.3g mm (q = 1e-4)\n",
+      written, report.lines_out, report.corrected, kept, split, report.segments, worst);
+  if (testing::Rs274Installed()) {  // LinuxCNC reads all of it, to the same number of motions
+    const auto folder = testing::FreshTestDir("formloop-distribute-large");
+    ASSERT_TRUE(WriteFileAtomic(folder / "out.ngc", *out).ok());
+    int code = 0;
+    std::string console;
+    const testing::Canon canon = testing::ParseCanon(testing::RunRs274(folder / "out.ngc", &code, &console));
+    EXPECT_EQ(code, 0) << console.substr(0, 2000);
+    EXPECT_EQ(canon.moves.size(), path->moves.size());
+    std::filesystem::remove_all(folder);
+  }
+}
+
+}  // namespace large
 
 }  // namespace
 }  // namespace formloop::nc
