@@ -53,11 +53,22 @@ std::string WorkSystemName(int work_system) {
 Result<GcodeDialect> ParseGcodeDialect(std::string_view name) {
   if (name == "linuxcnc" || name == "rs274ngc") return GcodeDialect::kRs274ngc;
   if (name == "fanuc") return GcodeDialect::kFanuc;
+  if (name == "sinumerik") return GcodeDialect::kSinumerik;
   return Status::BadInput(Where{.field = "--dialect"}, "unknown G-code dialect '" + std::string(name) + "'",
-                          "use linuxcnc (RS274NGC) or fanuc");
+                          "use linuxcnc (RS274NGC), fanuc or sinumerik");
 }
 
-const char* GcodeDialectName(GcodeDialect dialect) { return dialect == GcodeDialect::kFanuc ? "fanuc" : "linuxcnc"; }
+const char* GcodeDialectName(GcodeDialect dialect) {
+  switch (dialect) {
+    case GcodeDialect::kFanuc:
+      return "fanuc";
+    case GcodeDialect::kSinumerik:
+      return "sinumerik";
+    case GcodeDialect::kRs274ngc:
+      break;
+  }
+  return "linuxcnc";
+}
 
 PlaneAxes AxesOf(Plane plane) {
   switch (plane) {
@@ -453,6 +464,10 @@ Status GcodeReader::Interpret(Block* block) {
   for (double g : block->g_codes) {
     const int t = Tenths(g);
     const std::string name = GName(g);
+    if (options_.dialect == GcodeDialect::kSinumerik && (t == 700 || t == 710)) {  // G70 inch, G71 mm
+      SetUnits(t == 700 ? Units::kInch : Units::kMm);
+      continue;
+    }
     switch (t) {
       case 0:
       case 10:
@@ -493,16 +508,9 @@ Status GcodeReader::Interpret(Block* block) {
         plane_ = Plane::kYZ;
         break;
       case 200:
-      case 210: {
-        const Units u = t == 200 ? Units::kInch : Units::kMm;
-        if (u != units_) {  // the position stays where it is, in the new unit
-          const double f = u == Units::kInch ? 1.0 / kMmPerInch : kMmPerInch;
-          position_ *= f;
-          feed_ *= f;
-          units_ = u;
-        }
+      case 210:
+        SetUnits(t == 200 ? Units::kInch : Units::kMm);
         break;
-      }
       case 280:
       case 281:
       case 300:
@@ -1006,6 +1014,14 @@ Status GcodeReader::Interpret(Block* block) {
   position_ = block->end;
   known_ = block->end_known;
   return Status::Ok();
+}
+
+void GcodeReader::SetUnits(Units units) {
+  if (units == units_) return;
+  const double f = units == Units::kInch ? 1.0 / kMmPerInch : kMmPerInch;  // the position stays where it is
+  position_ *= f;
+  feed_ *= f;
+  units_ = units;
 }
 
 Status GcodeReader::Arc(Block* block, const Eigen::Vector3d& target, unsigned target_known) {

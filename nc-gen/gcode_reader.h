@@ -52,10 +52,11 @@
 namespace formloop::nc {
 
 enum class GcodeDialect {
-  kRs274ngc,  // LinuxCNC: numbers without a point are units; ';' comments; O-words are control flow
-  kFanuc,     // Fanuc 0i/30i: numbers without a point are least increments; O<n> / :<n> program numbers
+  kRs274ngc,   // LinuxCNC: numbers without a point are units; ';' comments; O-words are control flow
+  kFanuc,      // Fanuc 0i/30i: numbers without a point are least increments; O<n> / :<n> program numbers
+  kSinumerik,  // Siemens 840D ISO words as formloop's post writes them: G70/G71 inch/mm, ';' comments
 };
-// "linuxcnc" (also "rs274ngc") or "fanuc".
+// "linuxcnc" (also "rs274ngc"), "fanuc" or "sinumerik".
 Result<GcodeDialect> ParseGcodeDialect(std::string_view name);
 const char* GcodeDialectName(GcodeDialect dialect);
 
@@ -239,6 +240,7 @@ class GcodeReader {
   Status Lex(std::string_view line, Block* block);
   Status Interpret(Block* block);
   Status Arc(Block* block, const Eigen::Vector3d& target, unsigned target_known);
+  void SetUnits(Units units);
 
   ReaderOptions options_;
   std::string source_;

@@ -250,91 +250,41 @@ std::string AxisWords(const ProgramText& w, const Move& move, const std::string&
 Result<std::vector<ProgramMove>> ReadWordAddress(const std::string& text, const std::string& source,
                                                  const WordDialect& dialect) {
   const std::string fix = "only formloop's own " + dialect.name + " output can be read back";
+  ReaderOptions options;
+  options.dialect = dialect.gcode;
+  GcodeReader reader(options, source);
+  LineSource lines = LineSource::FromText(text);
+  Block block;
+  std::string_view line, eol;
   std::vector<ProgramMove> moves;
-  std::size_t start = 0;
-  long line_no = 0;
-  Eigen::Vector3d position = Eigen::Vector3d::Constant(std::nan(""));
-  double feed = 0;
-  int motion = -1;  // 0 rapid, 1 feed
-  while (start < text.size()) {
-    std::size_t end = text.find('\n', start);
-    if (end == std::string::npos) end = text.size();
-    const std::string raw = text.substr(start, end - start);
-    start = end + 1;
-    ++line_no;
-    const Where where{.file = source, .line = line_no};
-    std::string comment;
-    std::string code;
-    int depth = 0;
-    for (char c : raw) {
-      if (dialect.paren_comments && c == '(') {
-        ++depth;
-        continue;
-      }
-      if (dialect.paren_comments && c == ')') {
-        --depth;
-        continue;
-      }
-      if (depth > 0) {
-        comment += c;
-      } else if (c == ';') {
-        break;
-      } else if (!std::isspace(static_cast<unsigned char>(c))) {
-        code += static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
-      }
+  int percent = 0;
+  while (lines.Next(&line, &eol)) {
+    FL_RETURN_IF_ERROR(reader.Read(line, &block));
+    if (block.percent && ++percent == 2) break;
+    const Where where{.file = source, .line = block.line};
+    if (!block.notes.empty()) {
+      return Status::BadInput(where, "unsupported word '" + block.notes.front().word + "' (" +
+                                         block.notes.front().what + ")", fix);
     }
-    if (code.empty() || code == "%") continue;
-    bool has_xyz = false;
-    std::size_t i = 0;
-    while (i < code.size()) {
-      const char letter = code[i++];
-      std::size_t j = i;
-      while (j < code.size() && (std::isdigit(static_cast<unsigned char>(code[j])) || code[j] == '.' ||
-                                 code[j] == '-' || code[j] == '+')) {
-        ++j;
-      }
-      double value = 0;
-      if (!std::isalpha(static_cast<unsigned char>(letter)) || !ParseDouble(code.substr(i, j - i), &value)) {
-        return Status::BadInput(where, "cannot read word '" + code.substr(i - 1, j - i + 1) + "'", fix);
-      }
-      i = j;
-      switch (letter) {
-        case 'G':
-          if (value == 20 || value == 70 || value == 91) {
-            return Status::BadInput(where, "G" + FormatFixed(value, 0) + " (inch or incremental) is not supported",
-                                    "program in millimetres and absolute coordinates");
-          }
-          if (dialect.g_codes.count(value) == 0) {
-            return Status::BadInput(where, "unsupported G-code G" + FormatExact(value), fix);
-          }
-          if (value == 0 || value == 1) motion = static_cast<int>(value);
-          break;
-        case 'X':
-          position.x() = value;
-          has_xyz = true;
-          break;
-        case 'Y':
-          position.y() = value;
-          has_xyz = true;
-          break;
-        case 'Z':
-          position.z() = value;
-          has_xyz = true;
-          break;
-        case 'F':
-          feed = value;
-          break;
-        default:
-          if (dialect.other_letters.find(letter) == std::string::npos) {
-            return Status::BadInput(where, std::string("unsupported word '") + letter + "'", fix);
-          }
-      }
+    if (block.units != Units::kMm || block.incremental) {
+      return Status::BadInput(where, "inch or incremental programming is not supported",
+                              "program in millimetres and absolute coordinates");
     }
-    if (has_xyz) {
-      if (motion < 0) return Status::BadInput(where, "coordinates before any G0/G1", fix);
-      moves.push_back(
-          {.rapid = motion == 0, .tip = position, .line = line_no, .feed_mm_per_min = feed, .comment = comment});
+    if (block.motion == Motion::kArcCw || block.motion == Motion::kArcCcw) {
+      return Status::BadInput(where, "arc: formloop's own programs are straight moves",
+                              fix + " (programs with arcs: nc compensate --program, nc distribute)");
     }
+    if (block.motion == Motion::kNone) continue;
+    ProgramMove m{.rapid = block.motion == Motion::kRapid, .tip = block.end, .line = block.line,
+                  .feed_mm_per_min = block.feed, .comment = ""};
+    if (!block.comments.empty()) {
+      const auto [b, e] = block.comments.front();
+      std::string_view c = block.text.substr(b, e - b);
+      c.remove_prefix(1);
+      if (!c.empty() && c.back() == ')') c.remove_suffix(1);
+      m.comment = std::string(c);
+    }
+    moves.push_back(std::move(m));
   }
   return moves;
 }

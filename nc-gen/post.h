@@ -10,7 +10,8 @@
 //   "heidenhain" Heidenhain TNC conversational (Klartext) programs
 //   "sinumerik"  Siemens Sinumerik 840D ISO/G-code programs
 // Every dialect has a reader for formloop's own output (positions, rapid/feed, feed rate), so a program
-// can be checked by reading it back; anything else is refused with its line.
+// can be checked by reading it back; anything else is refused with its line. LinuxCNC, Fanuc and
+// Sinumerik programs are read by the one G-code reader (gcode_reader.h).
 //
 // Safety: a program is never emitted when any programmed position, feed or spindle speed lies outside
 // MachineLimits; the Status names the first offending move and the limit.
@@ -105,7 +106,8 @@ std::string CommentText(const std::string& text);
 // "(cut)" marker is the i-th CL point.
 Result<std::string> PostLinuxCnc(const Toolpath& path, const PostOptions& options);
 
-// Reads formloop's own LinuxCNC output back (G0/G1 with X Y Z F, comments, N numbers, G21/G90 only).
+// Reads formloop's own LinuxCNC output back (straight moves in mm and absolute coordinates; the G-code
+// reader underneath, held to what formloop writes).
 // Anything else is reported with its line, so a hand-edited program is never misread.
 Result<std::vector<ProgramMove>> ReadLinuxCncMoves(const std::string& text, const std::string& source);
 

@@ -71,8 +71,7 @@ class FanucPost : public PostDialect {
   }
 
   Result<std::vector<ProgramMove>> Read(const std::string& text, const std::string& source) const override {
-    static const WordDialect kDialect{
-        .name = "Fanuc", .paren_comments = true, .g_codes = {0, 1, 17, 21, 40, 49, 80, 90}, .other_letters = "NMSTO"};
+    static const WordDialect kDialect{.name = "Fanuc", .gcode = GcodeDialect::kFanuc};
     return ReadWordAddress(text, source, kDialect);
   }
 

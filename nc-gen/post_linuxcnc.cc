@@ -50,10 +50,7 @@ class LinuxCncPost : public PostDialect {
   }
 
   Result<std::vector<ProgramMove>> Read(const std::string& text, const std::string& source) const override {
-    static const WordDialect kDialect{.name = "LinuxCNC",
-                                      .paren_comments = true,
-                                      .g_codes = {0, 1, 17, 21, 40, 49, 64, 80, 90, 94},
-                                      .other_letters = "NMSTP"};
+    static const WordDialect kDialect{.name = "LinuxCNC", .gcode = GcodeDialect::kRs274ngc};
     return ReadWordAddress(text, source, kDialect);
   }
 

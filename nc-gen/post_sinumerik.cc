@@ -47,8 +47,7 @@ class SinumerikPost : public PostDialect {
   }
 
   Result<std::vector<ProgramMove>> Read(const std::string& text, const std::string& source) const override {
-    static const WordDialect kDialect{
-        .name = "Sinumerik", .paren_comments = false, .g_codes = {0, 1, 17, 40, 71, 90, 94}, .other_letters = "NMSTD"};
+    static const WordDialect kDialect{.name = "Sinumerik", .gcode = GcodeDialect::kSinumerik};
     return ReadWordAddress(text, source, kDialect);
   }
 

@@ -1,14 +1,14 @@
 #pragma once
 // Shared pieces of the posts (internal to nc-gen): a line writer that numbers blocks, wraps comments and
-// enforces the line-length limit, and a reader for the ISO word-address dialects (LinuxCNC, Fanuc,
-// Sinumerik), which differ only in comment syntax and in the words they allow.
+// enforces the line-length limit, and the read-back of the ISO word-address dialects (LinuxCNC, Fanuc,
+// Sinumerik) through the one G-code reader.
 
 #include <memory>
-#include <set>
 #include <string>
 #include <vector>
 
 #include "core/status.h"
+#include "nc-gen/gcode_reader.h"
 #include "nc-gen/post.h"
 #include "nc-gen/probe_program.h"
 
@@ -62,12 +62,13 @@ void WriteWordAddressBody(const MoveList& list, const std::string& rapid, const 
 
 // The word-address reader's view of a dialect.
 struct WordDialect {
-  std::string name;            // "LinuxCNC", used in messages
-  bool paren_comments = true;  // ( ... ) comments; ';' starts a comment to the end of the line always
-  std::set<double> g_codes;    // G-codes formloop writes (others are refused)
-  std::string other_letters;   // letters accepted and ignored (N M S T P O D ...)
+  std::string name;  // "LinuxCNC", used in messages
+  GcodeDialect gcode = GcodeDialect::kRs274ngc;
 };
 
+// formloop's own output read back through the one G-code reader (gcode_reader.h), held to what formloop
+// writes: millimetres, absolute coordinates, straight moves, nothing the reader reports. Anything else is
+// refused with its line, so a hand-edited program is never misread as formloop's.
 Result<std::vector<ProgramMove>> ReadWordAddress(const std::string& text, const std::string& source,
                                                  const WordDialect& dialect);
 
