@@ -224,6 +224,7 @@ struct DeviationDistributor::Impl {
 std::string DeviationDistributor::Impl::MarkerComment(const std::string& what) const {
   std::string head(block.text.substr(0, block.head_end));
   if (!head.empty() && head.back() != ' ' && head.back() != '\t') head += ' ';
+  if (options.reader.dialect == GcodeDialect::kSinumerik) return head + "; " + what + " - APPLIED BY FORMLOOP";
   return head + "(" + what + " - APPLIED BY FORMLOOP)";
 }
 

@@ -243,6 +243,8 @@ struct RefusalCase {
   long line = 0;
 };
 
+void PrintTo(const RefusalCase& c, std::ostream* os) { *os << c.name; }
+
 class PathDeviationRefusalTest : public ::testing::TestWithParam<RefusalCase> {};
 
 TEST_P(PathDeviationRefusalTest, ClearErrorWithLineAndNothingWritten) {

@@ -19,6 +19,7 @@
 #include "nc-gen/deviation_field.h"
 #include "nc-gen/program_compensation.h"
 #include "reconstruction/analytic_surface.h"
+#include "tests/support/rs274.h"
 #include "tests/support/test_dir.h"
 
 namespace formloop::nc {
@@ -187,6 +188,18 @@ TEST_F(ProgramCompensationTest, CheckAgreesAndFindsACorruptedBlock) {
   ASSERT_TRUE(side.ok()) << side.status().message();
   EXPECT_TRUE(side->has_lambda);
   const std::string compensated = *ReadFile(dir / "comp.ngc");
+  if (testing::Rs274Installed()) {  // LinuxCNC accepts the compensated program and runs the same moves
+    int code = 0;
+    std::string console;
+    const testing::Canon canon = testing::ParseCanon(testing::RunRs274(dir / "comp.ngc", &code, &console));
+    EXPECT_EQ(code, 0) << console;
+    const auto ours = ReadProgramPath(compensated, {}, "comp.ngc");
+    ASSERT_TRUE(ours.ok());
+    ASSERT_EQ(canon.moves.size(), ours->moves.size());
+    for (std::size_t k = 1; k < canon.moves.size(); ++k) {  // the first rapid starts where rs274 happens to be
+      EXPECT_LE((canon.moves[k].p - ours->moves[k].end).norm(), 1e-4) << "move " << k;
+    }
+  }
   const auto check =
       CheckProgramCompensation(shop.text, compensated, *side, field_.AsSystematicField(), {}, {.program_decimals = 4});
   ASSERT_TRUE(check.ok()) << check.status().message();

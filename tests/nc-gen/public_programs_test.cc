@@ -149,6 +149,8 @@ struct PublicProgram {
   std::string rs274_says;  // a phrase of rs274's refusal
 };
 
+void PrintTo(const PublicProgram& p, std::ostream* os) { *os << p.file; }
+
 class PublicProgramTest : public ::testing::TestWithParam<PublicProgram> {};
 
 TEST_P(PublicProgramTest, ReadReportedAndAgreesWithRs274) {

@@ -27,7 +27,10 @@
 #include <string>
 #include <vector>
 
+#include <fcntl.h>
+#include <sys/file.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <Eigen/Core>
 
@@ -35,10 +38,18 @@ namespace formloop::testing {
 
 inline bool Rs274Installed() { return std::system("command -v rs274 >/dev/null 2>&1") == 0; }
 
-// Runs `rs274 -g program program.canon` and returns the canonical commands; *exit_code and *console
-// receive the exit status and what rs274 printed.
+// Runs `rs274 -g program` and returns the canonical commands; *exit_code and *console receive the exit
+// status and what rs274 printed. rs274 keeps its tool table in shared memory, so two of them running at
+// once disturb each other ("Requested tool 1 not found", bus errors): runs from parallel ctest processes
+// take turns through an exclusive lock on a file in the temp directory. The canonical output goes to
+// the temp directory, never next to the program (which may sit in read-only reference data).
 inline std::string RunRs274(const std::filesystem::path& program, int* exit_code, std::string* console) {
-  const std::filesystem::path canon = program.string() + ".canon";
+  const std::filesystem::path lock_path = std::filesystem::temp_directory_path() / "formloop-rs274.lock";
+  const int lock = ::open(lock_path.c_str(), O_RDWR | O_CREAT, 0666);
+  if (lock >= 0) ::flock(lock, LOCK_EX);
+  const std::filesystem::path canon =
+      std::filesystem::temp_directory_path() /
+      ("formloop-rs274-" + std::to_string(::getpid()) + "-" + program.filename().string() + ".canon");
   const std::string command = "rs274 -g " + program.string() + " " + canon.string() + " </dev/null 2>&1";
   FILE* pipe = ::popen(command.c_str(), "r");
   std::array<char, 4096> buffer{};
@@ -51,6 +62,7 @@ inline std::string RunRs274(const std::filesystem::path& program, int* exit_code
   std::ifstream in(canon);
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   std::filesystem::remove(canon);
+  if (lock >= 0) ::close(lock);  // releases the lock
   return text;
 }
 
