@@ -29,6 +29,7 @@
 #include "cnc/macro_interpreter.h"
 #include "core/atomic_file.h"
 #include "core/point_io.h"
+#include "tests/support/rs274.h"
 #include "tests/support/test_dir.h"
 
 namespace formloop::cnc {
@@ -254,14 +255,12 @@ TEST(MacroInterpreter, DialectSemantics) {
 
 bool Rs274Installed() { return std::system("command -v rs274 >/dev/null 2>&1") == 0; }
 
+// Through tests/support/rs274.h, which lets one rs274 run at a time (parallel runs disturb each other).
 std::string Rs274(const std::filesystem::path& program, int* exit_code) {
-  const auto canon = program.string() + ".canon";
-  const std::string command =
-      "rs274 -g " + program.string() + " " + canon + " </dev/null >" + program.string() + ".console 2>&1";
-  const int status = std::system(command.c_str());
-  *exit_code = WEXITSTATUS(status);
-  const auto text = ReadFile(canon);
-  return text.ok() ? *text : std::string();
+  std::string console;
+  std::string canon = formloop::testing::RunRs274(program, exit_code, &console);
+  std::ofstream(program.string() + ".console") << console;
+  return canon;
 }
 
 std::vector<std::pair<int, double>> AuxOutputs(const std::string& canon) {

@@ -18,6 +18,7 @@
 #include "nc-gen/toolpath.h"
 #include "reconstruction/analytic_surface.h"
 #include "reconstruction/bspline_surface.h"
+#include "tests/support/rs274.h"
 
 namespace formloop::nc {
 namespace {
@@ -193,19 +194,9 @@ TEST(PostTest, CommentsNeverNestParentheses) {
 // LinuxCNC's own interpreter (Debian linuxcnc-uspace, installed by scripts/setup.sh) must accept the
 // cutting and the probing program and turn them into exactly our moves.
 std::string RunRs274(const std::filesystem::path& program, int* exit_code) {
-  const std::filesystem::path canon = program.string() + ".canon";
-  const std::string command = "rs274 -g " + program.string() + " " + canon.string() + " </dev/null 2>&1";
-  FILE* pipe = ::popen(command.c_str(), "r");
-  std::string out;
-  std::array<char, 4096> buffer{};
-  std::size_t n;
-  while (pipe != nullptr && (n = std::fread(buffer.data(), 1, buffer.size(), pipe)) > 0) out.append(buffer.data(), n);
-  const int status = pipe != nullptr ? ::pclose(pipe) : -1;
-  *exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  std::ifstream in(canon);
-  std::string canon_text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  std::filesystem::remove(canon);
-  return canon_text + "\n--- rs274 output ---\n" + out;
+  std::string console;
+  const std::string canon_text = testing::RunRs274(program, exit_code, &console);
+  return canon_text + "\n--- rs274 output ---\n" + console;
 }
 
 std::size_t Count(const std::string& text, const std::string& word) {
