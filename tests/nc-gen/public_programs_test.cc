@@ -1,6 +1,6 @@
 // The reader on programs nobody here wrote (issue 23, "What it must show" 3): public NC programs with
-// arcs from public repositories, kept with their sources and licences in ../shared/data/nc-programs/
-// (SOURCE.txt). For each program:
+// arcs from public repositories, kept with their sources and licences in data/nc-programs/
+// (README.md). For each program:
 //   - formloop's reader reads it, and every word it does not model is in its report with its lines:
 //     the test lists, per program, exactly which words those are (nothing else may appear, nothing
 //     listed may be missing), and checks independently (its own scan of the text) that every letter
@@ -34,7 +34,7 @@ namespace {
 
 using testing::CanonKind;
 
-const std::filesystem::path kData = std::filesystem::path(FORMLOOP_SHARED_DIR) / "data" / "nc-programs";
+const std::filesystem::path kData = std::filesystem::path(FORMLOOP_SOURCE_DIR) / "data" / "nc-programs";
 
 struct Reading {
   std::vector<PathMove> moves;
