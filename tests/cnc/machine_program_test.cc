@@ -253,8 +253,6 @@ TEST(MacroInterpreter, DialectSemantics) {
 
 // ---- LinuxCNC's rs274 ----------------------------------------------------------------------------
 
-bool Rs274Installed() { return std::system("command -v rs274 >/dev/null 2>&1") == 0; }
-
 // Through tests/support/rs274.h, which lets one rs274 run at a time (parallel runs disturb each other).
 std::string Rs274(const std::filesystem::path& program, int* exit_code) {
   std::string console;
@@ -322,7 +320,9 @@ std::string Loopback(const std::string& program) {
 class Rs274Test : public ::testing::Test {
  protected:
   void SetUp() override {
-    if (!Rs274Installed()) GTEST_SKIP() << "rs274 (linuxcnc-uspace) is not installed; scripts/setup.sh installs it";
+    if (!formloop::testing::Rs274Installed()) {
+      GTEST_SKIP() << "rs274 (linuxcnc-uspace) is not installed; scripts/setup.sh installs it";
+    }
     dir_ = formloop::testing::FreshTestDir("formloop-cnc-rs274");
   }
   void TearDown() override {
