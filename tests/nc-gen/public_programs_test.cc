@@ -82,6 +82,17 @@ std::map<char, long> LettersOf(const std::string& text) {
   return letters;
 }
 
+// Every letter of the program is one the reader handles, or it was reported.
+void ExpectEveryLetterHandledOrReported(const std::string& text, const std::set<std::string>& reported,
+                                        const std::string& name) {
+  static const std::string kHandled = "GMNXYZABCIJKRFSTPLHDO";
+  for (const auto& [letter, count] : LettersOf(text)) {
+    if (kHandled.find(letter) != std::string::npos) continue;
+    EXPECT_TRUE(reported.count(std::string(1, letter)))
+        << name << ": letter " << letter << " (" << count << " times) is neither handled nor reported";
+  }
+}
+
 struct Agreement {
   std::size_t compared = 0, arcs = 0, skipped_compensation = 0;
   double max_end_difference = 0, max_arc_difference = 0;
@@ -175,13 +186,7 @@ TEST_P(PublicProgramTest, ReadReportedAndAgreesWithRs274) {
     EXPECT_FALSE(entry.first_lines.empty()) << word;
   }
   EXPECT_EQ(reported, p.reported) << p.file;
-  // Independently: every letter of the program is one the reader handles, or it was reported.
-  static const std::string kHandled = "GMNXYZABCIJKRFSTPLHDO";
-  for (const auto& [letter, count] : LettersOf(*text)) {
-    if (kHandled.find(letter) != std::string::npos) continue;
-    EXPECT_TRUE(reported.count(std::string(1, letter)))
-        << p.file << ": letter " << letter << " (" << count << " times) is neither handled nor reported";
-  }
+  ExpectEveryLetterHandledOrReported(*text, reported, p.file);
   std::printf("[public] %-36s %6zu lines %6zu motion blocks %5zu arcs, %zu words reported\n", p.file.c_str(),
               r.report.lines, r.report.motion_blocks, r.report.arcs, r.report.notes());
   if (!testing::Rs274Installed()) {
@@ -229,6 +234,57 @@ INSTANTIATE_TEST_SUITE_P(Programs, PublicProgramTest,
                            }
                            return name;
                          });
+
+// The link's machine-side LinuxCNC program (cnc/machine_program.h; golden in tests/cnc/golden/, written
+// by formloop's link, not by its posts) is macro code: O-word subroutines and loops, # parameters,
+// G38.2 probing. The G-code reader does not execute macros; it reads the program without an error and
+// reports exactly those three words with their lines, so nothing in it is silently taken for a path.
+TEST(LinkProgramTest, MacroWordsOfTheLinksLinuxCncProgramAreReportedNotDropped) {
+  const std::string file = "measure.ngc";
+  const auto text = ReadFile(std::filesystem::path(FORMLOOP_SOURCE_DIR) / "tests" / "cnc" / "golden" / file);
+  ASSERT_TRUE(text.ok()) << text.status().message();
+  const Reading r = ReadUntilError(*text, ReaderOptions{}, file);
+  ASSERT_TRUE(r.status.ok()) << r.status.message();
+  std::set<std::string> reported;
+  for (const auto& [word, entry] : r.report.words) {
+    reported.insert(word);
+    EXPECT_FALSE(entry.first_lines.empty()) << word;
+  }
+  EXPECT_EQ(reported, (std::set<std::string>{"#", "O", "G38.2"}));
+  EXPECT_EQ(r.report.unknown(), 0u);
+  // The test's own count, comments removed: O-word lines (the rest of the line is theirs), parameter
+  // statements (a line starting with '#'), words whose value is #n or [expression], G38.2 blocks.
+  std::size_t o_lines = 0, hash_words = 0, probes = 0;
+  std::size_t start = 0;
+  while (start < text->size()) {
+    const std::size_t end = std::min(text->find('\n', start), text->size());
+    std::string l;
+    for (std::size_t i = start, depth = 0; i < end; ++i) {
+      const char c = (*text)[i];
+      if (c == '(') ++depth;
+      if (depth == 0) l += c;
+      if (c == ')' && depth > 0) --depth;
+    }
+    start = end + 1;
+    if (l.empty()) continue;
+    if (l[0] == 'o' || l[0] == 'O') {
+      ++o_lines;
+    } else if (l[0] == '#') {
+      ++hash_words;
+    } else {
+      for (std::size_t i = 1; i < l.size(); ++i) {
+        hash_words += (l[i] == '#' || l[i] == '[') && std::isalpha(static_cast<unsigned char>(l[i - 1])) ? 1 : 0;
+      }
+      probes += l.find("G38.2") != std::string::npos ? 1 : 0;
+    }
+  }
+  EXPECT_GT(o_lines, 0u);
+  EXPECT_EQ(r.report.words.at("O").count, o_lines);
+  EXPECT_EQ(r.report.words.at("#").count, hash_words);
+  EXPECT_EQ(r.report.words.at("G38.2").count, probes);
+  std::printf("[link] %s: %zu O-word lines, %zu parameter words, %zu probing moves reported; %zu motion blocks\n",
+              file.c_str(), o_lines, hash_words, probes, r.report.motion_blocks);
+}
 
 }  // namespace
 }  // namespace formloop::nc
