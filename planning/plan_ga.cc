@@ -1,17 +1,13 @@
 #include "planning/plan_ga.h"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <numbers>
-#include <numeric>
 
-#include "core/random.h"
+#include "planning/aga.h"
 
 namespace formloop::planning {
 namespace {
-
-constexpr double kInf = std::numeric_limits<double>::infinity();
 
 // ---------------------------------------------------------------- surrogate (§4.3)
 
@@ -33,16 +29,9 @@ double MaxFeedPerToothMm(const SurrogateInputs& in, double r) {
   return std::min(in.f_z_max_mm, in.max_feed_mm_per_min / (in.flutes * SpindleRpm(in, r)));
 }
 
-// ---------------------------------------------------------------- AGA (§1.6)
+// ---------------------------------------------------------------- decoding (§4.2)
 
-using Genes = std::array<double, 4>;
-
-struct Individual {
-  Genes xi{};
-  SurrogateResult eval;
-};
-
-SurrogateResult Decode(const SurrogateInputs& in, const std::vector<double>& radii, const Genes& xi) {
+SurrogateResult Decode(const SurrogateInputs& in, const std::vector<double>& radii, const std::vector<double>& xi) {
   const int k_ok = static_cast<int>(radii.size());
   const int i = std::min(k_ok - 1, static_cast<int>(std::floor(xi[0] * k_ok)));
   const double r = radii[static_cast<std::size_t>(i)];
@@ -54,94 +43,6 @@ SurrogateResult Decode(const SurrogateInputs& in, const std::vector<double>& rad
   SurrogateResult out = EvaluateSurrogate(in, r, s, f_z, in.c_pc_max * xi[3]);
   out.tool_index = i;
   return out;
-}
-
-// Tournament and elite order: higher fitness (equal within 1e-12 relative), then shorter time, then
-// lower index.
-bool Better(const std::vector<Individual>& pop, std::size_t a, std::size_t b) {
-  const double fa = pop[a].eval.fitness, fb = pop[b].eval.fitness;
-  if (std::abs(fa - fb) > 1e-12 * std::max(std::abs(fa), std::abs(fb))) return fa > fb;
-  if (pop[a].eval.time_min != pop[b].eval.time_min) return pop[a].eval.time_min < pop[b].eval.time_min;
-  return a < b;
-}
-
-std::size_t Tournament(const std::vector<Individual>& pop, Rng& rng) {
-  const std::size_t a = rng.UniformIndex(pop.size()), b = rng.UniformIndex(pop.size());
-  return Better(pop, a, b) ? a : b;
-}
-
-struct FitnessStats {
-  double f_max = -kInf, f_avg = 0;
-  bool flat = true;  // f_max − f_avg negligible: the fixed probabilities apply
-};
-
-FitnessStats StatsOf(const std::vector<Individual>& pop) {
-  FitnessStats st;
-  for (const Individual& ind : pop) {
-    st.f_max = std::max(st.f_max, ind.eval.fitness);
-    st.f_avg += ind.eval.fitness;
-  }
-  st.f_avg /= static_cast<double>(pop.size());
-  st.flat = st.f_max - st.f_avg <= 1e-12 * std::max(std::abs(st.f_max), 1e-300);
-  return st;
-}
-
-double CrossoverProbability(const FitnessStats& st, double f_parent) {
-  if (st.flat || f_parent < st.f_avg) return 0.9;
-  return 0.9 - 0.3 * (f_parent - st.f_avg) / (st.f_max - st.f_avg);
-}
-
-// As printed (f_max − f): the best gets the largest rate around it; elitism keeps its unmutated copy.
-double MutationProbability(const FitnessStats& st, double f) {
-  if (st.flat || f < st.f_avg) return 0.1;
-  return 0.1 - 0.099 * (st.f_max - f) / (st.f_max - st.f_avg);
-}
-
-Individual MakeChild(const SurrogateInputs& in, const std::vector<double>& radii, const Genes& xi,
-                     const FitnessStats& st, double sigma, Rng& rng) {
-  Individual child{xi, Decode(in, radii, xi)};
-  const double p_m = MutationProbability(st, child.eval.fitness);
-  bool mutated = false;
-  for (double& g : child.xi) {
-    if (rng.Uniform() < p_m) {
-      g = std::clamp(g + sigma * rng.Normal(), 0.0, 1.0);
-      mutated = true;
-    }
-  }
-  if (mutated) child.eval = Decode(in, radii, child.xi);
-  return child;
-}
-
-std::vector<std::size_t> RankedIndices(const std::vector<Individual>& pop) {
-  std::vector<std::size_t> idx(pop.size());
-  std::iota(idx.begin(), idx.end(), 0);
-  std::stable_sort(idx.begin(), idx.end(), [&](std::size_t a, std::size_t b) { return Better(pop, a, b); });
-  return idx;
-}
-
-std::vector<Individual> NextGeneration(const SurrogateInputs& in, const std::vector<double>& radii,
-                                       const std::vector<Individual>& pop, int g, Rng& rng) {
-  const FitnessStats st = StatsOf(pop);
-  const double sigma = 0.1 - 0.09 * g / std::max(1, in.generations - 1);
-  std::vector<Individual> next;
-  next.reserve(pop.size());
-  const std::vector<std::size_t> ranked = RankedIndices(pop);
-  for (int e = 0; e < in.elites && e < static_cast<int>(pop.size()); ++e) next.push_back(pop[ranked[e]]);
-  while (next.size() < pop.size()) {
-    const Individual& p1 = pop[Tournament(pop, rng)];
-    const Individual& p2 = pop[Tournament(pop, rng)];
-    Genes c1 = p1.xi, c2 = p2.xi;
-    if (rng.Uniform() < CrossoverProbability(st, std::max(p1.eval.fitness, p2.eval.fitness))) {
-      for (std::size_t k = 0; k < c1.size(); ++k) {  // blend crossover, λ ∈ [−0.25, 1.25] per gene
-        const double lambda = rng.Uniform(-0.25, 1.25);
-        c1[k] = std::clamp(lambda * p1.xi[k] + (1 - lambda) * p2.xi[k], 0.0, 1.0);
-        c2[k] = std::clamp(lambda * p2.xi[k] + (1 - lambda) * p1.xi[k], 0.0, 1.0);
-      }
-    }
-    next.push_back(MakeChild(in, radii, c1, st, sigma, rng));
-    if (next.size() < pop.size()) next.push_back(MakeChild(in, radii, c2, st, sigma, rng));
-  }
-  return next;
 }
 
 }  // namespace
@@ -185,27 +86,20 @@ SurrogateResult EvaluateSurrogate(const SurrogateInputs& in, double r, double s,
 SurrogateResult SurrogateGa(const SurrogateInputs& in, std::uint64_t seed, nlohmann::json* history) {
   const std::vector<double> radii = GougeFreeRadii(in);
   if (radii.empty()) return {};  // PLAN-NO-TOOL: tool_index −1
-  Rng rng(seed);
-  std::vector<Individual> pop(static_cast<std::size_t>(in.population));
-  for (Individual& ind : pop) {
-    for (double& g : ind.xi) g = rng.Uniform();
-    ind.eval = Decode(in, radii, ind.xi);
+  // Fitness −J (penalised); among equal fitness the shorter machining time wins.
+  const AgaObjective objective = [&](const std::vector<double>& xi) {
+    const SurrogateResult e = Decode(in, radii, xi);
+    return AgaScore{e.fitness, -e.time_min};
+  };
+  const AgaOptions options{.population = in.population, .generations = in.generations, .elites = in.elites};
+  const AgaResult run = RunAga(4, objective, options, seed);
+  SurrogateResult out = Decode(in, radii, run.genes);
+  out.generations = run.generations;
+  if (history != nullptr) {
+    std::vector<double> best_j;
+    for (const std::vector<double>& xi : run.best_genes) best_j.push_back(Decode(in, radii, xi).J);
+    (*history)["best_J"] = best_j;
   }
-  std::vector<double> best_fitness, best_j;
-  int g = 0;
-  for (;; ++g) {
-    const Individual& best = pop[RankedIndices(pop).front()];
-    best_fitness.push_back(best.eval.fitness);
-    best_j.push_back(best.eval.J);
-    const double f_now = best_fitness.back();
-    // 20-generation stall window (§1.6 step 4).
-    const bool stalled = g >= 20 && f_now - best_fitness[static_cast<std::size_t>(g - 20)] <= 1e-7 * std::abs(f_now);
-    if (g >= in.generations || stalled) break;
-    pop = NextGeneration(in, radii, pop, g, rng);
-  }
-  SurrogateResult out = pop[RankedIndices(pop).front()].eval;
-  out.generations = g;
-  if (history != nullptr) (*history)["best_J"] = best_j;
   return out;
 }
 

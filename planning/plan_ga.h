@@ -1,8 +1,7 @@
 #pragma once
 // The plan GA of the simulation-correction step (spec/process-optimization.md §4): the fast surrogate of
 // §4.3 (machining time, tool deflection, scallop and the predicted form error of a plan r, s, f_z, c_pc)
-// and the adaptive genetic algorithm of §1.6 (Srinivas & Patnaik 1994: crossover and mutation rates that
-// fall for fitter individuals; tournament selection, blend crossover, Gaussian mutation, elitism) with
+// and formloop's one adaptive genetic algorithm (planning/aga.h, spec §1.6; Srinivas & Patnaik 1994) with
 // the §4.2 decoding of genes into a gouge-free tool, a step-over below the scallop bound and a feed per
 // tooth within the machine's feed. A brute-force grid over the same space is the oracle the tests hold
 // the GA to (§4.4). Everything is seeded (formloop::Rng), so the same input gives the same plan.
