@@ -81,8 +81,7 @@ class Aga {
       const Individual& p1 = pop[Tournament(pop, rng_)];
       const Individual& p2 = pop[Tournament(pop, rng_)];
       std::vector<double> c1 = p1.xi, c2 = p2.xi;
-      if (rng_.Uniform() <
-          AgaCrossoverProbability(st.f_max, st.f_avg, std::max(p1.score.fitness, p2.score.fitness))) {
+      if (rng_.Uniform() < AgaCrossoverProbability(st.f_max, st.f_avg, std::max(p1.score.fitness, p2.score.fitness))) {
         for (std::size_t k = 0; k < c1.size(); ++k) {  // blend crossover, λ ∈ [−0.25, 1.25] per gene
           const double lambda = rng_.Uniform(-0.25, 1.25);
           c1[k] = std::clamp(lambda * p1.xi[k] + (1 - lambda) * p2.xi[k], 0.0, 1.0);
@@ -100,7 +99,7 @@ class Aga {
   Individual Child(std::vector<double> xi, const FitnessStats& st, double sigma) {
     Individual child{std::move(xi), {}};
     child.score = objective_(child.xi);
-    const double p_m = AgaMutationProbability(st.f_max, st.f_avg, child.score.fitness, options_.mutation_rule);
+    const double p_m = AgaMutationProbability(st.f_max, st.f_avg, child.score.fitness);
     bool mutated = false;
     for (double& gene : child.xi) {
       if (rng_.Uniform() < p_m) {
@@ -135,10 +134,10 @@ double AgaCrossoverProbability(double f_max, double f_avg, double f_parent) {
   return 0.9 - 0.3 * (f_parent - f_avg) / (f_max - f_avg);
 }
 
-double AgaMutationProbability(double f_max, double f_avg, double f, AgaMutationRule rule) {
+// As printed (f_max − f): the best gets the largest rate around it; elitism keeps its unmutated copy.
+double AgaMutationProbability(double f_max, double f_avg, double f) {
   if (Flat(f_max, f_avg) || f < f_avg) return 0.1;
-  const double share = rule == AgaMutationRule::kAsPrinted ? f_max - f : f - f_avg;
-  return 0.1 - 0.099 * share / (f_max - f_avg);
+  return 0.1 - 0.099 * (f_max - f) / (f_max - f_avg);
 }
 
 AgaResult RunAga(int gene_count, const AgaObjective& objective, const AgaOptions& options, std::uint64_t seed) {
@@ -152,9 +151,9 @@ AgaResult RunAga(int gene_count, const AgaObjective& objective, const AgaOptions
     out.best_fitness.push_back(best.score.fitness);
     const double f_now = best.score.fitness;
     const auto window = static_cast<std::size_t>(options.stall_window);
-    const bool stalled = static_cast<std::size_t>(g) >= window &&
-                         f_now - out.best_fitness[static_cast<std::size_t>(g) - window] <=
-                             options.stall_tolerance * std::abs(f_now);
+    const bool stalled =
+        static_cast<std::size_t>(g) >= window &&
+        f_now - out.best_fitness[static_cast<std::size_t>(g) - window] <= options.stall_tolerance * std::abs(f_now);
     if (g >= options.generations || stalled) break;
     pop = aga.Next(pop, g);
   }

@@ -1,0 +1,76 @@
+#pragma once
+// Editing a formloop word-address program (the LinuxCNC, Fanuc and Sinumerik output of nc-gen/post.h)
+// in place: the feed (F), spindle (S) and axis (X, Y, Z) words of chosen blocks, new blocks between
+// two blocks, and header comments. Every line the edit does not touch stays byte-identical, so a
+// re-optimised program differs from its parent only where it must (spec/process-optimization.md §1.8,
+// §3.4).
+//
+// The program is read with the dialect's own reader (nc::ReadProgram), which refuses anything that is
+// not formloop's own output, naming the line; the edited text is read back the same way before it is
+// returned (EditableProgram::Verified), so an edit can never produce a program the reader would not take.
+// Heidenhain conversational programs (L X.. F..) are not word-address programs and are refused.
+//
+// A block is named in messages by its N word ("N120") when the program numbers its blocks, otherwise by
+// its line ("line 57").
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "core/status.h"
+#include "nc-gen/post.h"
+
+namespace formloop::planning {
+
+struct ProgramLine {
+  std::string text;
+  long number = -1;  // N word, −1 when the line has none
+  int move = -1;     // index into EditableProgram::moves() of the move this line commands, −1 if none
+};
+
+class EditableProgram {
+ public:
+  // Reads `text` in `dialect` ("linuxcnc", "fanuc", "sinumerik").
+  static Result<EditableProgram> Parse(const std::string& text, const std::string& dialect, const std::string& source);
+
+  const std::string& dialect() const { return dialect_; }
+  const std::vector<ProgramLine>& lines() const { return lines_; }
+  // The moves as read (rapid/feed, end point, modal feed, 1-based line).
+  const std::vector<nc::ProgramMove>& moves() const { return moves_; }
+  // Start of move i: the end of move i − 1 (NaN axes before the first programmed position).
+  Eigen::Vector3d MoveStart(std::size_t i) const;
+  // Line index (0-based) of move i.
+  std::size_t LineOfMove(std::size_t i) const { return static_cast<std::size_t>(moves_[i].line - 1); }
+  bool NumberedBlocks() const;
+  // "N120" or "line 57" for the line at 0-based index.
+  std::string BlockName(std::size_t line_index) const;
+  // Decimals the program writes coordinates with (from its first axis word; 4 if none).
+  int Decimals() const { return decimals_; }
+
+  // Sets (or adds) `letter`'s value on a line; the rest of the line keeps its bytes.
+  void SetWord(std::size_t line_index, char letter, const std::string& value);
+  // The value of `letter` on the line, when present outside comments.
+  bool GetWord(std::size_t line_index, char letter, std::string* value) const;
+  // Inserts lines before line_index (their number/move fields are informational only).
+  void InsertLines(std::size_t line_index, const std::vector<std::string>& texts);
+  // Inserts comment lines after the leading comments (and '%', "O1234") of the program.
+  void InsertHeaderComments(const std::vector<std::string>& comments);
+  // A comment line in this dialect ("(...)" LinuxCNC/Fanuc, "; ..." Sinumerik).
+  std::string CommentLine(const std::string& text) const;
+
+  std::string Text() const;
+  // The text after reading it back with the dialect's reader; the reader's refusal otherwise.
+  Result<std::string> Verified(const std::string& source) const;
+
+ private:
+  std::string dialect_;
+  std::string trailing_;  // what follows the last newline-terminated line
+  std::vector<ProgramLine> lines_;
+  std::vector<nc::ProgramMove> moves_;
+  int decimals_ = 4;
+};
+
+// Fixed-point text of a feed (0 decimals) or coordinate, locale-free.
+std::string FeedWord(double feed_mm_per_min);
+
+}  // namespace formloop::planning
