@@ -283,21 +283,7 @@ Result<CuttingProgramReport> OptimiseCuttingProgram(const std::string& program_t
     report.cutting_time_before_min += cutting[i].length_mm / original;
     report.cutting_time_after_min += cutting[i].length_mm / feed[static_cast<std::size_t>(group_of[i])];
   }
-  double modal = -1;  // the feed in effect in the new program
-  for (std::size_t i = 0; i < program.lines().size(); ++i) {
-    const int m = program.lines()[i].move;
-    const bool has_f = program.GetWord(i, 'F', &word);
-    if (m < 0) {
-      if (has_f && !ParseDouble(word, &modal)) modal = -1;  // a feed-only block sets the modal feed
-      continue;
-    }
-    const nc::ProgramMove& move = program.moves()[static_cast<std::size_t>(m)];
-    if (move.rapid) continue;
-    auto it = desired.find(static_cast<std::size_t>(m));
-    const double want = it != desired.end() ? it->second : move.feed_mm_per_min;
-    if (has_f || want != modal) program.SetWord(i, 'F', FeedWord(want));
-    modal = want;
-  }
+  program.SetFeeds(desired);
   for (std::size_t i = 0; i < before.size(); ++i) report.lines_changed += before[i] != program.lines()[i].text;
   program.InsertHeaderComments({"formloop optimise cutting: parent sha256 " + report.parent_sha256,
                                 "coefficient set " + report.coefficient_set + ", seed " + std::to_string(options.seed) +

@@ -112,16 +112,28 @@ std::string EditableProgram::BlockName(std::size_t line_index) const {
 }
 
 void EditableProgram::SetWord(std::size_t line_index, char letter, const std::string& value) {
-  std::string& text = lines_[line_index].text;
-  const std::vector<Token> tokens = CodeTokens(text, dialect_ == "sinumerik");
-  for (const Token& t : tokens) {
-    if (IsWord(text, t, letter)) {
-      text.replace(t.begin + 1, t.end - t.begin - 1, value);
-      return;
+  lines_[line_index].text = WithWords(line_index, {{letter, value}});
+}
+
+std::string EditableProgram::WithWords(std::size_t line_index,
+                                       const std::vector<std::pair<char, std::string>>& words) const {
+  std::string text = lines_[line_index].text;
+  const bool semicolon = dialect_ == "sinumerik";
+  for (const auto& [letter, value] : words) {
+    const std::vector<Token> tokens = CodeTokens(text, semicolon);
+    bool done = false;
+    for (const Token& t : tokens) {
+      if (IsWord(text, t, letter)) {
+        text.replace(t.begin + 1, t.end - t.begin - 1, value);
+        done = true;
+        break;
+      }
     }
+    if (done) continue;
+    const std::size_t at = tokens.empty() ? text.size() : tokens.back().end;
+    text.insert(at, std::string(tokens.empty() ? "" : " ") + letter + value);
   }
-  const std::size_t at = tokens.empty() ? text.size() : tokens.back().end;
-  text.insert(at, std::string(tokens.empty() ? "" : " ") + letter + value);
+  return text;
 }
 
 bool EditableProgram::GetWord(std::size_t line_index, char letter, std::string* value) const {
@@ -133,6 +145,25 @@ bool EditableProgram::GetWord(std::size_t line_index, char letter, std::string* 
     }
   }
   return false;
+}
+
+void EditableProgram::SetFeeds(const std::map<std::size_t, double>& feed_of_move) {
+  double modal = -1;  // the feed in effect in the edited program
+  std::string word;
+  for (std::size_t i = 0; i < lines_.size(); ++i) {
+    const int m = lines_[i].move;
+    const bool has_f = GetWord(i, 'F', &word);
+    if (m < 0) {
+      if (has_f && !ParseDouble(word, &modal)) modal = -1;  // a feed-only block sets the modal feed
+      continue;
+    }
+    const nc::ProgramMove& move = moves_[static_cast<std::size_t>(m)];
+    if (move.rapid) continue;
+    auto it = feed_of_move.find(static_cast<std::size_t>(m));
+    const double want = it != feed_of_move.end() ? it->second : move.feed_mm_per_min;
+    if (has_f || want != modal) SetWord(i, 'F', FeedWord(want));
+    modal = want;
+  }
 }
 
 void EditableProgram::InsertLines(std::size_t line_index, const std::vector<std::string>& texts) {

@@ -14,7 +14,9 @@
 // its line ("line 57").
 
 #include <Eigen/Core>
+#include <map>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/status.h"
@@ -49,8 +51,14 @@ class EditableProgram {
 
   // Sets (or adds) `letter`'s value on a line; the rest of the line keeps its bytes.
   void SetWord(std::size_t line_index, char letter, const std::string& value);
+  // The line's text with these words set (or added), the program unchanged.
+  std::string WithWords(std::size_t line_index, const std::vector<std::pair<char, std::string>>& words) const;
   // The value of `letter` on the line, when present outside comments.
   bool GetWord(std::size_t line_index, char letter, std::string* value) const;
+  // Gives each feed move i in feed_of_move that feed and every other feed move its original one: an F word
+  // is written where the modal feed would otherwise be wrong, and rewritten where the line has one.
+  // Call before InsertLines (it works on the lines as parsed).
+  void SetFeeds(const std::map<std::size_t, double>& feed_of_move);
   // Inserts lines before line_index (their number/move fields are informational only).
   void InsertLines(std::size_t line_index, const std::vector<std::string>& texts);
   // Inserts comment lines after the leading comments (and '%', "O1234") of the program.
