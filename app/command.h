@@ -53,5 +53,7 @@ void AddDiagnoseCommand(CLI::App& root, CommandAction* action);
 void AddReportCommand(CLI::App& root, CommandAction* action);
 // `link emulate|collect|write|program|check|selftest` (app/cmd_link.cc).
 void AddLinkCommand(CLI::App& root, CommandAction* action);
+// `optimise cutting|feed|program` (app/cmd_optimise.cc).
+void AddOptimiseCommand(CLI::App& root, CommandAction* action);
 
 }  // namespace formloop::app

@@ -38,6 +38,7 @@ int main(int argc, char** argv) {
   app::AddDiagnoseCommand(app, &action);
   app::AddReportCommand(app, &action);
   app::AddLinkCommand(app, &action);
+  app::AddOptimiseCommand(app, &action);
 
   try {
     app.parse(argc, argv);

@@ -358,4 +358,46 @@ Canvas DrawBars(const std::vector<std::string>& labels, const std::vector<double
   return c;
 }
 
+Canvas DrawTimePanels(const std::vector<TimePanel>& panels, const std::string& title) {
+  constexpr int kLeft = 80, kWidth = 820, kPanelHeight = 220, kGap = 60, kTop = 40;
+  const int count = static_cast<int>(panels.size());
+  Canvas c(kLeft + kWidth + 30, kTop + count * (kPanelHeight + kGap));
+  DrawTitle(c, title);
+  double t_hi = 0;
+  for (const TimePanel& p : panels) {
+    for (const TimeSeries& s : p.series) {
+      if (!s.t_s.empty()) t_hi = std::max(t_hi, *std::max_element(s.t_s.begin(), s.t_s.end()));
+    }
+  }
+  if (t_hi <= 0) t_hi = 1;
+  for (int k = 0; k < count; ++k) {
+    const TimePanel& p = panels[static_cast<std::size_t>(k)];
+    double y_hi = 0;
+    for (const TimeSeries& s : p.series) {
+      for (double v : s.values) y_hi = std::max(y_hi, v);
+    }
+    for (const LevelLine& l : p.levels) y_hi = std::max(y_hi, l.value);
+    const Frame f{kLeft, kTop + k * (kPanelHeight + kGap), kWidth, kPanelHeight, 0, t_hi, 0,
+                  y_hi > 0 ? y_hi * 1.1 : 1};
+    for (double t : NiceTicks(f.y_lo, f.y_hi, 5)) c.Line(f.left, f.Py(t), f.left + f.width, f.Py(t), kGridGrey);
+    for (const TimeSeries& s : p.series) {
+      for (std::size_t i = 1; i < s.t_s.size() && i < s.values.size(); ++i) {
+        c.Line(f.Px(s.t_s[i - 1]), f.Py(s.values[i - 1]), f.Px(s.t_s[i]), f.Py(s.values[i]), s.colour);
+      }
+    }
+    for (const LevelLine& l : p.levels) {
+      c.Line(f.left, f.Py(l.value), f.left + f.width, f.Py(l.value), l.colour, 1, 6);
+      c.Text(f.left + f.width - 4, static_cast<int>(f.Py(l.value)) - 10, l.label, l.colour, 1, TextAlign::kRight);
+    }
+    int legend_x = f.left + 6;
+    for (const TimeSeries& s : p.series) {
+      c.FillRect(legend_x, f.top + 6, legend_x + 14, f.top + 9, s.colour);
+      c.Text(legend_x + 18, f.top + 4, s.label, kInk);
+      legend_x += 18 + Canvas::TextWidth(s.label) + 16;
+    }
+    DrawAxes(c, f, "time (s)", p.y_label, 10, 5);
+  }
+  return c;
+}
+
 }  // namespace formloop::app

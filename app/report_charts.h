@@ -47,6 +47,27 @@ Canvas DrawMoranScatter(const std::vector<double>& z, const std::vector<double>&
 Canvas DrawBars(const std::vector<std::string>& labels, const std::vector<double>& values, double limit,
                 const std::string& limit_label, const std::string& y_label, const std::string& title);
 
+// One line of a time plot: values against time, drawn in one colour and named in the legend.
+struct TimeSeries {
+  std::vector<double> t_s, values;
+  std::string label;
+  Rgb colour;
+};
+// A horizontal reference line of a panel (a set point, a limit), dashed, labelled at its right end.
+struct LevelLine {
+  double value = 0;
+  std::string label;
+  Rgb colour;
+};
+struct TimePanel {
+  std::vector<TimeSeries> series;
+  std::vector<LevelLine> levels;
+  std::string y_label;
+};
+// Panels stacked over one shared time axis (e.g. spindle current and feed of a feed-control run), each
+// with its own y range covering its series and levels from 0, a legend per panel and the title on top.
+Canvas DrawTimePanels(const std::vector<TimePanel>& panels, const std::string& title);
+
 // Tick positions: "nice" steps (1, 2, 5 × 10^k) covering [lo, hi] with about `target` ticks.
 std::vector<double> NiceTicks(double lo, double hi, int target);
 // A tick label with as many decimals as the step needs ("0.5", "10", "-2.5").

@@ -25,6 +25,8 @@ PACKAGES=(
   nlohmann-json3-dev libcli11-dev libfmt-dev libspdlog-dev
   libpng-dev        # PNG pictures embedded in each run's report.html
   libssl-dev        # SHA-256 (OpenSSL EVP) of the CAD and scan files a run copies into its folder
+  libfuzzylite-dev  # the fuzzy feed controller's Mamdani inference (planning/fuzzy_feed.h)
+  libnlopt-dev      # tests only: an independent optimum (COBYLA) for the cutting-parameter GA
   chromium          # headless browser: the report test checks every picture of report.html loads
   linuxcnc-uspace   # reference tool: its rs274 interpreter checks our LinuxCNC programs in the tests
 )
