@@ -128,10 +128,7 @@ Result<std::vector<planning::CuttingDataRecord>> CuttingData(const OptimiseCutti
                           planning::CuttingDataFromJson(record.manufacturing["cutting_data"],
                                                         args.library + ": case " + args.case_uid +
                                                             " manufacturing.cutting_data"));
-      for (planning::CuttingDataRecord& r : from_case) {
-        if (r.source.empty()) r.source = "case " + args.case_uid;
-        out.push_back(std::move(r));
-      }
+      for (planning::CuttingDataRecord& r : from_case) out.push_back(std::move(r));
     }
   }
   return out;

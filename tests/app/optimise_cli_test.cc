@@ -115,6 +115,37 @@ TEST_F(OptimiseCliTest, BadInputNamesTheParameterAndWritesNothing) {
   EXPECT_FALSE(fs::exists(target.string() + ".partial"));
 }
 
+// The recommended cutting data a case keeps (manufacturing.cutting_data) are fused with the model optimum.
+TEST_F(OptimiseCliTest, CaseLibraryCuttingDataAreFusedWithTheModelOptimum) {
+  std::string out, err;
+  const fs::path kb = dir_ / "kb.sqlite";
+  ASSERT_EQ(RunFormloop("kb init " + kb.string(), &out, &err), 0) << err;
+  json record = json::parse(ReadText(kSource / "data" / "kb" / "example_case.json"));
+  record["manufacturing"]["cutting_data"] = json::parse(R"([
+      {"tool_family": "solid-carbide-end-mill", "grade": "K20F", "material": "C45", "iso_group": "P",
+       "operation": "side_milling", "d_min_mm": 8, "d_max_mm": 12, "hardness_hb": 200,
+       "v_c_nom_m_per_min": 160, "f_z_nom_mm": 0.04}])");
+  const fs::path case_file = dir_ / "case.json";
+  std::ofstream(case_file) << record.dump(2);
+  ASSERT_EQ(RunFormloop("kb add " + kb.string() + " " + case_file.string(), &out, &err), 0) << err;
+  const std::string uid = record["uid"].get<std::string>();
+  ASSERT_EQ(RunFormloop("optimise cutting --coefficients " + kS1 + " --a-p-mm 5 --a-e-mm 1 --library " + kb.string() +
+                            " --case " + uid + " --model-credibility 0.5",
+                        &out, &err),
+            0)
+      << err;
+  const json fusion = json::parse(out)["cut"]["fusion"];
+  EXPECT_TRUE(fusion["database_used"].get<bool>()) << fusion.dump(2);
+  EXPECT_EQ(fusion["database"]["level"], "exact") << fusion.dump(2);
+  EXPECT_DOUBLE_EQ(fusion["w_m"].get<double>(), 0.3);  // c_model 0.5 (M), c_db 1 (H)
+  EXPECT_NE(fusion.dump().find("case " + uid), std::string::npos) << fusion.dump(2);
+  // --library without --case is refused.
+  EXPECT_NE(RunFormloop("optimise cutting --coefficients " + kS1 + " --a-p-mm 5 --a-e-mm 1 --library " + kb.string(),
+                        &out, &err),
+            0);
+  EXPECT_NE(err.find("--case"), std::string::npos) << err;
+}
+
 // Level 2 on formloop's raster over the stepped wall, then Level 1 on the same program and stock.
 TEST_F(OptimiseCliTest, FeedControlMeetsTheCriteriaAndTheProgramIsReoptimisedFromItsStock) {
   std::string out, err;
