@@ -24,7 +24,9 @@
 //   program   Level 3. The inspection of a part (deviations.csv of `formloop run`/`formloop analyse`)
 //             against the nominal surface Q of the run that cut it: out-of-tolerance regions traced to
 //             the program's blocks and those blocks adjusted (program.<ext>, adjustment.json), the §3.5
-//             record appended to the inspection log (--log, JSON Lines).
+//             record appended to the inspection log (--log, JSON Lines) after the folder is complete; its
+//             "time" is the current UTC time (the only thing that differs between two identical runs, and
+//             it is not in the folder).
 
 #include <cstdint>
 #include <string>
