@@ -82,8 +82,10 @@ void AddOptimiseCommand(CLI::App& root, CommandAction* action) {
       "Level 3: map the out-of-tolerance regions of an inspection back to the NC blocks that cut them and adjust "
       "those blocks (normal offsets, or a feed reduction where the error follows the load); writes the adjusted "
       "program, adjustment.json and optimise.json and appends the inspection record to --log.");
-  p->add_option("--run", program->run, "the `formloop run` folder that made the part (nominal Q, tool, tolerance)")
-      ->required();
+  p->add_option("--run", program->run, "the `formloop run` folder that made the part (nominal Q, tool, tolerance)");
+  p->add_option("--surface", program->surface, "without --run: the nominal surface Q.step");
+  p->add_option("--ball-radius-mm", program->ball_radius_mm, "ball radius of the tool (default: the run's)");
+  p->add_option("--dialect", program->dialect, "without --run: the program's dialect")->default_val("linuxcnc");
   p->add_option("--program", program->program, "the program that cut the part (default: the run's toolpath/program)");
   p->add_option("--inspection", program->inspection,
                 "deviations.csv of the inspection (default: the run's loop-0/deviations.csv)");

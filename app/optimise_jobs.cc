@@ -25,6 +25,7 @@
 #include "planning/inspection_adjustment.h"
 #include "planning/program_edit.h"
 #include "planning/tool_path_engagement.h"
+#include "reconstruction/cad_io.h"
 #include "reconstruction/foot_point.h"
 
 namespace formloop::app {
@@ -441,18 +442,39 @@ Result<json> RunOptimiseFeed(const OptimiseFeedArgs& args) {
 }
 
 Result<json> RunOptimiseProgram(const OptimiseProgramArgs& args) {
-  if (args.run.empty()) {
-    return Status::BadInput(Where{.field = "--run"}, "the `formloop run` folder that made the part is required");
+  // The nominal surface, tool, tolerance and dialect: from the run folder, or given one by one.
+  recon::BSplineSurface q;
+  std::string dialect = args.dialect, part_name = "part", program_path = args.program, inspection_path = args.inspection;
+  double radius = args.ball_radius_mm, tolerance = args.tolerance_mm;
+  if (args.run.empty() == args.surface.empty()) {
+    return Status::BadInput(Where{.field = "--run"},
+                            "give either the `formloop run` folder that made the part (--run) or its nominal surface "
+                            "(--surface Q.step with --program, --inspection, --ball-radius-mm and --tolerance-mm)");
   }
-  FL_ASSIGN_OR_RETURN(const RunFolder run, ReadRunFolder(args.run));
-  FL_ASSIGN_OR_RETURN(const std::string ext, ProgramExtension(run.part.dialect));
-  const std::string program_path =
-      !args.program.empty() ? args.program : (fs::path(args.run) / "toolpath" / ("program" + ext)).string();
-  const std::string inspection_path =
-      !args.inspection.empty() ? args.inspection : (fs::path(args.run) / "loop-0" / "deviations.csv").string();
+  if (!args.run.empty()) {
+    FL_ASSIGN_OR_RETURN(RunFolder run, ReadRunFolder(args.run));
+    q = std::move(run.q);
+    dialect = run.part.dialect;
+    part_name = run.part.name;
+    FL_ASSIGN_OR_RETURN(const std::string ext, ProgramExtension(dialect));
+    if (program_path.empty()) program_path = (fs::path(args.run) / "toolpath" / ("program" + ext)).string();
+    if (inspection_path.empty()) inspection_path = (fs::path(args.run) / "loop-0" / "deviations.csv").string();
+    if (radius <= 0) radius = run.toolpath.options.tool.radius_mm;
+    if (tolerance <= 0) tolerance = run.part.tolerance_mm;
+  } else {
+    for (const auto& [missing, option] : {std::pair{program_path.empty(), "--program"},
+                                          std::pair{inspection_path.empty(), "--inspection"},
+                                          std::pair{!(radius > 0), "--ball-radius-mm"},
+                                          std::pair{!(tolerance > 0), "--tolerance-mm"}}) {
+      if (missing) return Status::BadInput(Where{.field = option}, "required with --surface (no run folder)");
+    }
+    FL_ASSIGN_OR_RETURN(const recon::CadFace face, recon::ReadCadFace(args.surface, {}));
+    q = face.surface;
+  }
+  FL_ASSIGN_OR_RETURN(const std::string ext, ProgramExtension(dialect));
   FL_ASSIGN_OR_RETURN(const std::string text, ReadFile(program_path));
   FL_ASSIGN_OR_RETURN(const planning::EditableProgram program,
-                      planning::EditableProgram::Parse(text, run.part.dialect, program_path));
+                      planning::EditableProgram::Parse(text, dialect, program_path));
   FL_ASSIGN_OR_RETURN(const PointSet table, ReadPoints(inspection_path));
   FL_ASSIGN_OR_RETURN(const std::vector<metrology::Deviation> points,
                       planning::DeviationsFromTable(table, inspection_path));
@@ -466,14 +488,13 @@ Result<json> RunOptimiseProgram(const OptimiseProgramArgs& args) {
     }
   }
   planning::InspectionOptions options;
-  options.tolerance_mm = args.tolerance_mm > 0 ? args.tolerance_mm : run.part.tolerance_mm;
+  options.tolerance_mm = tolerance;
   options.inspection_id = args.inspection_id.empty() ? "inspection-1" : args.inspection_id;
-  options.part_id = args.part_id.empty() ? run.part.name : args.part_id;
+  options.part_id = args.part_id.empty() ? part_name : args.part_id;
   options.operation_id = args.operation_id.empty() ? fs::path(program_path).filename().string() : args.operation_id;
   options.probe_calibration_id = args.probe_calibration_id;
   FL_RETURN_IF_ERROR(options.Validate());
-  const double radius = run.toolpath.options.tool.radius_mm;
-  FL_ASSIGN_OR_RETURN(const recon::FootPointProjector nominal, recon::FootPointProjector::Build(run.q));
+  FL_ASSIGN_OR_RETURN(const recon::FootPointProjector nominal, recon::FootPointProjector::Build(q));
   FL_ASSIGN_OR_RETURN(const planning::InspectionEvaluation evaluation, planning::EvaluateInspection(points, options));
   FL_ASSIGN_OR_RETURN(const planning::ProgramGeometry geometry,
                       planning::BuildProgramGeometry(program, nominal, radius, std::min(0.5, evaluation.h_mm / 4)));
@@ -482,12 +503,13 @@ Result<json> RunOptimiseProgram(const OptimiseProgramArgs& args) {
                                                             inspection_path));
   json result = {{"command", "optimise program"},
                  {"run", args.run},
+                 {"surface", args.surface},
                  {"program", program_path},
                  {"inspection", inspection_path},
                  {"tolerance_mm", options.tolerance_mm},
                  {"ball_radius_mm", radius},
                  {"adjustment", adjustment.ToJson()}};
-  FL_ASSIGN_OR_RETURN(result["inputs"], InputHashes({program_path, inspection_path, args.load}));
+  FL_ASSIGN_OR_RETURN(result["inputs"], InputHashes({program_path, inspection_path, args.load, args.surface}));
   const std::string program_name = "program" + ext;
   if (!adjustment.program.empty()) result["adjustment"]["file"] = program_name;
   log::Info("optimise program: {} points, Moran z {:.2f} ({}), {} region(s), program {}, {} CL points shifted, "
@@ -497,7 +519,7 @@ Result<json> RunOptimiseProgram(const OptimiseProgramArgs& args) {
             adjustment.kind, adjustment.cl_points_shifted, adjustment.feeds_changed, adjustment.max_shift_mm);
   for (const std::string& alarm : adjustment.alarms) log::Warn("{}", alarm);
   FL_ASSIGN_OR_RETURN(const fs::path staging,
-                      BeginOutput(args.output, {program_path, inspection_path, args.load, args.log}));
+                      BeginOutput(args.output, {program_path, inspection_path, args.load, args.log, args.surface}));
   if (!adjustment.program.empty()) FL_RETURN_IF_ERROR(WriteFileAtomic(staging / program_name, adjustment.program));
   FL_RETURN_IF_ERROR(WriteJsonFile(staging / "adjustment.json", result["adjustment"]));
   FL_RETURN_IF_ERROR(WriteJsonFile(staging / kMarker, result));

@@ -22,7 +22,8 @@
 //             feed.csv (every control sample of both runs), feed.png (current and feed over time),
 //             report.html (the plot and the §2.7 figures, self-contained) and optimise.json.
 //   program   Level 3. The inspection of a part (deviations.csv of `formloop run`/`formloop analyse`)
-//             against the nominal surface Q of the run that cut it: out-of-tolerance regions traced to
+//             against the nominal surface Q of the run that cut it (or Q.step with the program, the ball
+//             radius and the tolerance given): out-of-tolerance regions traced to
 //             the program's blocks and those blocks adjusted (program.<ext>, adjustment.json), the §3.5
 //             record appended to the inspection log (--log, JSON Lines) after the folder is complete; its
 //             "time" is the current UTC time (the only thing that differs between two identical runs, and
@@ -66,9 +67,12 @@ Result<nlohmann::json> RunOptimiseFeed(const OptimiseFeedArgs& args);
 
 struct OptimiseProgramArgs {
   OptimiseOutput output;
-  std::string run;         // the `formloop run` folder: Q, ball radius, tolerance
+  std::string run;         // the `formloop run` folder: Q, ball radius, tolerance, dialect ...
+  std::string surface;     // ... or Q.step with --program, --inspection, --ball-radius-mm, --tolerance-mm
+  double ball_radius_mm = 0;
+  std::string dialect = "linuxcnc";  // without --run
   std::string program;     // default: the run's toolpath program
-  std::string inspection;  // deviations.csv; default: the run's last loop-K/deviations.csv
+  std::string inspection;  // deviations.csv; default: the run's loop-0/deviations.csv
   std::string load;        // optional: {"N120": load, ...} (e.g. mean I − I_0 per block from Level 2)
   std::string log;         // inspection log (JSON Lines) to append the §3.5 record to
   double tolerance_mm = 0;  // t_p; 0: the part's (2 x its ± tolerance)

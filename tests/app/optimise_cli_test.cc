@@ -289,6 +289,21 @@ TEST_F(OptimiseCliTest, PlantedLocalErrorIsTracedToTheBlocksThatCutItAndTheProgr
   const std::string adjusted = ReadText(result / "program.ngc");
   EXPECT_NE(adjusted, program);
   EXPECT_NE(adjusted.find("insp-7"), std::string::npos);
+  // The same from the files alone (a `formloop analyse` folder has no run): the same adjustment.
+  const std::string files = " --surface " + (run / "surface" / "Q.step").string() + " --program " +
+                            (run / "toolpath" / "program.ngc").string() + " --inspection " +
+                            (run / "loop-0" / "deviations.csv").string() + " --tolerance-mm " +
+                            FormatFixed(part->tolerance_mm, 4) + " --inspection-id insp-7";
+  EXPECT_NE(RunFormloop("optimise program" + files + " --out " + (dir_ / "files").string(), &out, &err), 0);
+  EXPECT_NE(err.find("--ball-radius-mm"), std::string::npos) << err;
+  ASSERT_EQ(RunFormloop("optimise program" + files + " --ball-radius-mm " + FormatExact(path.options.tool.radius_mm) +
+                            " --out " + (dir_ / "files").string(),
+                        &out, &err),
+            0)
+      << err;
+  EXPECT_EQ(ReadText(dir_ / "files" / "adjustment.json"), ReadText(result / "adjustment.json"));
+  EXPECT_EQ(ReadText(dir_ / "files" / "program.ngc"), adjusted);
+
   auto records = planning::ReadInspectionLog(log);
   ASSERT_TRUE(records.ok()) << records.status().message();
   ASSERT_EQ(records->size(), 1u);
