@@ -27,7 +27,8 @@ Result<std::vector<Deviation>> ComputeDeviations(const recon::BSplineSurface& su
     d.foot = foot.foot;
     d.normal = foot.normal;
     d.deviation_mm = foot.deviation_mm;
-    d.on_boundary = foot.on_boundary;
+    d.outside_trim = foot.outside_trim;
+    d.on_boundary = foot.on_boundary || foot.outside_trim;
     out.push_back(d);
   }
   return out;

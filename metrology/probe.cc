@@ -1,5 +1,7 @@
 #include "metrology/probe.h"
 
+#include "reconstruction/trim.h"
+
 #include <cmath>
 #include <map>
 #include <optional>
@@ -23,18 +25,38 @@ nlohmann::json ProbingPlan::ToJson() const {
                            {"point", {p.point.x(), p.point.y(), p.point.z()}},
                            {"normal", {p.normal.x(), p.normal.y(), p.normal.z()}}});
   }
-  return {{"count", points.size()}, {"points", points_json}};
+  nlohmann::json out = {{"count", points.size()}, {"points", points_json}};
+  if (trimmed) {
+    out["trim"] = {{"edge_margin_mm", edge_margin_mm},
+                   {"left_out", left_out},
+                   {"rule", "points inside the trimmed face (OpenCASCADE classification) and at least edge_margin_mm "
+                            "(3-D distance) from its loops"}};
+  }
+  return out;
 }
 
-Result<ProbingPlan> PlanProbingGrid(const recon::BSplineSurface& surface, int nu, int nv, double inset_fraction) {
+bool ProbePositionAllowed(const recon::BSplineSurface& surface, double u, double v, const Eigen::Vector3d& p,
+                          double edge_margin_mm) {
+  const recon::Trim* trim = surface.trim();
+  if (trim == nullptr || trim->natural()) return true;
+  return trim->Inside(u, v) && trim->EdgeDistanceMm(p) >= edge_margin_mm;
+}
+
+Result<ProbingPlan> PlanProbingGrid(const recon::BSplineSurface& surface, int nu, int nv, double inset_fraction,
+                                    double edge_margin_mm) {
   if (nu < 2 || nv < 2) return Status::BadInput(Where{.field = "probing.grid"}, "needs at least 2 × 2 points");
   if (!(inset_fraction >= 0 && inset_fraction < 0.5)) {
     return Status::BadInput(Where{.field = "probing.inset_fraction"}, "must be in [0, 0.5)");
+  }
+  if (!(edge_margin_mm >= 0) || !std::isfinite(edge_margin_mm)) {
+    return Status::BadInput(Where{.field = "probing.edge_margin_mm"}, "must be a finite number >= 0");
   }
   const recon::ParamDomain dom = surface.domain();
   const double u0 = dom.u_min + inset_fraction * dom.u_span(), u1 = dom.u_max - inset_fraction * dom.u_span();
   const double v0 = dom.v_min + inset_fraction * dom.v_span(), v1 = dom.v_max - inset_fraction * dom.v_span();
   ProbingPlan plan;
+  plan.trimmed = surface.trim() != nullptr && !surface.trim()->natural();
+  plan.edge_margin_mm = plan.trimmed ? edge_margin_mm : 0.0;
   for (int j = 0; j < nv; ++j) {
     for (int i = 0; i < nu; ++i) {
       ProbePoint p;
@@ -42,9 +64,20 @@ Result<ProbingPlan> PlanProbingGrid(const recon::BSplineSurface& surface, int nu
       p.u = u0 + (u1 - u0) * i / (nu - 1);
       p.v = v0 + (v1 - v0) * j / (nv - 1);
       p.point = surface.Point(p.u, p.v);
+      if (!ProbePositionAllowed(surface, p.u, p.v, p.point, edge_margin_mm)) {
+        ++plan.left_out;
+        continue;
+      }
       p.normal = surface.Normal(p.u, p.v);
       plan.points.push_back(p);
     }
+  }
+  if (plan.points.empty()) {
+    return Status::BadInput(Where{.field = "probing.grid"},
+                            "no point of the " + std::to_string(nu) + " x " + std::to_string(nv) +
+                                " grid lies inside the trimmed face at least " + FormatExact(edge_margin_mm) +
+                                " mm from its edge",
+                            "use a finer grid or a smaller probing.edge_margin_mm");
   }
   return plan;
 }

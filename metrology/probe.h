@@ -45,12 +45,30 @@ struct ProbePoint {
 
 struct ProbingPlan {
   std::vector<ProbePoint> points;
+  // On a trimmed Q (reconstruction/trim.h): the margin kept from the trim's edges and how many planned
+  // positions were left out (outside the trim, or nearer its edge than the margin).
+  bool trimmed = false;
+  double edge_margin_mm = 0;
+  int left_out = 0;
   nlohmann::json ToJson() const;
 };
 
+// Default margin of probe points from a trim's edge (3-D distance, mm): the 1 mm radius of the usual
+// stylus ball, which touches the part up to that far around the point on a tilted approach, plus 1 mm
+// for the part's set-up and the edge's own tolerance.
+inline constexpr double kProbeEdgeMarginMm = 2.0;
+
 // nu × nv points equidistant in parameter space, inset from the domain edges by `inset_fraction`
-// of each span (probing right at an edge risks missing the part). Ids are 1..nu·nv, row-major.
-Result<ProbingPlan> PlanProbingGrid(const recon::BSplineSurface& surface, int nu, int nv, double inset_fraction);
+// of each span (probing right at an edge risks missing the part). Ids are 1..nu·nv, row-major. On a
+// trimmed Q, positions outside the trim (OpenCASCADE's classification) or nearer than edge_margin_mm
+// to one of its loops (3-D distance) are left out, keeping the ids of the others; BadInput when none is
+// left.
+Result<ProbingPlan> PlanProbingGrid(const recon::BSplineSurface& surface, int nu, int nv, double inset_fraction,
+                                    double edge_margin_mm = kProbeEdgeMarginMm);
+// True when a probe point at (u, v) with nominal point p may be planned on Q: always without a trim,
+// else inside it and at least edge_margin_mm from its loops.
+bool ProbePositionAllowed(const recon::BSplineSurface& surface, double u, double v, const Eigen::Vector3d& p,
+                          double edge_margin_mm);
 
 struct ProbeRecord {
   std::int64_t id = 0;

@@ -11,7 +11,9 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "core/point_io.h"
 #include "reconstruction/analytic_surface.h"
+#include "reconstruction/trim.h"
 
 namespace formloop::metrology {
 namespace {
@@ -39,7 +41,7 @@ struct Candidate {
 }  // namespace
 
 Result<ProbingPlan> PlanProbingCurvatureWeighted(const recon::BSplineSurface& q, int count, double inset_fraction,
-                                                 double curvature_weight) {
+                                                 double curvature_weight, double edge_margin_mm) {
   if (!q.valid()) return Status::BadInput(Where{.field = "probing.surface"}, "the surface Q is empty");
   if (count < 1) {
     return Status::BadInput(Where{.field = "probing.count"}, "must be at least 1, got " + std::to_string(count),
@@ -68,7 +70,7 @@ Result<ProbingPlan> PlanProbingCurvatureWeighted(const recon::BSplineSurface& q,
   const double n_wanted = static_cast<double>(wanted);
   const int nu = std::max(2, static_cast<int>(std::lround(std::sqrt(n_wanted * aspect))));
   const int nv = std::max(2, static_cast<int>(n_wanted / nu));
-  const std::size_t n = static_cast<std::size_t>(nu) * static_cast<std::size_t>(nv);
+  std::size_t n = static_cast<std::size_t>(nu) * static_cast<std::size_t>(nv);
   if (static_cast<std::size_t>(count) > n) {
     return Status::BadInput(Where{.field = "probing.count"},
                             std::to_string(count) + " points asked for, but only " + std::to_string(n) +
@@ -76,20 +78,38 @@ Result<ProbingPlan> PlanProbingCurvatureWeighted(const recon::BSplineSurface& q,
                             "ask for at most " + std::to_string(n) + " points");
   }
 
-  std::vector<Candidate> candidates(n);
+  if (!(edge_margin_mm >= 0) || !std::isfinite(edge_margin_mm)) {
+    return Status::BadInput(Where{.field = "probing.edge_margin_mm"}, "must be a finite number >= 0");
+  }
+  std::vector<Candidate> candidates;
+  candidates.reserve(n);
   Eigen::AlignedBox3d box;
+  int left_out = 0;
   for (int j = 0; j < nv; ++j) {
     for (int i = 0; i < nu; ++i) {
-      Candidate& c = candidates[static_cast<std::size_t>(j) * nu + i];
+      Candidate c;
       c.u = u0 + (u1 - u0) * i / (nu - 1);
       c.v = v0 + (v1 - v0) * j / (nv - 1);
       const recon::SurfaceDerivatives d = q.Derivatives(c.u, c.v);
       c.point = d.p;
+      if (!ProbePositionAllowed(q, c.u, c.v, c.point, edge_margin_mm)) {
+        ++left_out;
+        continue;
+      }
       const recon::PrincipalCurvatures k = recon::CurvaturesFromDerivatives(d);
       const double h = 0.5 * (std::abs(k.k1) + std::abs(k.k2));
       c.mean_abs_curvature = std::isfinite(h) ? h : 0.0;
       box.extend(c.point);
+      candidates.push_back(c);
     }
+  }
+  n = candidates.size();
+  if (static_cast<std::size_t>(count) > n) {
+    return Status::BadInput(Where{.field = "probing.count"},
+                            std::to_string(count) + " points asked for, but only " + std::to_string(n) +
+                                " candidates lie inside the trimmed face at least " + FormatExact(edge_margin_mm) +
+                                " mm from its edge",
+                            "ask for at most " + std::to_string(n) + " points");
   }
   const double diagonal = box.diagonal().norm();  // L, mm
 
@@ -104,6 +124,9 @@ Result<ProbingPlan> PlanProbingCurvatureWeighted(const recon::BSplineSurface& q,
   std::vector<double> nearest(n, std::numeric_limits<double>::infinity());
   std::vector<char> chosen(n, 0);
   ProbingPlan plan;
+  plan.trimmed = q.trim() != nullptr && !q.trim()->natural();
+  plan.edge_margin_mm = plan.trimmed ? edge_margin_mm : 0.0;
+  plan.left_out = left_out;
   plan.points.reserve(static_cast<std::size_t>(count));
   std::size_t next = first;
   for (int id = 1; id <= count; ++id) {

@@ -38,7 +38,9 @@ inline constexpr int kMaxProbingCandidates = 40000;
 
 // count in 1..(number of candidates, at most kMaxProbingCandidates); inset_fraction in [0, 0.45)
 // of each parameter span (as in PlanProbingGrid); curvature_weight = β ≥ 0 (0: uniform spacing on Q).
+// On a trimmed Q only candidates that ProbePositionAllowed (probe.h) with edge_margin_mm take part.
 Result<ProbingPlan> PlanProbingCurvatureWeighted(const recon::BSplineSurface& q, int count, double inset_fraction,
-                                                 double curvature_weight = 1.0);
+                                                 double curvature_weight = 1.0,
+                                                 double edge_margin_mm = kProbeEdgeMarginMm);
 
 }  // namespace formloop::metrology

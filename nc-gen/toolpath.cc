@@ -11,6 +11,12 @@
 #include <Eigen/LU>
 #include <Eigen/Cholesky>
 
+#include <BRepBndLib.hxx>
+#include <Bnd_Box.hxx>
+#include <TopoDS_Face.hxx>
+
+#include "core/number_text.h"
+#include "reconstruction/trim.h"
 
 namespace formloop::nc {
 
@@ -403,6 +409,146 @@ std::vector<Eigen::Vector3d> LeadArc(const recon::BSplineSurface& q, const ClPoi
   return out;
 }
 
+
+// What the planner must respect beyond Q's parameter box: the trim (which (u, v) are the part) and the
+// neighbouring faces (the ball must stay clear of them). Without a trim every (u, v) is usable.
+class Domain {
+ public:
+  Domain(const recon::BSplineSurface& q, double r) : q_(q), trim_(q.trim()), r_(r) {}
+  bool trimmed() const { return trim_ != nullptr && !trim_->natural(); }
+  bool has_neighbours() const { return trim_ != nullptr && trim_->has_neighbours(); }
+  bool Inside(double u, double v) const { return !trimmed() || trim_->Inside(u, v); }
+  // The ball centred at `centre` stays clear of every neighbouring face.
+  bool BallClear(const Eigen::Vector3d& centre) const {
+    if (!has_neighbours()) return true;
+    return trim_->NeighbourDistanceMm(centre, r_) >= r_ - kNeighbourClearanceToleranceMm;
+  }
+  // The ball moved straight up from `centre` to top_z stays clear (steps of r/2, both ends included).
+  bool ColumnClear(const Eigen::Vector3d& centre, double top_z) const {
+    if (!has_neighbours()) return true;
+    const int steps = std::max(1, static_cast<int>(std::ceil((top_z - centre.z()) / (0.5 * r_))));
+    for (int k = 0; k <= steps; ++k) {
+      const double z = centre.z() + (top_z - centre.z()) * k / steps;
+      if (!BallClear(Eigen::Vector3d(centre.x(), centre.y(), std::max(z, centre.z())))) return false;
+    }
+    return true;
+  }
+  // A CC point at (u, v) is usable: inside the trim and its ball clear of the neighbours. Counts the
+  // samples inside the trim that the neighbours block.
+  bool Usable(double u, double v, int* blocked = nullptr) const {
+    if (!Inside(u, v)) return false;
+    if (!has_neighbours()) return true;
+    const recon::SurfaceDerivatives d = q_.Derivatives(u, v);
+    const bool clear = BallClear(d.p + r_ * recon::NormalFromDerivatives(d));
+    if (!clear && blocked != nullptr) ++*blocked;
+    return clear;
+  }
+  const recon::Trim* trim() const { return trim_; }
+
+ private:
+  const recon::BSplineSurface& q_;
+  const recon::Trim* trim_;
+  double r_;
+};
+
+// The runs of usable samples of one section piece, each a new piece whose ends are moved onto the
+// boundary of the usable set by bisection along the plane (to 1e-9 mm in the abscissa).
+std::vector<Section> ClipSection(const recon::BSplineSurface& q, const recon::ParamDomain& dom, const RasterFrame& f,
+                                 const Section& piece, const Domain& domain, double r, double h, int* blocked) {
+  const std::size_t n = piece.uv.size();
+  std::vector<char> usable(n);
+  bool all = true;
+  for (std::size_t i = 0; i < n; ++i) {
+    usable[i] = domain.Usable(piece.uv[i].x(), piece.uv[i].y(), blocked) ? 1 : 0;
+    all = all && usable[i];
+  }
+  if (all) return {piece};
+  // The usable end between sample `in` (usable) and `out` (not).
+  const auto boundary = [&](std::size_t in, std::size_t out) {
+    double s_in = piece.s[in], s_out = piece.s[out];
+    Eigen::Vector2d uv_in = piece.uv[in], uv_out = piece.uv[out];
+    for (int it = 0; it < 60 && std::abs(s_out - s_in) > 1e-9; ++it) {
+      const double s_mid = 0.5 * (s_in + s_out);
+      const Eigen::Vector2d guess = 0.5 * (uv_in + uv_out);
+      double u = guess.x(), v = guess.y();
+      if (SolveOnPlane(q, dom, f, piece.c, s_mid, &u, &v) && domain.Usable(u, v)) {
+        s_in = s_mid;
+        uv_in = Eigen::Vector2d(u, v);
+      } else {
+        s_out = s_mid;
+        uv_out = guess;
+      }
+    }
+    return std::make_pair(uv_in, s_in);
+  };
+  std::vector<Section> out;
+  std::size_t i = 0;
+  while (i < n) {
+    if (!usable[i]) {
+      ++i;
+      continue;
+    }
+    std::size_t j = i;
+    while (j + 1 < n && usable[j + 1]) ++j;
+    std::vector<Eigen::Vector2d> uv;
+    std::vector<double> abscissa;
+    if (i > 0) {
+      const auto [b_uv, b_s] = boundary(i, i - 1);
+      if (b_s < piece.s[i] - 1e-12) {
+        uv.push_back(b_uv);
+        abscissa.push_back(b_s);
+      }
+    }
+    for (std::size_t k = i; k <= j; ++k) {
+      uv.push_back(piece.uv[k]);
+      abscissa.push_back(piece.s[k]);
+    }
+    if (j + 1 < n) {
+      const auto [b_uv, b_s] = boundary(j, j + 1);
+      if (b_s > piece.s[j] + 1e-12) {
+        uv.push_back(b_uv);
+        abscissa.push_back(b_s);
+      }
+    }
+    out.push_back(PieceGeometry(q, f, piece.c, std::move(uv), std::move(abscissa), r, h));
+    i = j + 1;
+  }
+  return out;
+}
+
+// CC samples of one contour pass: from the dense loop samples `uv` (in order), the subset whose straight
+// ball-centre segments stay within `chord` of every skipped sample's centre and are at most `spacing`
+// long, first and last kept.
+std::vector<Eigen::Vector2d> ThinContour(const recon::BSplineSurface& q, const std::vector<Eigen::Vector2d>& uv,
+                                         double r, double chord, double spacing) {
+  if (uv.size() <= 2) return uv;
+  std::vector<Eigen::Vector3d> centre(uv.size());
+  for (std::size_t i = 0; i < uv.size(); ++i) {
+    const recon::SurfaceDerivatives d = q.Derivatives(uv[i].x(), uv[i].y());
+    centre[i] = d.p + r * recon::NormalFromDerivatives(d);
+  }
+  std::vector<Eigen::Vector2d> out{uv.front()};
+  std::size_t i = 0;
+  while (i + 1 < uv.size()) {
+    std::size_t best = i + 1;
+    for (std::size_t j = i + 2; j < uv.size(); ++j) {
+      const Eigen::Vector3d a = centre[i], b = centre[j];
+      if ((b - a).norm() > spacing) break;
+      bool ok = true;
+      for (std::size_t k = i + 1; k < j && ok; ++k) {
+        const Eigen::Vector3d ab = b - a;
+        const double t = std::clamp((centre[k] - a).dot(ab) / std::max(ab.squaredNorm(), 1e-300), 0.0, 1.0);
+        ok = (a + t * ab - centre[k]).norm() <= chord;
+      }
+      if (!ok) break;
+      best = j;
+    }
+    out.push_back(uv[best]);
+    i = best;
+  }
+  return out;
+}
+
 }  // namespace
 
 Result<Toolpath> PlanRaster(const recon::BSplineSurface& surface, const ToolpathOptions& options) {
@@ -414,6 +560,7 @@ Result<Toolpath> PlanRaster(const recon::BSplineSurface& surface, const Toolpath
   const double chord = options.chord_tolerance_um * 1e-3;
   const RasterFrame frame(options.raster_angle_deg);
   const ConcaveRegions concave(surface, dom, r);
+  const Domain domain(surface, r);
   // Where the ball is lifted it rests on Q at up to two points and its centre follows arcs of radius up
   // to r: spacing for the chord tolerance on such an arc, with a margin.
   const double lifted_spacing = 0.6 * std::sqrt(8.0 * chord * r);
@@ -435,6 +582,31 @@ Result<Toolpath> PlanRaster(const recon::BSplineSurface& surface, const Toolpath
   path.options = options;
   path.min_step_over_mm = 1e300;
   path.max_step_over_mm = 0;
+  path.trimmed = domain.trimmed();
+  path.neighbours_checked = domain.has_neighbours();
+  if (domain.has_neighbours()) {
+    // The highest neighbouring geometry within reach of the tool over Q (its bounding box widened by the
+    // ball and the leads): rapids between passes run above it.
+    Eigen::AlignedBox3d reach;
+    for (int j = 0; j <= 32; ++j) {
+      for (int i = 0; i <= 32; ++i) reach.extend(surface.Point(dom.u_min + dom.u_span() * i / 32, dom.v_min + dom.v_span() * j / 32));
+    }
+    const double margin = r + options.lead_mm + 1.0;
+    double top = -1e300;
+    for (const TopoDS_Face& face : domain.trim()->neighbours()) {
+      Bnd_Box box;
+      BRepBndLib::Add(face, box);
+      double x0, y0, z0, x1, y1, z1;
+      box.Get(x0, y0, z0, x1, y1, z1);
+      if (x1 < reach.min().x() - margin || x0 > reach.max().x() + margin || y1 < reach.min().y() - margin ||
+          y0 > reach.max().y() + margin) {
+        continue;
+      }
+      top = std::max(top, z1);
+    }
+    if (top > -1e300) path.min_safe_z_mm = top + options.clearance_mm;
+  }
+  const double column_top = std::isfinite(path.min_safe_z_mm) ? path.min_safe_z_mm : -1e300;
 
   const auto tip_of = [r](const ClPoint& cl) {
     return Eigen::Vector3d(cl.cc + r * cl.normal + (cl.lift_mm - r) * Eigen::Vector3d::UnitZ());
@@ -449,17 +621,123 @@ Result<Toolpath> PlanRaster(const recon::BSplineSurface& surface, const Toolpath
     lead.normal = Eigen::Vector3d::UnitZ();
     return lead;
   };
+  // The tip offsets of a lead at `end` leaving along t: the arc of LeadArc, or, where it (or the vertical
+  // retract above its outer end) would bring the ball nearer than r to a neighbouring face, a straight
+  // lead along the normal, then a vertical one. Error when none is clear.
+  const auto clear_lead = [&](const ClPoint& end, const Eigen::Vector3d& t) -> Result<std::vector<Eigen::Vector3d>> {
+    std::vector<Eigen::Vector3d> offsets = LeadArc(surface, end, t, options.lead_mm, r);
+    if (!domain.has_neighbours()) return offsets;
+    const Eigen::Vector3d tip = tip_of(end);
+    const auto clear = [&](const std::vector<Eigen::Vector3d>& o) {
+      for (const Eigen::Vector3d& offset : o) {
+        if (!domain.BallClear(tip + offset + r * Eigen::Vector3d::UnitZ())) return false;
+      }
+      return domain.ColumnClear(tip + o.back() + r * Eigen::Vector3d::UnitZ(), column_top);
+    };
+    if (clear(offsets)) return offsets;
+    const int k_max = static_cast<int>(offsets.size());
+    for (const Eigen::Vector3d& direction : {Eigen::Vector3d(end.normal), Eigen::Vector3d(Eigen::Vector3d::UnitZ())}) {
+      for (int k = 1; k <= k_max; ++k) offsets[static_cast<std::size_t>(k - 1)] = options.lead_mm * k / k_max * direction;
+      if (clear(offsets)) {
+        ++(direction.z() == 1.0 && direction.head<2>().isZero() ? path.leads_vertical : path.leads_along_normal);
+        return offsets;
+      }
+    }
+    return Status::Failed("tool path: the pass ending at (" + FormatFixed(end.cc.x(), 3) + ", " +
+                          FormatFixed(end.cc.y(), 3) + ", " + FormatFixed(end.cc.z(), 3) +
+                          ") has no lead that keeps the ball clear of the neighbouring faces (arc, along the normal and "
+                          "vertical all reach them); choose a smaller tool or machine this region from another set-up");
+  };
+
+  int pass = 0;  // one pass per piece of a section, then one per contour run
+  // Leads, the lift of leads near concave regions, and the pass appended to the path.
+  const auto finish_pass = [&](std::vector<ClPoint> cut, const Eigen::Vector3d& along, bool at_risk) -> Status {
+    for (ClPoint& cl : cut) cl.pass = pass;
+    // Tangential leads: along the tip path's direction at each end (`along` for a one-point pass).
+    const auto direction = [&](const Eigen::Vector3d& from, const Eigen::Vector3d& to) {
+      const Eigen::Vector3d t = to - from;
+      return t.norm() > 1e-9 ? Eigen::Vector3d(t.normalized()) : along;
+    };
+    std::vector<ClPoint> points;
+    if (options.lead_mm > 0) {
+      const Eigen::Vector3d t0 = cut.size() > 1 ? direction(tip_of(cut[0]), tip_of(cut[1])) : along;
+      FL_ASSIGN_OR_RETURN(const std::vector<Eigen::Vector3d> arc, clear_lead(cut.front(), -t0));
+      for (auto it = arc.rbegin(); it != arc.rend(); ++it) {
+        points.push_back(lead_point(ClKind::kLeadIn, cut.front(), tip_of(cut.front()) + *it));
+      }
+    }
+    points.insert(points.end(), cut.begin(), cut.end());
+    if (options.lead_mm > 0) {
+      const std::size_t k = cut.size() - 1;
+      const Eigen::Vector3d t1 = cut.size() > 1 ? direction(tip_of(cut[k - 1]), tip_of(cut[k])) : along;
+      FL_ASSIGN_OR_RETURN(const std::vector<Eigen::Vector3d> arc, clear_lead(cut.back(), t1));
+      for (const Eigen::Vector3d& offset : arc) {
+        points.push_back(lead_point(ClKind::kLeadOut, cut.back(), tip_of(cut.back()) + offset));
+      }
+    }
+    // On a pass near a concave region below the ball radius the lead arcs are checked like CL points
+    // (the local argument of LeadArc does not hold there) and lifted clear of Q.
+    if (at_risk) {
+      for (ClPoint& cl : points) {
+        if (cl.kind == ClKind::kCut) continue;
+        const Eigen::Vector3d centre = cl.cc + r * Eigen::Vector3d::UnitZ();
+        const recon::SurfaceDerivatives d = surface.Derivatives(cl.u, cl.v);
+        const double reach = 1.5 * r + (centre - d.p).head<2>().norm();
+        const double lift = DropLift(surface, dom, cl.u, cl.v, d, centre, r, reach);
+        if (lift > 1e-6) cl.cc.z() += lift;
+      }
+    }
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      points[i].index_in_pass = static_cast<int>(i);
+      path.points.push_back(points[i]);
+    }
+    ++pass;
+    return Status::Ok();
+  };
+  // A cut CL at (u, v): CC point, normal, gouge-risk count and the drop-cutter lift near concave regions.
+  const auto cut_point = [&](double u, double v, bool at_risk) {
+    const recon::SurfaceDerivatives d = surface.Derivatives(u, v);
+    ClPoint cl;
+    cl.u = u;
+    cl.v = v;
+    cl.cc = d.p;
+    cl.normal = recon::NormalFromDerivatives(d);
+    if (recon::CurvaturesFromDerivatives(d).k2 < -1.0 / r) ++path.gouge_risk_points;
+    if (at_risk && concave.Near(cl.cc)) {
+      const double lift = DropLift(surface, dom, u, v, d, cl.cc + r * cl.normal, r);
+      if (lift > 1e-6) cl.lift_mm = lift;
+    }
+    return cl;
+  };
+  const auto near_concave = [&](const std::vector<Eigen::Vector2d>& uv) {
+    if (concave.empty()) return false;
+    for (const auto& p : uv) {
+      if (concave.Near(surface.Point(p.x(), p.y()))) return true;
+    }
+    return false;
+  };
 
   double c = c_min;
-  int pass = 0;   // one pass per piece of a section
   int plane = 0;  // sections with at least one piece
   FL_ASSIGN_OR_RETURN(std::vector<Section> sections, TraceSection(surface, dom, frame, c, r, h));
   while (true) {
+    // The pieces that are cut: clipped to the usable set on a trimmed Q or beside neighbouring faces (the
+    // step-over below is planned on the whole sections).
+    std::vector<Section> cut_sections;
+    if (domain.trimmed() || domain.has_neighbours()) {
+      for (const Section& piece : sections) {
+        for (Section& clipped : ClipSection(surface, dom, frame, piece, domain, r, h, &path.neighbour_blocked_samples)) {
+          cut_sections.push_back(std::move(clipped));
+        }
+      }
+    } else {
+      cut_sections = sections;
+    }
     // Pieces of one plane are cut in the pass direction: along d, or against it on reversed passes.
     const bool reversed = options.zigzag && plane % 2 == 1;
-    if (reversed) std::reverse(sections.begin(), sections.end());
-    if (!sections.empty()) ++plane;
-    for (const Section& section : sections) {
+    if (reversed) std::reverse(cut_sections.begin(), cut_sections.end());
+    if (!cut_sections.empty()) ++plane;
+    for (const Section& section : cut_sections) {
       // Along the pass: the sag of a chord of length L on a path of curvature κ is L²κ/8 (3 % margin for
       // the interpolated arc length).
       double spacing = options.max_point_spacing_mm;
@@ -468,16 +746,8 @@ Result<Toolpath> PlanRaster(const recon::BSplineSurface& surface, const Toolpath
       const double length = section.arc.back();
       const auto n_for = [&](double sp) { return std::max(2, static_cast<int>(std::ceil(length / sp)) + 1); };
       int n_points = section.uv.size() == 1 ? 1 : n_for(spacing);
-      bool at_risk = false;
-      if (!concave.empty()) {
-        for (const auto& uv : section.uv) {
-          if (concave.Near(surface.Point(uv.x(), uv.y()))) {
-            at_risk = true;
-            break;
-          }
-        }
-        if (at_risk && n_points > 1 && spacing > lifted_spacing) n_points = n_for(lifted_spacing);
-      }
+      const bool at_risk = near_concave(section.uv);
+      if (at_risk && n_points > 1 && spacing > lifted_spacing) n_points = n_for(lifted_spacing);
       std::vector<ClPoint> cut;
       cut.reserve(n_points);
       std::size_t j = 0;  // dense sample at or before the target arc length
@@ -498,60 +768,10 @@ Result<Toolpath> PlanRaster(const recon::BSplineSurface& surface, const Toolpath
             return Status::Internal("PlanRaster: a point between two solved samples of a section did not converge");
           }
         }
-        const recon::SurfaceDerivatives d = surface.Derivatives(u, v);
-        ClPoint cl;
-        cl.pass = pass;
-        cl.u = u;
-        cl.v = v;
-        cl.cc = d.p;
-        cl.normal = recon::NormalFromDerivatives(d);
-        if (recon::CurvaturesFromDerivatives(d).k2 < -1.0 / r) ++path.gouge_risk_points;
-        if (at_risk && concave.Near(cl.cc)) {
-          const double lift = DropLift(surface, dom, u, v, d, cl.cc + r * cl.normal, r);
-          if (lift > 1e-6) cl.lift_mm = lift;
-        }
-        cut.push_back(cl);
+        cut.push_back(cut_point(u, v, at_risk));
       }
       if (reversed) std::reverse(cut.begin(), cut.end());
-      // Tangential leads: along the tip path's direction at each end (±d for a one-point pass).
-      const Eigen::Vector3d along = reversed ? -frame.d : frame.d;
-      const auto direction = [&](const Eigen::Vector3d& from, const Eigen::Vector3d& to) {
-        const Eigen::Vector3d t = to - from;
-        return t.norm() > 1e-9 ? Eigen::Vector3d(t.normalized()) : along;
-      };
-      std::vector<ClPoint> points;
-      if (options.lead_mm > 0) {
-        const Eigen::Vector3d t0 = cut.size() > 1 ? direction(tip_of(cut[0]), tip_of(cut[1])) : along;
-        const std::vector<Eigen::Vector3d> arc = LeadArc(surface, cut.front(), -t0, options.lead_mm, r);
-        for (auto it = arc.rbegin(); it != arc.rend(); ++it) {
-          points.push_back(lead_point(ClKind::kLeadIn, cut.front(), tip_of(cut.front()) + *it));
-        }
-      }
-      points.insert(points.end(), cut.begin(), cut.end());
-      if (options.lead_mm > 0) {
-        const std::size_t k = cut.size() - 1;
-        const Eigen::Vector3d t1 = cut.size() > 1 ? direction(tip_of(cut[k - 1]), tip_of(cut[k])) : along;
-        for (const Eigen::Vector3d& offset : LeadArc(surface, cut.back(), t1, options.lead_mm, r)) {
-          points.push_back(lead_point(ClKind::kLeadOut, cut.back(), tip_of(cut.back()) + offset));
-        }
-      }
-      // On a pass near a concave region below the ball radius the lead arcs are checked like CL points
-      // (the local argument of LeadArc does not hold there) and lifted clear of Q.
-      if (at_risk) {
-        for (ClPoint& cl : points) {
-          if (cl.kind == ClKind::kCut) continue;
-          const Eigen::Vector3d centre = cl.cc + r * Eigen::Vector3d::UnitZ();
-          const recon::SurfaceDerivatives d = surface.Derivatives(cl.u, cl.v);
-          const double reach = 1.5 * r + (centre - d.p).head<2>().norm();
-          const double lift = DropLift(surface, dom, cl.u, cl.v, d, centre, r, reach);
-          if (lift > 1e-6) cl.cc.z() += lift;
-        }
-      }
-      for (std::size_t i = 0; i < points.size(); ++i) {
-        points[i].index_in_pass = static_cast<int>(i);
-        path.points.push_back(points[i]);
-      }
-      ++pass;
+      FL_RETURN_IF_ERROR(finish_pass(std::move(cut), reversed ? Eigen::Vector3d(-frame.d) : frame.d, at_risk));
     }
     if (c >= c_max) break;
     // Across the passes: the smallest plane spacing that keeps the scallop on this plane and the next.
@@ -568,8 +788,57 @@ Result<Toolpath> PlanRaster(const recon::BSplineSurface& surface, const Toolpath
     c = (c_next >= c_max - 1e-9) ? c_max : c_next;
     sections = std::move(next);
   }
+
+  // Contour passes along the trimming loops (outer first, then the holes), split where the ball would
+  // reach a neighbouring face.
+  if (domain.trimmed()) {
+    for (const recon::TrimLoop& loop : domain.trim()->loops()) {
+      const std::size_t n = loop.uv.size();
+      std::vector<char> usable(n);
+      std::size_t first_blocked = n;
+      for (std::size_t i = 0; i < n; ++i) {
+        const recon::SurfaceDerivatives d = surface.Derivatives(std::clamp(loop.uv[i].x(), dom.u_min, dom.u_max),
+                                                                std::clamp(loop.uv[i].y(), dom.v_min, dom.v_max));
+        usable[i] = domain.BallClear(d.p + r * recon::NormalFromDerivatives(d)) ? 1 : 0;
+        if (!usable[i] && first_blocked == n) first_blocked = i;
+      }
+      std::vector<std::vector<Eigen::Vector2d>> runs;
+      if (first_blocked == n) {
+        std::vector<Eigen::Vector2d> closed(loop.uv.begin(), loop.uv.end());
+        closed.push_back(loop.uv.front());  // around and back to the start
+        runs.push_back(std::move(closed));
+      } else {
+        std::vector<Eigen::Vector2d> run;
+        for (std::size_t k = 1; k <= n; ++k) {  // from just after a blocked sample, once around
+          const std::size_t i = (first_blocked + k) % n;
+          if (usable[i]) {
+            run.push_back(loop.uv[i]);
+          } else if (!run.empty()) {
+            runs.push_back(std::move(run));
+            run.clear();
+          }
+        }
+        if (!run.empty()) runs.push_back(std::move(run));
+      }
+      for (const std::vector<Eigen::Vector2d>& run : runs) {
+        std::vector<Eigen::Vector2d> uv = ThinContour(surface, run, r, chord, options.max_point_spacing_mm);
+        for (Eigen::Vector2d& p : uv) {
+          p = Eigen::Vector2d(std::clamp(p.x(), dom.u_min, dom.u_max), std::clamp(p.y(), dom.v_min, dom.v_max));
+        }
+        const bool at_risk = near_concave(uv);
+        std::vector<ClPoint> cut;
+        for (const Eigen::Vector2d& p : uv) cut.push_back(cut_point(p.x(), p.y(), at_risk));
+        FL_RETURN_IF_ERROR(finish_pass(std::move(cut), frame.d, at_risk));
+        ++path.contour_passes;
+      }
+    }
+  }
   path.passes = pass;
-  if (path.points.empty()) return Status::Internal("PlanRaster: no section plane met Q");
+  if (path.points.empty()) {
+    return domain.trimmed() ? Status::Failed("PlanRaster: no part of the trimmed face is reachable by the ball")
+                            : Status::Internal("PlanRaster: no section plane met Q");
+  }
+  if (path.min_step_over_mm > path.max_step_over_mm) path.min_step_over_mm = path.max_step_over_mm = 0;
   SummariseLifted(&path);
   UpdateCutterLocations(&path);
   return path;
@@ -608,10 +877,11 @@ void UpdateCutterLocations(Toolpath* path) {
   path->total_length_mm = length;
   path->total_time_s = length / feed_mm_per_s;
   path->safe_z_mm = max_tip_z + path->options.clearance_mm;
+  if (std::isfinite(path->min_safe_z_mm)) path->safe_z_mm = std::max(path->safe_z_mm, path->min_safe_z_mm);
 }
 
 nlohmann::json Toolpath::ReportJson() const {
-  return {{"strategy", "section-plane raster"},
+  nlohmann::json out = {{"strategy", "section-plane raster"},
           {"raster_angle_deg", options.raster_angle_deg},
           {"zigzag", options.zigzag},
           {"lead_mm", options.lead_mm},
@@ -634,6 +904,18 @@ nlohmann::json Toolpath::ReportJson() const {
             {"cc_box_max_mm", {lifted_box_max.x(), lifted_box_max.y(), lifted_box_max.z()}},
             {"cl_indices", lifted_indices}}},
           {"lifted_points", lifted_points}};
+  if (trimmed || neighbours_checked) {
+    out["trim"] = {{"note", "passes end at the trim (OpenCASCADE classification); a contour pass follows every trimming "
+                            "loop; leads and retracts keep the ball clear of the neighbouring faces"},
+                   {"trimmed", trimmed},
+                   {"contour_passes", contour_passes},
+                   {"neighbours_checked", neighbours_checked},
+                   {"neighbour_blocked_samples", neighbour_blocked_samples},
+                   {"leads_along_normal", leads_along_normal},
+                   {"leads_vertical", leads_vertical},
+                   {"min_safe_z_mm", std::isfinite(min_safe_z_mm) ? nlohmann::json(min_safe_z_mm) : nlohmann::json()}};
+  }
+  return out;
 }
 
 }  // namespace formloop::nc

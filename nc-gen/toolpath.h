@@ -26,7 +26,23 @@
 // LeadArc in toolpath.cc), so the cutter enters and leaves the surface already moving along the path;
 // lead points are CL points of kind kLeadIn/kLeadOut, off Q, never compensated.
 // Cutter location: ball centre B = i + r·n, programmed tip T = B − r·ẑ.
+//
+// Trimmed Q (reconstruction/trim.h). A CC point is usable when its (u, v) lies inside the trim (OpenCASCADE's
+// classification; on the edge counts as inside) and the ball there stays clear of the neighbouring faces
+// (distance from its centre ≥ r − kNeighbourClearanceToleranceMm). Each section is traced over Q's whole
+// parameter box as above (the step-over is planned there, so it never depends on where the trim cuts a
+// plane), then cut into the runs of usable samples (every 0.25 mm along the plane); where a run ends, the
+// end is found by bisection on the plane to 1e-9 mm, so passes start and end at the trim. A trim feature
+// narrower than that sampling along a plane can be missed by it; the contour passes still follow it.
+// Passes ending at a boundary that runs along them leave a wedge between the last pass and the boundary, so
+// after the raster one contour pass follows every trimming loop (outer and holes) with its CC points on the
+// loop (the loop's pcurve samples, every kTrimLoopSpacingMm, thinned to the chord tolerance and
+// max_point_spacing_mm), split where the ball would reach a neighbour. A lead that would bring the ball
+// nearer than r to a neighbouring face (or whose vertical retract column above its outer end would) is
+// replaced by a straight lead along the normal, then by a vertical one; if none is clear the plan is refused.
+// Safe Z is at least the top of the neighbouring faces within reach plus the clearance.
 
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -98,8 +114,21 @@ struct Toolpath {
   std::vector<int> lifted_indices;
   Eigen::Vector3d lifted_box_min = Eigen::Vector3d::Zero(), lifted_box_max = Eigen::Vector3d::Zero();
   double max_lift_mm = 0;
+  // Trimmed Q: passes clipped to the trim, contour passes along its loops (header comment).
+  bool trimmed = false;
+  int contour_passes = 0;
+  // Neighbouring faces: usable-looking samples dropped because the ball would reach a neighbour, leads
+  // changed to leave along the normal or vertically, and the lowest safe Z they allow (NaN: no neighbours
+  // within reach).
+  bool neighbours_checked = false;
+  int neighbour_blocked_samples = 0;
+  int leads_along_normal = 0, leads_vertical = 0;
+  double min_safe_z_mm = std::numeric_limits<double>::quiet_NaN();
   nlohmann::json ReportJson() const;
 };
+
+// A ball nearer than r − this to a neighbouring face counts as touching it (mm).
+inline constexpr double kNeighbourClearanceToleranceMm = 1e-4;
 
 Result<Toolpath> PlanRaster(const recon::BSplineSurface& surface, const ToolpathOptions& options);
 

@@ -80,9 +80,11 @@ Status WriteToolpathFile(const std::filesystem::path& path, const Toolpath& t) {
       "# formloop tool path (spec/nc-gen.md): one row per CL point in cutting order; cc = cutter-contact point "
       "on Q (leads: the tip), n = Q's unit normal (leads: z), lift along the tool axis\n";
   text += kOptionsPrefix + ToolpathOptionsJson(t.options).dump() + "\n";
-  const nlohmann::json summary = {{"passes", t.passes},
-                                  {"step_over_mm", {{"min", t.min_step_over_mm}, {"max", t.max_step_over_mm}}},
-                                  {"gouge_risk_points", t.gouge_risk_points}};
+  nlohmann::json summary = {{"passes", t.passes},
+                            {"step_over_mm", {{"min", t.min_step_over_mm}, {"max", t.max_step_over_mm}}},
+                            {"gouge_risk_points", t.gouge_risk_points}};
+  // Beside neighbouring faces: the lowest safe Z they allow (kept so a path read back retracts as high).
+  if (std::isfinite(t.min_safe_z_mm)) summary["min_safe_z_mm"] = t.min_safe_z_mm;
   text += kSummaryPrefix + summary.dump() + "\n";
   text += "pass,kind,u,v,cc_x,cc_y,cc_z,nx,ny,nz,lift_mm\n";
   for (const ClPoint& cl : t.points) {
@@ -118,6 +120,9 @@ Result<Toolpath> ParseToolpath(const std::string& text, const std::string& sourc
         t.min_step_over_mm = json.value("/step_over_mm/min"_json_pointer, 0.0);
         t.max_step_over_mm = json.value("/step_over_mm/max"_json_pointer, 0.0);
         t.gouge_risk_points = json.value("gouge_risk_points", 0);
+        if (json.contains("min_safe_z_mm") && json["min_safe_z_mm"].is_number()) {
+          t.min_safe_z_mm = json["min_safe_z_mm"].get<double>();
+        }
       }
       continue;
     }

@@ -6,6 +6,7 @@
 // report travels with it so fit error is never mistaken for machining error.
 
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -19,6 +20,8 @@
 #include "reconstruction/foot_point.h"
 
 namespace formloop::recon {
+
+class Trim;  // reconstruction/trim.h
 
 class BSplineSurface {
  public:
@@ -37,8 +40,15 @@ class BSplineSurface {
   int u_poles() const;
   int v_poles() const;
 
+  // The trimmed domain (reconstruction/trim.h): which (u, v) belong to the part, the loops that bound
+  // it and the faces beside it; null when Q is the whole patch over domain(). Copies share it.
+  const Trim* trim() const { return trim_.get(); }
+  const std::shared_ptr<const Trim>& shared_trim() const { return trim_; }
+  void set_trim(std::shared_ptr<const Trim> trim) { trim_ = std::move(trim); }
+
  private:
   Handle(Geom_BSplineSurface) geom_;
+  std::shared_ptr<const Trim> trim_;
 };
 
 // Samples of a surface on a regular grid in parameter space, row-major: index = i_v * nu + i_u.
@@ -97,8 +107,9 @@ Result<BSplineSurface> FitGrid(const GridSamples& samples, const GridFitOptions&
 Result<BSplineSurface> FitAnalytic(const AnalyticSurface& surface, int nu, int nv, const GridFitOptions& options,
                                    int n_check, unsigned long long seed, FitReport* report);
 
-// STEP AP214 file holding one B-spline face (the surface bounded by its parameter domain). The
-// OpenCASCADE banners are kept off stdout.
+// STEP AP214 file holding one B-spline face: the surface bounded by its parameter domain, or, when Q
+// has a trim, the trimmed face (read back by ReadCadFace with the same trim). The OpenCASCADE banners
+// are kept off stdout.
 Status WriteStep(const std::filesystem::path& path, const BSplineSurface& surface, const std::string& name);
 // Reads face `face_index` (0-based) of a STEP file and returns its underlying B-spline surface
 // (converted when the face holds another surface type).

@@ -5,10 +5,10 @@
 #include <memory>
 #include <system_error>
 
+#include <BRepBuilderAPI_NurbsConvert.hxx>
 #include <BRepTools.hxx>
 #include <BRep_Tool.hxx>
-#include <GeomConvert.hxx>
-#include <Geom_RectangularTrimmedSurface.hxx>
+#include <Geom_BSplineSurface.hxx>
 #include <IFSelect_ReturnStatus.hxx>
 #include <IGESControl_Reader.hxx>
 #include <IGESData_GlobalSection.hxx>
@@ -28,6 +28,7 @@
 #include <XSControl_WorkSession.hxx>
 
 #include "reconstruction/occt_support.h"
+#include "reconstruction/trim.h"
 
 namespace formloop::recon {
 namespace {
@@ -58,7 +59,10 @@ struct LoadedCad {
 std::string FaceName(const LoadedCad& cad, const TopoDS_Face& face) {
   const Handle(XSControl_TransferReader) transfer = cad.reader->WS()->TransferReader();
   if (transfer.IsNull()) return "";
-  const Handle(Standard_Transient) entity = transfer->EntityFromShapeResult(face, 1);
+  // Mode 1 finds faces transferred on their own (a solid's); faces of open shells or compounds are found
+  // only by exploring every result (mode -1).
+  Handle(Standard_Transient) entity = transfer->EntityFromShapeResult(face, 1);
+  if (entity.IsNull()) entity = transfer->EntityFromShapeResult(face, -1);
   if (entity.IsNull()) return "";
   if (cad.format == CadFormat::kStep) {
     const Handle(StepRepr_RepresentationItem) item = Handle(StepRepr_RepresentationItem)::DownCast(entity);
@@ -97,6 +101,30 @@ std::string FileUnit(LoadedCad& cad) {
   return model.IsNull() ? "" : UnitSymbol(Trimmed(model->GlobalSection().UnitName()));
 }
 
+// IGES 5.3 global section: parameter 14 is the unit flag (1 inch, 2 mm, 3 named in parameter 15, 4 ft,
+// ..., 11 µm) and 15 the unit's name. OpenCASCADE reads a missing flag as its default, 1 (inch), with no
+// name; a file whose name is missing and whose flag says nothing else states no unit, and reading it
+// as inches would scale a part drawn in mm by 25.4.
+Status CheckIgesUnit(const std::filesystem::path& path, XSControl_Reader& reader) {
+  const Handle(IGESData_IGESModel) model = Handle(IGESData_IGESModel)::DownCast(reader.Model());
+  if (model.IsNull()) return Status::Ok();
+  const IGESData_GlobalSection& global = model->GlobalSection();
+  const int flag = global.UnitFlag();
+  const std::string name = Trimmed(global.UnitName());
+  if (flag < 1 || flag > 11) {
+    return Status::BadInput(Where{.file = path.string(), .field = "global section parameter 14 (units flag)"},
+                            "unit flag " + std::to_string(flag) + " is not one of IGES 5.3's codes 1..11",
+                            "export the IGES file again with its length unit (e.g. mm)");
+  }
+  if (name.empty() && (flag == 1 || flag == 3)) {
+    return Status::BadInput(Where{.file = path.string(), .field = "global section parameters 14-15 (units)"},
+                            "the file states no length unit (no unit name, and the unit flag is missing or at "
+                            "its default, which IGES reads as inches)",
+                            "export the IGES file again with its length unit (e.g. mm), or export STEP");
+  }
+  return Status::Ok();
+}
+
 Result<LoadedCad> Load(const std::filesystem::path& path) {
   FL_ASSIGN_OR_RETURN(const CadFormat format, CadFormatFromPath(path));
   const std::string kind = format == CadFormat::kStep ? "STEP" : "IGES";
@@ -121,6 +149,7 @@ Result<LoadedCad> Load(const std::filesystem::path& path) {
                               format == CadFormat::kStep ? "export the part as STEP AP203/AP214/AP242"
                                                          : "export the part as IGES 5.3");
     }
+    if (format == CadFormat::kIges) FL_RETURN_IF_ERROR(CheckIgesUnit(path, *cad.reader));
     cad.reader->TransferRoots();
     const TopoDS_Shape shape = cad.reader->OneShape();
     for (TopExp_Explorer it(shape, TopAbs_FACE); it.More(); it.Next()) cad.faces.push_back(TopoDS::Face(it.Current()));
@@ -216,51 +245,125 @@ Result<std::vector<CadFaceInfo>> ListCadFaces(const std::filesystem::path& path)
   return cad.infos;
 }
 
-Result<CadFace> ReadCadFace(const std::filesystem::path& path, const CadFaceSelector& selector) {
-  FL_ASSIGN_OR_RETURN(LoadedCad cad, Load(path));
-  FL_ASSIGN_OR_RETURN(const int index, ChooseFace(path, cad.infos, selector));
-  const TopoDS_Face& face = cad.faces[static_cast<std::size_t>(index)];
+namespace {
+
+// Q and its trim for face `index` of a loaded file; `chosen` are the faces of the region (the others
+// are the trim's neighbours).
+Result<CadFace> MakeCadFace(const std::filesystem::path& path, const LoadedCad& cad, int index,
+                            const std::vector<int>& chosen) {
+  TopoDS_Face face = cad.faces[static_cast<std::size_t>(index)];
   CadFace result;
   result.info = cad.infos[static_cast<std::size_t>(index)];
   result.file_unit = cad.file_unit;
   const std::string which = "face " + std::to_string(index) + (result.info.name.empty() ? "" : " '" + result.info.name + "'");
   try {
-    const Handle(Geom_Surface) geom = BRep_Tool::Surface(face);  // with the face location applied
-    if (geom.IsNull()) {
+    TopLoc_Location location;
+    if (BRep_Tool::Surface(face, location).IsNull()) {
       return Status::BadInput(Where{.file = path.string()}, which + " has no underlying surface",
                               "choose another face");
     }
-    Handle(Geom_BSplineSurface) bspline = Handle(Geom_BSplineSurface)::DownCast(geom);
-    if (bspline.IsNull()) {
-      // Trim to the face's parameter box so unbounded surfaces (planes, cylinders) convert.
-      double u1, u2, v1, v2;
-      BRepTools::UVBounds(face, u1, u2, v1, v2);
-      Handle(Geom_Surface) trimmed = geom;
-      if (!geom->IsKind(STANDARD_TYPE(Geom_RectangularTrimmedSurface))) {
-        trimmed = new Geom_RectangularTrimmedSurface(geom, u1, u2, v1, v2);
-      }
-      bspline = GeomConvert::SurfaceToBSplineSurface(trimmed);
-      if (bspline.IsNull()) {
-        return Status::BadInput(Where{.file = path.string()},
-                                which + " of type " + result.info.surface_type +
-                                    " could not be converted to a B-spline surface",
-                                "convert the face to a NURBS surface in the CAD system");
-      }
+    if (Handle(Geom_BSplineSurface)::DownCast(BRep_Tool::Surface(face, location)).IsNull()) {
+      // Surface and pcurves converted together, so the trimming loops stay valid on Q.
+      BRepBuilderAPI_NurbsConvert convert(face, Standard_True);
+      face = TopoDS::Face(convert.Shape());
       result.converted = true;
-    } else {
-      bspline = Handle(Geom_BSplineSurface)::DownCast(bspline->Copy());  // Q must not alias the reader's model
     }
+    Handle(Geom_BSplineSurface) bspline = Handle(Geom_BSplineSurface)::DownCast(BRep_Tool::Surface(face));
+    if (bspline.IsNull()) {
+      return Status::BadInput(Where{.file = path.string()},
+                              which + " of type " + result.info.surface_type +
+                                  " could not be converted to a B-spline surface",
+                              "convert the face to a NURBS surface in the CAD system");
+    }
+    bspline = Handle(Geom_BSplineSurface)::DownCast(bspline->Copy());  // Q must not alias the reader's model
+    // Restrict Q to the face's parameter box (exact): the rest of a large underlying patch is never used.
+    double u1, u2, v1, v2, bu1, bu2, bv1, bv2;
+    BRepTools::UVBounds(face, u1, u2, v1, v2);
+    bspline->Bounds(bu1, bu2, bv1, bv2);
+    u1 = std::max(u1, bu1), u2 = std::min(u2, bu2), v1 = std::max(v1, bv1), v2 = std::min(v2, bv2);
+    const double eu = 1e-9 * (bu2 - bu1), ev = 1e-9 * (bv2 - bv1);
+    if (u2 > u1 && v2 > v1 && (u1 > bu1 + eu || u2 < bu2 - eu || v1 > bv1 + ev || v2 < bv2 - ev)) {
+      if (bspline->IsUPeriodic()) bspline->SetUNotPeriodic();
+      if (bspline->IsVPeriodic()) bspline->SetVNotPeriodic();
+      bspline->Segment(u1, u2, v1, v2);
+    }
+    double u_offset = 0, u_sign = 1;
     if (face.Orientation() == TopAbs_REVERSED) {
       // The face's material side is opposite to S_u × S_v; reverse u so Q's normal points away
-      // from the material as the rest of formloop assumes.
+      // from the material as the rest of formloop assumes (u_Q = first + last − u_face).
+      bspline->Bounds(bu1, bu2, bv1, bv2);
       bspline->UReverse();
+      u_offset = bu1 + bu2;
+      u_sign = -1;
     }
     result.surface = BSplineSurface(bspline);
+    result.face = face;
+    std::vector<TopoDS_Face> neighbours;
+    for (std::size_t k = 0; k < cad.faces.size(); ++k) {
+      if (std::find(chosen.begin(), chosen.end(), static_cast<int>(k)) == chosen.end()) {
+        neighbours.push_back(cad.faces[k]);
+      }
+    }
+    auto trim = Trim::OfFace(face, result.surface, u_offset, u_sign, std::move(neighbours));
+    if (!trim.ok()) return Status::BadInput(Where{.file = path.string()}, which + ": " + trim.status().message());
+    if (!(*trim)->natural() || (*trim)->has_neighbours()) result.surface.set_trim(*trim);
   } catch (const Standard_Failure& failure) {
     return Status::BadInput(Where{.file = path.string()},
                             "OpenCASCADE failed while converting " + which + ": " + occt::Message(failure));
   }
   return result;
+}
+
+}  // namespace
+
+Result<CadFace> ReadCadFace(const std::filesystem::path& path, const CadFaceSelector& selector) {
+  FL_ASSIGN_OR_RETURN(LoadedCad cad, Load(path));
+  FL_ASSIGN_OR_RETURN(const int index, ChooseFace(path, cad.infos, selector));
+  return MakeCadFace(path, cad, index, {index});
+}
+
+Result<std::vector<CadFace>> ReadCadFaces(const std::filesystem::path& path, const CadRegionSelector& selector) {
+  const bool by_name = !selector.names.empty();
+  const std::string field = by_name ? "face_names" : "faces";
+  if (selector.indices.empty() && selector.names.empty()) {
+    return Status::BadInput(Where{.file = path.string(), .field = "faces"}, "no face chosen",
+                            "give \"faces\": [indices] or \"face_names\": [names]");
+  }
+  if (!selector.indices.empty() && by_name) {
+    return Status::BadInput(Where{.file = path.string(), .field = "faces"},
+                            "both face indices and face names are given", "give one of the two");
+  }
+  FL_ASSIGN_OR_RETURN(LoadedCad cad, Load(path));
+  std::vector<int> chosen;
+  const std::size_t count = by_name ? selector.names.size() : selector.indices.size();
+  for (std::size_t k = 0; k < count; ++k) {
+    CadFaceSelector one;
+    if (by_name) {
+      one.name = selector.names[k];
+    } else {
+      one.index = selector.indices[k];
+      if (one.index < 0) {
+        return Status::BadInput(Where{.file = path.string(), .field = field + "[" + std::to_string(k) + "]"},
+                                "face index " + std::to_string(one.index) + " is negative", "use 0-based indices");
+      }
+    }
+    auto index = ChooseFace(path, cad.infos, one);
+    if (!index.ok()) {
+      return Status::BadInput(FormatWhere(Where{.field = field + "[" + std::to_string(k) + "]"}) +
+                              index.status().message());
+    }
+    if (std::find(chosen.begin(), chosen.end(), *index) != chosen.end()) {
+      return Status::BadInput(Where{.file = path.string(), .field = field + "[" + std::to_string(k) + "]"},
+                              "face " + std::to_string(*index) + " is chosen twice", "list each face once");
+    }
+    chosen.push_back(*index);
+  }
+  std::vector<CadFace> faces;
+  for (const int index : chosen) {
+    FL_ASSIGN_OR_RETURN(CadFace face, MakeCadFace(path, cad, index, chosen));
+    faces.push_back(std::move(face));
+  }
+  return faces;
 }
 
 Result<BSplineSurface> ReadStep(const std::filesystem::path& path, int face_index) {

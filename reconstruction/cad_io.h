@@ -12,13 +12,21 @@
 // prints.
 //
 // Faces whose surface is not a B-spline (planes, cylinders, cones, surfaces of revolution, offset
-// surfaces...) are trimmed to the face's parameter box and converted with
-// GeomConvert::SurfaceToBSplineSurface; the source type is reported. The face's trimming curves
-// are not kept: Q is the whole underlying patch over that box.
+// surfaces...) are converted with their trimming curves by BRepBuilderAPI_NurbsConvert (surface and
+// pcurves together, so the trim stays valid); the source type is reported. Q is the underlying
+// B-spline restricted (Geom_BSplineSurface::Segment, exact) to the face's parameter box, and the
+// face's trimming loops and the file's other faces travel with it as its Trim
+// (reconstruction/trim.h): outside the outer loop and inside holes is not part of the part.
+//
+// IGES files must state their length unit: a global section whose unit flag is missing or not one
+// of IGES 5.3's codes 1..11 (the standard then assumes inches, which for a part drawn in mm is a
+// factor 25.4) is refused, naming the field.
 
 #include <filesystem>
 #include <string>
 #include <vector>
+
+#include <TopoDS_Face.hxx>
 
 #include "core/status.h"
 #include "reconstruction/bspline_surface.h"
@@ -39,7 +47,8 @@ struct CadFaceInfo {
 };
 
 struct CadFace {
-  BSplineSurface surface;   // in mm
+  BSplineSurface surface;   // in mm, with its trim (null when the face is its whole patch and alone in the file)
+  TopoDS_Face face;         // the face as read (after NURBS conversion), in mm
   CadFaceInfo info;
   std::string file_unit;    // the file's length unit: "mm", "inch", "m", ... (Q itself is always in mm)
   bool converted = false;   // the face's surface was converted to a B-spline
@@ -57,5 +66,15 @@ struct CadFaceSelector {
 // no face.
 Result<std::vector<CadFaceInfo>> ListCadFaces(const std::filesystem::path& path);
 Result<CadFace> ReadCadFace(const std::filesystem::path& path, const CadFaceSelector& selector);
+
+// Several faces (a free-form region): by 0-based indices or by names (one of the two). Each is read
+// as ReadCadFace reads one; the neighbours of each face's trim are the faces not chosen. BadInput
+// naming the field ("faces" / "face_names") for an empty list, a repeated face, an index out of
+// range or a name that does not exist (the message lists the file's faces).
+struct CadRegionSelector {
+  std::vector<int> indices;
+  std::vector<std::string> names;
+};
+Result<std::vector<CadFace>> ReadCadFaces(const std::filesystem::path& path, const CadRegionSelector& selector);
 
 }  // namespace formloop::recon

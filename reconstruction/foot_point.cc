@@ -12,6 +12,7 @@
 // one-point functions, use a GeomAdaptor_Surface per call.
 
 #include "reconstruction/foot_point.h"
+#include "reconstruction/trim.h"
 
 #include <algorithm>
 #include <array>
@@ -341,6 +342,7 @@ ParamDomain DomainOf(const Handle(Geom_BSplineSurface)& geom) {
 
 struct FootPointProjector::Impl {
   ParamDomain domain;
+  std::shared_ptr<const Trim> trim;               // of the B-spline it was built from (may be null)
   Handle(Geom_BSplineSurface) bspline;            // set for a B-spline projector
   std::unique_ptr<const SpanCaches> span_caches;  // its span polynomials, unless they would be too large
   const AnalyticSurface* analytic = nullptr;      // set for an analytic projector (not owned)
@@ -554,6 +556,16 @@ Status ProjectorOptions::Validate() const {
   return Status::Ok();
 }
 
+namespace {
+
+// Flags a foot point outside Q's trim (FootPoint::outside_trim).
+Result<FootPoint> MarkTrim(const Trim* trim, Result<FootPoint> foot) {
+  if (foot.ok() && trim != nullptr && !trim->natural()) foot->outside_trim = !trim->Inside(foot->u, foot->v);
+  return foot;
+}
+
+}  // namespace
+
 Result<FootPointProjector> FootPointProjector::Build(const BSplineSurface& q, const ProjectorOptions& options) {
   return BuildBSpline(q, options, true);
 }
@@ -569,6 +581,7 @@ Result<FootPointProjector> FootPointProjector::BuildBSpline(const BSplineSurface
     // A private copy: later changes to q (or its destruction) do not reach the projector.
     impl->bspline = Handle(Geom_BSplineSurface)::DownCast(q.geom()->Copy());
     impl->domain = DomainOf(impl->bspline);
+    impl->trim = q.shared_trim();
     if (span_caches && SpanCaches::EstimateBytes(impl->bspline) <= kMaxSpanCacheBytes) {
       impl->span_caches = std::make_unique<const SpanCaches>(impl->bspline);
     }
@@ -595,7 +608,7 @@ Result<FootPoint> FootPointProjector::Project(const Eigen::Vector3d& p) const {
     return impl_->Visit([&](auto& eval) {
       pcl::Indices found;
       std::vector<float> found_d2;
-      return impl_->GlobalProject(eval, p, found, found_d2);
+      return MarkTrim(impl_->trim.get(), impl_->GlobalProject(eval, p, found, found_d2));
     });
   } catch (const Standard_Failure& failure) {
     return Status::Internal("projection of " + PointText(p) + ": OpenCASCADE failed: " + occt::Message(failure));
@@ -604,7 +617,8 @@ Result<FootPoint> FootPointProjector::Project(const Eigen::Vector3d& p) const {
 
 Result<FootPoint> FootPointProjector::ProjectFrom(const Eigen::Vector3d& p, double u0, double v0) const {
   try {
-    return impl_->Visit([&](auto& eval) { return LocalProject(eval, impl_->domain, p, u0, v0); });
+    return impl_->Visit(
+        [&](auto& eval) { return MarkTrim(impl_->trim.get(), LocalProject(eval, impl_->domain, p, u0, v0)); });
   } catch (const Standard_Failure& failure) {
     return Status::Internal("projection of " + PointText(p) + ": OpenCASCADE failed: " + occt::Message(failure));
   }
@@ -619,7 +633,7 @@ Result<std::vector<FootPoint>> FootPointProjector::ProjectAll(const std::vector<
       pcl::Indices found;  // reused by every point
       std::vector<float> found_d2;
       for (; index < points.size(); ++index) {
-        Result<FootPoint> foot = impl_->GlobalProject(eval, points[index], found, found_d2);
+        Result<FootPoint> foot = MarkTrim(impl_->trim.get(), impl_->GlobalProject(eval, points[index], found, found_d2));
         if (!foot.ok()) {
           return Status(foot.status().code(), "points[" + std::to_string(index) + "] of " +
                                                   std::to_string(points.size()) + ": " + foot.status().message());
@@ -654,7 +668,7 @@ Result<FootPoint> ProjectFrom(const BSplineSurface& surface, const Eigen::Vector
   }
   try {
     BSplineEvaluator eval(surface.geom());
-    return LocalProject(eval, DomainOf(surface.geom()), p, u0, v0);
+    return MarkTrim(surface.trim(), LocalProject(eval, DomainOf(surface.geom()), p, u0, v0));
   } catch (const Standard_Failure& failure) {
     return Status::Internal("projection of " + PointText(p) + ": OpenCASCADE failed: " + occt::Message(failure));
   }

@@ -58,6 +58,10 @@ struct FootPoint {
   // The edge of the parameter domain holds the foot point back: p lies beyond Q, so deviation_mm is
   // not a normal distance. Points exactly over an edge (orthogonal there) are not flagged.
   bool on_boundary = false;
+  // Q is trimmed (reconstruction/trim.h) and (u, v) lies outside the trim: the foot point is on the
+  // underlying patch beyond the part's edge or over a hole, so deviation_mm is not a deviation from
+  // the part. Flagged like on_boundary; the search itself runs over Q's whole parameter box.
+  bool outside_trim = false;
 };
 
 struct ProjectorOptions {

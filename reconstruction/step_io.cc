@@ -24,6 +24,7 @@
 #include "core/atomic_file.h"
 #include "reconstruction/bspline_surface.h"
 #include "reconstruction/occt_support.h"
+#include "reconstruction/trim.h"
 
 namespace formloop::recon {
 
@@ -37,16 +38,22 @@ Status WriteStep(const std::filesystem::path& path, const BSplineSurface& surfac
   FL_RETURN_IF_ERROR(file.open_status());
   try {
     const ParamDomain dom = surface.domain();
-    BRepBuilderAPI_MakeFace make_face(surface.geom(), dom.u_min, dom.u_max, dom.v_min, dom.v_max,
-                                      Precision::Confusion());
-    if (!make_face.IsDone()) {
-      return Status::Internal(where + ": BRepBuilderAPI_MakeFace failed (error " +
-                              std::to_string(static_cast<int>(make_face.Error())) + ")");
+    TopoDS_Face face;
+    if (surface.trim() != nullptr && !surface.trim()->natural()) {
+      face = surface.trim()->face();  // the trimmed face as it was read (or built on Q)
+    } else {
+      BRepBuilderAPI_MakeFace make_face(surface.geom(), dom.u_min, dom.u_max, dom.v_min, dom.v_max,
+                                        Precision::Confusion());
+      if (!make_face.IsDone()) {
+        return Status::Internal(where + ": BRepBuilderAPI_MakeFace failed (error " +
+                                std::to_string(static_cast<int>(make_face.Error())) + ")");
+      }
+      face = make_face.Face();
     }
     STEPControl_Writer writer;  // initialises the STEP controller and its static parameters
     Interface_Static::SetCVal("write.step.unit", "MM");
     Interface_Static::SetCVal("write.step.product.name", name.empty() ? "formloop_surface" : name.c_str());
-    if (writer.Transfer(make_face.Face(), STEPControl_AsIs) != IFSelect_RetDone) {
+    if (writer.Transfer(face, STEPControl_AsIs) != IFSelect_RetDone) {
       return Status::Internal(where + ": the STEP translator refused the face");
     }
     APIHeaderSection_MakeHeader header(writer.Model());
@@ -65,9 +72,9 @@ Status WriteStep(const std::filesystem::path& path, const BSplineSurface& surfac
         product->SetName(product_name);
       }
       // The face carries the name too, so `formloop fit Q.step --face NAME` finds it.
-      if (const Handle(StepShape_AdvancedFace) face = Handle(StepShape_AdvancedFace)::DownCast(entity);
-          !face.IsNull()) {
-        face->SetName(product_name);
+      if (const Handle(StepShape_AdvancedFace) advanced = Handle(StepShape_AdvancedFace)::DownCast(entity);
+          !advanced.IsNull()) {
+        advanced->SetName(product_name);
       }
     }
     if (writer.Write(file.temp_path().string().c_str()) != IFSelect_RetDone) {

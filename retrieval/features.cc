@@ -6,6 +6,7 @@
 #include <numbers>
 
 #include "core/number_text.h"
+#include "reconstruction/trim.h"
 
 namespace formloop::retrieval {
 namespace {
@@ -123,11 +124,13 @@ nlohmann::json PartFeatures::ToJson() const {
   for (int i = 0; i < descriptors.size() && i < kDescriptorCount; ++i) {
     d[std::string(DescriptorNames()[i])] = descriptors[i];
   }
-  return {{"descriptors", d},
-          {"concepts", Concepts()},
-          {"size_mm", size_mm},
-          {"normal_flipped", normal_flipped},
-          {"nodes_skipped", nodes_skipped}};
+  nlohmann::json out = {{"descriptors", d},
+                        {"concepts", Concepts()},
+                        {"size_mm", size_mm},
+                        {"normal_flipped", normal_flipped},
+                        {"nodes_skipped", nodes_skipped}};
+  if (samples_outside_trim > 0) out["samples_outside_trim"] = samples_outside_trim;
+  return out;
 }
 
 Result<PartFeatures> ClassifyPart(const PartDescription& part, const FacetTaxonomies& taxonomies) {
@@ -187,6 +190,14 @@ Result<PartFeatures> ExtractFeatures(const PartDescription& part, const recon::B
     s->weight = jac * du * dv;
     return true;
   };
+  // On a trimmed Q only samples inside the trim count (reconstruction/trim.h): nodes and midpoints
+  // outside it are left out of every extreme, extent and integral.
+  const recon::Trim* trim = surface.trim() != nullptr && !surface.trim()->natural() ? surface.trim() : nullptr;
+  const auto inside = [&](double u, double v) {
+    if (trim == nullptr || trim->Inside(u, v)) return true;
+    ++f.samples_outside_trim;
+    return false;
+  };
   std::vector<Sample> nodes, mids;
   nodes.reserve(static_cast<size_t>((n + 1) * (n + 1)));
   mids.reserve(static_cast<size_t>(n * n));
@@ -196,13 +207,16 @@ Result<PartFeatures> ExtractFeatures(const PartDescription& part, const recon::B
       const double u = i == n ? dom.u_max : dom.u_min + i * du;
       const double v = j == n ? dom.v_max : dom.v_min + j * dv;
       Sample s;
-      if (evaluate(u, v, &s)) {
+      if (!inside(u, v)) {
+      } else if (evaluate(u, v, &s)) {
         nodes.push_back(s);
       } else {
         ++f.nodes_skipped;
       }
       if (i < n && j < n) {
-        if (evaluate(dom.u_min + (i + 0.5) * du, dom.v_min + (j + 0.5) * dv, &s)) {
+        const double um = dom.u_min + (i + 0.5) * du, vm = dom.v_min + (j + 0.5) * dv;
+        if (!inside(um, vm)) {
+        } else if (evaluate(um, vm, &s)) {
           mids.push_back(s);
         } else {
           ++f.nodes_skipped;

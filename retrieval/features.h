@@ -45,6 +45,10 @@
 // 23  aspect_z                  extent_z / max(extent_x, extent_y), 0 if that is 0
 // Entries 12–15 and 16–19 each sum to 1.
 //
+// Trimmed Q (reconstruction/trim.h): only nodes and midpoints inside the trim are used, so the
+// descriptor is that of the part's face, not of its underlying patch (the area is the midpoint rule
+// over the cells whose midpoint is inside: within about half a cell times the trim's perimeter).
+//
 // Facet concepts (canonical node names of the taxonomies under data/taxonomies/, see its README):
 //   shape        ← PartDescription::shape_family (a node or alias of shape.txt)
 //   material     ← PartDescription::material (a node or alias of material.txt, e.g. "1.2344" → H13)
@@ -132,6 +136,7 @@ struct PartFeatures {
   double size_mm = 0;           // L = sqrt(area)
   bool normal_flipped = false;  // the surface's normal pointed to −z and was flipped
   int nodes_skipped = 0;        // grid nodes/midpoints with an undefined normal (degenerate), left out
+  int samples_outside_trim = 0; // grid nodes/midpoints outside Q's trim, left out
   // Facet name → concept, ready for CaseConcepts::categorical.
   std::map<std::string, std::string> Concepts() const;
   nlohmann::json ToJson() const;

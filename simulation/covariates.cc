@@ -7,17 +7,9 @@
 #include <pcl/kdtree/kdtree_flann.h>
 #include <pcl/point_types.h>
 
+#include "core/geometry.h"
+
 namespace formloop::sim {
-namespace {
-
-double SegmentDistance(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
-  const Eigen::Vector3d ab = b - a;
-  const double len2 = ab.squaredNorm();
-  const double t = len2 > 0 ? std::clamp((p - a).dot(ab) / len2, 0.0, 1.0) : 0.0;
-  return (a + t * ab - p).norm();
-}
-
-}  // namespace
 
 Result<std::vector<PointContext>> AssociateWithToolpath(const std::vector<CutterLocation>& cls, double r,
                                                         const std::vector<MeasuredPoint>& points,

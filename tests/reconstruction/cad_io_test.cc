@@ -244,5 +244,34 @@ TEST_F(CadIoTest, BadInputGivesClearErrors) {
   EXPECT_EQ(ReadCadFace(dir_ / "q.txt", {}).status().code(), StatusCode::kBadInput);
 }
 
+TEST_F(CadIoTest, IgesWithoutAUnitIsRefusedNamingTheField) {
+  const BSplineSurface q = SaddleQ();
+  const ParamDomain d = q.domain();
+  const fs::path with_unit = dir_ / "q.igs", without = dir_ / "q_no_unit.igs";
+  {
+    IGESControl_Controller::Init();
+    IGESControl_Writer writer("MM", 0);
+    BRepBuilderAPI_MakeFace face(q.geom(), d.u_min, d.u_max, d.v_min, d.v_max, Precision::Confusion());
+    ASSERT_TRUE(writer.AddShape(face.Face()));
+    writer.ComputeModel();
+    ASSERT_TRUE(writer.Write(with_unit.string().c_str()));
+  }
+  // Global section parameters 14 (unit flag 2 = mm) and 15 (unit name) blanked, columns kept.
+  std::string text = ReadText(with_unit);
+  const std::size_t at = text.find(",2,2HMM,");
+  ASSERT_NE(at, std::string::npos) << "the writer's global section changed";
+  text.replace(at, 8, ",,,     ");
+  std::ofstream(without) << text;
+  ASSERT_TRUE(ReadCadFace(with_unit, {}).ok());
+  const auto refused = ReadCadFace(without, {});
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.status().code(), StatusCode::kBadInput);
+  const std::string message = refused.status().ToString();
+  EXPECT_NE(message.find("q_no_unit.igs"), std::string::npos) << message;
+  EXPECT_NE(message.find("global section parameters 14-15 (units)"), std::string::npos) << message;
+  EXPECT_NE(message.find("inches"), std::string::npos) << message;
+  EXPECT_FALSE(ListCadFaces(without).ok()) << "listing refuses it too";
+}
+
 }  // namespace
 }  // namespace formloop::recon
