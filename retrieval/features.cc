@@ -257,6 +257,15 @@ Result<PartFeatures> ExtractFeatures(const PartDescription& part, const recon::B
     max_slope = std::max(max_slope, std::acos(std::clamp(std::abs(s.n.z()), 0.0, 1.0)));
     if (s.k2 < 0) min_concave = std::min(min_concave, -1.0 / s.k2);
   }
+  // On a trimmed Q the extents come from the trim's loops too (the grid's nodes stop up to a cell short).
+  if (trim != nullptr) {
+    for (const recon::TrimLoop& loop : trim->loops()) {
+      for (const Eigen::Vector3d& p : loop.point) {
+        lo = lo.cwiseMin(p);
+        hi = hi.cwiseMax(p);
+      }
+    }
+  }
   double area = 0;
   for (const Sample& s : mids) area += s.weight;
   if (!(area > 0)) return Status::Failed("features: the surface has zero area");

@@ -47,7 +47,8 @@
 //
 // Trimmed Q (reconstruction/trim.h): only nodes and midpoints inside the trim are used, so the
 // descriptor is that of the part's face, not of its underlying patch (the area is the midpoint rule
-// over the cells whose midpoint is inside: within about half a cell times the trim's perimeter).
+// over the cells whose midpoint is inside: within about half a cell times the trim's perimeter); the
+// extents also take the trim's loops into account, so they are those of the face.
 //
 // Facet concepts (canonical node names of the taxonomies under data/taxonomies/, see its README):
 //   shape        ← PartDescription::shape_family (a node or alias of shape.txt)
