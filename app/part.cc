@@ -29,6 +29,38 @@ Status ReadInt(const JsonFields& f, const std::string& key, int* out, int min, i
 constexpr NumberRange kPositive{.min = 0, .exclusive_min = true};
 constexpr NumberRange kNonNegative{.min = 0};
 
+// "profile": a probe profile file from `formloop calibrate sphere` (relative to the part file) or the
+// profile itself inline; it replaces ball_radius_mm and pretravel_mm, which may then not be given too.
+Status ReadProbeProfileField(const JsonFields& f, const std::string& source, metrology::ProbeModel* model,
+                             bool* given) {
+  if (!f.Has("profile")) return Status::Ok();
+  const std::string field = f.Path("profile");
+  if (f.Has("ball_radius_mm") || f.Has("pretravel_mm")) {
+    return Status::BadInput(Where{.file = source, .field = field},
+                            "a probe profile is given together with ball_radius_mm or pretravel_mm",
+                            "give the profile alone: it holds the ball radius and the pretravel");
+  }
+  const Json& value = f.json().at("profile");
+  Result<metrology::ProbeModel> read = Status::Internal("unset");
+  if (value.is_string()) {
+    const std::filesystem::path given_path(value.get<std::string>());
+    const std::filesystem::path path =
+        given_path.is_absolute() ? given_path : std::filesystem::path(source).parent_path() / given_path;
+    read = metrology::ReadProbeProfile(path);
+  } else if (value.is_object()) {
+    read = metrology::ProbeProfileFromJson(value, source + " field '" + field + "'");
+  } else {
+    return Status::BadInput(Where{.file = source, .field = field}, "must be a file name or a probe profile object",
+                            "write e.g. \"profile\": \"probe.json\" (from `formloop calibrate sphere --out probe.json`)");
+  }
+  if (!read.ok()) {
+    return Status::BadInput(FormatWhere(Where{.file = source, .field = field}) + read.status().message());
+  }
+  *model = *read;
+  *given = true;
+  return Status::Ok();
+}
+
 }  // namespace
 
 Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source) {
@@ -57,8 +89,12 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
     return Status::BadInput(Where{.file = source, .field = "surface"}, "required field is missing",
                             "add \"surface\": {\"reference\": \"saddle\"} (see `formloop surfaces list`)");
   }
-  FL_RETURN_IF_ERROR(surface->CheckKnown({"reference", "kind", "params", "samples"}));
-  if (surface->Has("kind")) {
+  if (!IsSurfaceFile(surface->json())) {
+    FL_RETURN_IF_ERROR(surface->CheckKnown({"reference", "kind", "params", "samples"}));
+  }
+  if (IsSurfaceFile(surface->json())) {
+    FL_ASSIGN_OR_RETURN(part.surface_file, ParseSurfaceFile(*surface, source));
+  } else if (surface->Has("kind")) {
     FL_RETURN_IF_ERROR(surface->String("kind", &part.surface_kind));
     FL_RETURN_IF_ERROR(ReadInt(*surface, "samples", &part.surface_samples, 8, 400));
     const Json params = json["surface"].value("params", Json::object());
@@ -167,7 +203,8 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
     std::optional<JsonFields> p;
     FL_RETURN_IF_ERROR(f->Object("probe", &p));
     if (p) {
-      FL_RETURN_IF_ERROR(p->CheckKnown({"ball_radius_mm", "pretravel_mm"}));
+      FL_RETURN_IF_ERROR(p->CheckKnown({"ball_radius_mm", "pretravel_mm", "profile"}));
+      FL_RETURN_IF_ERROR(ReadProbeProfileField(*p, source, &part.true_probe, &part.true_probe_profile_given));
       FL_RETURN_IF_ERROR(p->OptionalNumber("ball_radius_mm", &part.true_probe.ball_radius_mm, kPositive));
       FL_RETURN_IF_ERROR(p->OptionalNumber("pretravel_mm", &part.true_probe.pretravel_mm));
     }
@@ -175,8 +212,10 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
   FL_RETURN_IF_ERROR(top.Object("probing", &f));
   bool true_probe_given = json.contains("machine") && json["machine"].contains("probe");
   if (f) {
-    FL_RETURN_IF_ERROR(f->CheckKnown({"grid", "inset_fraction", "ball_radius_mm", "pretravel_mm", "clearance_mm",
-                                      "search_mm", "feed_mm_per_min"}));
+    FL_RETURN_IF_ERROR(f->CheckKnown({"grid", "inset_fraction", "edge_margin_mm", "ball_radius_mm", "pretravel_mm",
+                                      "profile", "clearance_mm", "search_mm", "feed_mm_per_min"}));
+    FL_RETURN_IF_ERROR(ReadProbeProfileField(*f, source, &part.probe, &part.probe_profile_given));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("edge_margin_mm", &part.probe_edge_margin_mm, kNonNegative));
     if (f->Has("grid")) {
       const Json& g = f->json().at("grid");
       if (!g.is_array() || g.size() != 2 || !g[0].is_number_integer() || !g[1].is_number_integer() ||
@@ -234,6 +273,8 @@ nlohmann::json PartSpec::ToJson() const {
   const auto& t = toolpath;
   nlohmann::json surface = {{"reference", surface_reference}};
   if (!surface_kind.empty()) surface = {{"kind", surface_kind}, {"params", surface_params}, {"samples", surface_samples}};
+  // A file is named by its copy beside the resolved part in the run folder (inputs/).
+  if (surface_file) surface = surface_file->ToJson(surface_file->CopyName());
   nlohmann::json magazine = nlohmann::json::array();
   for (const auto& tool : tools) magazine.push_back({{"number", tool.number}, {"radius_mm", tool.radius_mm}});
   nlohmann::json out = {{"name", name},
@@ -289,6 +330,13 @@ nlohmann::json PartSpec::ToJson() const {
                        {"loops", {{"max", max_loops}, {"max_offset_um", compensation.max_offset_um}}}};
   // Only effects the part gave: without them `--machine virtual` takes the machine's profile, and a
   // resolved part read again must do the same.
+  out["probing"]["edge_margin_mm"] = probe_edge_margin_mm;
+  if (probe_profile_given) {
+    out["probing"].erase("ball_radius_mm");
+    out["probing"].erase("pretravel_mm");
+    out["probing"]["profile"] = metrology::ProbeProfileToJson(probe);
+  }
+  if (true_probe_profile_given) out["machine"]["probe"] = {{"profile", metrology::ProbeProfileToJson(true_probe)}};
   if (effects_given) {
     out["machine"]["effects"] = {{"tool_radius_error_um", effects.tool_radius_error_um},
                                  {"deflection_um", effects.deflection_um},
@@ -301,6 +349,7 @@ nlohmann::json PartSpec::ToJson() const {
 }
 
 std::string PartSpec::SurfaceName() const {
+  if (surface_file) return surface_file->Describe();
   if (surface_kind.empty()) return surface_reference;
   std::string text = surface_kind + "(";
   bool first = true;
@@ -313,6 +362,7 @@ std::string PartSpec::SurfaceName() const {
 
 std::string PartSpec::ShapeConcept() const {
   if (!shape_family.empty()) return shape_family;
+  if (surface_file) return "free-form";  // a CAD face or a scan: the taxonomy's node above every free-form family
   if (surface_kind.empty()) return surface_reference;  // the shape taxonomy's leaves carry these names
   static const std::map<std::string, std::string> kShapeOfKind = {
       {"paraboloid", "tilted_paraboloid"}, {"gaussian_pocket", "bowl"}, {"twisted_ruled", "blade"}};

@@ -7,6 +7,8 @@
 //   "name": "demo-saddle",                       // run and program names
 //   "surface": {"reference": "saddle"},          // analytic reference surface, or a parametric kind:
 //              {"kind": "gaussian_pocket", "params": {"size_mm": 80, ...}, "samples": 41}  (retrieval/starter.h)
+//              {"cad": "part.step", "faces": [3, 4] | "face_names": ["top"]}  or  {"points": "scan.ply"}
+//              (files relative to the part file; app/surface_source.h)
 //   "shape_family": "bowl", "finish_ra_um": 0.8, "batch_size": 1,   // retrieval description (optional)
 //   "material": "H13",                           // a leaf or alias of data/taxonomies/material.txt
 //   "tolerance_mm": 0.010,                       // form tolerance α
@@ -16,18 +18,21 @@
 //   "tools": [{"number": 2, "radius_mm": 1.5}, ...],   // magazine for the simulation-correction step
 //   "toolpath": {"scallop_um": 3, "chord_tolerance_um": 1, "feed_mm_per_min": 1500, ...},
 //   "machine": {"name": "vm-1", "class": "3-axis", "travel_min_mm": [..], "travel_max_mm": [..], "max_feed_mm_per_min": .., "effects": {..}},
-//   "probing": {"grid": [20, 20], "inset_fraction": 0.05, "ball_radius_mm": 1.0, ...},
+//   "probing": {"grid": [20, 20], "inset_fraction": 0.05, "edge_margin_mm": 2, "ball_radius_mm": 1.0, ...,
+//               "profile": "probe.json"},        // a probe profile from `formloop calibrate sphere` (or inline)
 //   "analysis": {"neighbours": 8, "max_control_net": 8, "coverage_factor": 2},
 //   "loops": {"max": 3, "max_offset_um": 200}
 // }
 
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
+#include "app/surface_source.h"
 #include "core/status.h"
 #include "metrology/decomposition.h"
 #include "metrology/probe.h"
@@ -46,6 +51,7 @@ struct PartSpec {
   std::string surface_kind;             // ... a parametric kind of retrieval/starter.h with its parameters
   std::map<std::string, double> surface_params;
   int surface_samples = 41;             // grid samples per direction of a parametric kind's fit
+  std::optional<SurfaceFile> surface_file;  // ... or CAD faces or a scan (app/surface_source.h)
   // Retrieval description (retrieval::PartDescription): the shape concept defaults from the surface.
   std::string shape_family;
   double finish_ra_um = 0.8;
@@ -68,6 +74,10 @@ struct PartSpec {
   metrology::ProbeModel true_probe;     // the probe the virtual machine really has
   int probe_nu = 20, probe_nv = 20;
   double probe_inset_fraction = 0.05;
+  double probe_edge_margin_mm = metrology::kProbeEdgeMarginMm;  // from a trimmed face's edge (metrology/probe.h)
+  // probing.profile / machine.probe.profile: the probe models came from probe profiles (lobing included);
+  // the resolved part then carries them inline.
+  bool probe_profile_given = false, true_probe_profile_given = false;
   nc::ProbeProgramOptions probe_program;
   metrology::ProbeModel probe;          // the probe model the analysis applies
   metrology::DecompositionOptions analysis;
@@ -75,7 +85,7 @@ struct PartSpec {
   nc::CompensationOptions compensation;
 
   nlohmann::json ToJson() const;  // fully resolved
-  std::string SurfaceName() const;  // the reference name or "<kind>(p=v, ...)"
+  std::string SurfaceName() const;  // the reference name, "<kind>(p=v, ...)", "cad:FILE[faces]" or "scan:FILE"
   std::string ShapeConcept() const; // shape_family, else the shape taxonomy leaf of the surface
 };
 

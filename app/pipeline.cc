@@ -30,7 +30,7 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
   log::Info("[surface] '{}': B-spline fit", part.SurfaceName());
   FL_ASSIGN_OR_RETURN(const stages::Surface surface, stages::BuildSurface(part, in.fit_seed, folder));
   const recon::BSplineSurface& q = surface.q;
-  summary->fit_check_max_um = surface.report.check_max_mm * 1e3;
+  summary->fit_check_max_um = surface.fit_check_max_mm * 1e3;
   log::Info("      fit rms {:.4f} um at samples; check max {:.4f} um at {} random points", surface.report.rms_mm * 1e3,
             surface.report.check_max_mm * 1e3, surface.report.n_check);
 
@@ -124,7 +124,7 @@ json RunSummary::ToJson() const {
           {"part", part},
           {"surface", surface},
           {"tolerance_um", tolerance_um},
-          {"fit_check_max_um", fit_check_max_um},
+          {"fit_check_max_um", std::isfinite(fit_check_max_um) ? json(fit_check_max_um) : json(nullptr)},
           {"route",
            {{"name", route},
             {"similarity", similarity >= 0 ? json(similarity) : json(nullptr)},

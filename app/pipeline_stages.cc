@@ -16,6 +16,7 @@
 #include "planning/precompensation.h"
 #include "reconstruction/analytic_surface.h"
 #include "reconstruction/cad_io.h"
+#include "reconstruction/trim.h"
 #include "retrieval/retrieve.h"
 #include "retrieval/starter.h"
 #include "simulation/virtual_machine.h"
@@ -83,6 +84,8 @@ Result<Inputs> ResolveInputs(const PartSpec& given, const RunOptions& options, c
   in.part = given;
   in.part.machine_name = in.machine.name;
   FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("inputs") / "part.json", in.part.ToJson()));
+  // The CAD model or scan beside it, so the run repeats from its folder (the part names the copy and its hash).
+  if (in.part.surface_file) FL_RETURN_IF_ERROR(CopySurfaceFile(*in.part.surface_file, folder.Path("inputs")));
   FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("inputs") / "options.json",
                                       {{"kb", options.kb},
                                        {"machine", options.machine},
@@ -101,7 +104,20 @@ Result<Surface> BuildSurface(const PartSpec& part, std::uint64_t seed, const Run
   Surface s;
   FL_RETURN_IF_ERROR(folder.MakeFolder("surface"));
   const fs::path samples_path = folder.Path(fs::path("surface") / "samples.csv");
-  if (part.surface_kind.empty()) {
+  if (part.surface_file) {
+    // CAD faces or a scan (app/surface_source.h); samples of Q inside its trim.
+    FL_ASSIGN_OR_RETURN(SurfaceFromFile built, BuildSurfaceFromFile(*part.surface_file, part.tolerance_mm));
+    s.q = std::move(built.q);
+    s.report = std::move(built.report);
+    s.description = std::move(built.description);
+    const recon::TrimmedGrid grid = recon::SampleTrimmedGrid(s.q, part.fit_samples_u, part.fit_samples_v);
+    PointSet samples;
+    for (std::size_t k = 0; k < grid.uv.size(); ++k) {
+      if (grid.inside[k]) samples.points.push_back(s.q.Point(grid.uv[k].x(), grid.uv[k].y()));
+    }
+    FL_RETURN_IF_ERROR(WritePoints(samples_path, samples));
+    s.fit_check_max_mm = built.fit_check_max_mm;
+  } else if (part.surface_kind.empty()) {
     FL_ASSIGN_OR_RETURN(std::unique_ptr<recon::AnalyticSurface> reference,
                         recon::MakeReferenceSurface(part.surface_reference));
     FL_RETURN_IF_ERROR(
@@ -137,6 +153,7 @@ Result<Surface> BuildSurface(const PartSpec& part, std::uint64_t seed, const Run
                      {"params", part.surface_params},
                      {"check", "vertical distance to z = f(x, y) at random points"}};
   }
+  if (!part.surface_file) s.fit_check_max_mm = s.report.check_max_mm;
   s.description["fit"] = s.report.ToJson();
   s.description["bspline"] = {{"u_degree", s.q.u_degree()},
                               {"v_degree", s.q.v_degree()},
@@ -230,7 +247,8 @@ Result<Programs> WritePrograms(const PartSpec& part, const recon::BSplineSurface
   log::Info("      {} passes, {} CL points, {:.0f} s cutting", p.nominal.passes, p.nominal.points.size(),
             p.nominal.total_time_s);
   FL_ASSIGN_OR_RETURN(p.probing_plan,
-                      metrology::PlanProbingGrid(q, part.probe_nu, part.probe_nv, part.probe_inset_fraction));
+                      metrology::PlanProbingGrid(q, part.probe_nu, part.probe_nv, part.probe_inset_fraction,
+                                                 part.probe_edge_margin_mm));
   FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("toolpath") / "probing_plan.json", p.probing_plan.ToJson()));
   nc::ProbeProgramOptions probe_options = part.probe_program;
   probe_options.post = p.post;

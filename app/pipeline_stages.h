@@ -53,11 +53,13 @@ Result<Inputs> ResolveInputs(const PartSpec& given, const RunOptions& options, c
                              const RunFolderWriter& folder);
 
 // 2. The ideal surface Q: a reference surface or a parametric kind fitted as a B-spline, checked against
-// its defining function at random points not used in the fit (surface/).
+// its defining function at random points not used in the fit, or CAD faces or a scan
+// (app/surface_source.h) (surface/).
 struct Surface {
   recon::BSplineSurface q;
   recon::FitReport report;
   nlohmann::json description;
+  double fit_check_max_mm = 0;  // largest known distance from the given surface (NaN: unknown, a scan)
 };
 Result<Surface> BuildSurface(const PartSpec& part, std::uint64_t seed, const RunFolderWriter& folder);
 

@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <optional>
+#include <unordered_map>
 #include <string_view>
 #include <utility>
 #include <vector>
@@ -17,6 +19,8 @@
 #include "core/number_text.h"
 #include "core/point_io.h"
 #include "core/point_set.h"
+#include "reconstruction/cad_io.h"
+#include "reconstruction/trim.h"
 
 namespace formloop::app {
 namespace {
@@ -43,7 +47,51 @@ struct RunData {
   Json summary;
   OptionalJson retrieval, plan, sim_correction, diagnosis, retain;
   std::vector<LoopData> loops;  // loop-0, loop-1, ... as long as the folders exist
+  MapMask part_mask;            // a run on a trimmed Q: (x, y) over the part (TrimMask); empty otherwise
 };
+
+// For a trimmed Q (surface/Q.step holds the trimmed face): whether the point of Q above (x, y) lies inside
+// the trim, so the deviation maps stay blank outside the face and over its holes. Results are kept per
+// 0.05 mm cell (every map of the report asks for the same pixels); Newton starts from the previous answer
+// or else the nearest of 33 × 33 samples of Q.
+MapMask TrimMask(const fs::path& run_dir) {
+  std::error_code ec;
+  if (!fs::exists(run_dir / "surface" / "Q.step", ec)) return {};
+  auto face = recon::ReadCadFace(run_dir / "surface" / "Q.step", {});
+  if (!face.ok() || face->surface.trim() == nullptr || face->surface.trim()->natural()) return {};
+  struct State {
+    recon::BSplineSurface q;
+    std::vector<std::pair<Eigen::Vector2d, Eigen::Vector2d>> starts;  // (x, y) -> (u, v)
+    std::optional<Eigen::Vector2d> last;
+    std::unordered_map<long long, bool> cache;
+  };
+  auto state = std::make_shared<State>();
+  state->q = face->surface;
+  const recon::ParamDomain d = state->q.domain();
+  for (int j = 0; j <= 32; ++j) {
+    for (int i = 0; i <= 32; ++i) {
+      const Eigen::Vector2d uv(d.u_min + d.u_span() * i / 32, d.v_min + d.v_span() * j / 32);
+      state->starts.emplace_back(state->q.Point(uv.x(), uv.y()).head<2>(), uv);
+    }
+  }
+  return [state](double x, double y) {
+    const long long key = std::llround(x / 0.05) * 1000003LL + std::llround(y / 0.05);
+    if (const auto it = state->cache.find(key); it != state->cache.end()) return it->second;
+    std::optional<Eigen::Vector2d> uv;
+    if (state->last) uv = recon::ParametersAboveXY(state->q, x, y, *state->last);
+    if (!uv) {
+      const Eigen::Vector2d xy(x, y);
+      const auto nearest = std::min_element(state->starts.begin(), state->starts.end(), [&](const auto& a, const auto& b) {
+        return (a.first - xy).squaredNorm() < (b.first - xy).squaredNorm();
+      });
+      uv = recon::ParametersAboveXY(state->q, x, y, nearest->second);
+    }
+    if (uv) state->last = uv;
+    const bool inside = uv && state->q.trim()->Inside(uv->x(), uv->y());
+    state->cache.emplace(key, inside);
+    return inside;
+  };
+}
 
 OptionalJson ReadOptionalJson(const fs::path& path) {
   std::error_code ec;
@@ -190,6 +238,7 @@ Result<RunData> LoadRun(const fs::path& run_dir) {
   run.sim_correction = ReadOptionalJson(run_dir / "sim_correction.json");
   run.diagnosis = ReadOptionalJson(run_dir / "loop-0" / "diagnosis" / "diagnosis.json");
   run.retain = ReadOptionalJson(run_dir / "retain.json");
+  run.part_mask = TrimMask(run_dir);
   for (int k = 0; fs::is_directory(run_dir / ("loop-" + std::to_string(k)), ec); ++k) {
     run.loops.push_back(ReadLoop(run_dir / ("loop-" + std::to_string(k)), k));
   }
@@ -462,7 +511,8 @@ std::vector<std::string> DeviationStats(const LoopData& loop) {
           d.empty() ? "—" : FormatFixed(*lo, 2), d.empty() ? "—" : FormatFixed(*hi, 2)};
 }
 
-Status DeviationFigures(std::string& html, const LoopData& first, const LoopData& last, double tol) {
+Status DeviationFigures(std::string& html, const LoopData& first, const LoopData& last, double tol,
+                        const MapMask& part_mask) {
   const PointSet& p0 = *first.points;
   const PointSet& p1 = *last.points;
   const std::vector<double> d0 = Column(p0, "deviation_um"), d1 = Column(p1, "deviation_um");
@@ -476,7 +526,8 @@ Status DeviationFigures(std::string& html, const LoopData& first, const LoopData
     FL_ASSIGN_OR_RETURN(std::string fig,
                         Figure(DrawFieldMap(Column(*loop->points, "x"), Column(*loop->points, "y"),
                                             Column(*loop->points, "deviation_um"), scale,
-                                            "DEVIATION LOOP " + std::to_string(loop->loop), "DEVIATION (µm)"),
+                                            "DEVIATION LOOP " + std::to_string(loop->loop), "DEVIATION (µm)",
+                                            part_mask),
                                "Colour map of the deviations of loop " + std::to_string(loop->loop) + " " + when,
                                "Deviation of loop " + std::to_string(loop->loop) + " (" + when + "). " + common));
     html += fig;
@@ -487,7 +538,7 @@ Status DeviationFigures(std::string& html, const LoopData& first, const LoopData
   } else {
     FL_ASSIGN_OR_RETURN(std::string fig,
                         Figure(DrawFieldMap(Column(p0, "x"), Column(p0, "y"), ds, std::max(MaxAbs(ds), 1e-3),
-                                            "SYSTEMATIC FIELD LOOP 0", "d_s (µm)"),
+                                            "SYSTEMATIC FIELD LOOP 0", "d_s (µm)", part_mask),
                                "Colour map of the systematic deviation field of loop 0",
                                "Systematic field d_s of loop 0 (the part compensation acts on), on its own symmetric "
                                "scale ±" + FormatFixed(MaxAbs(ds), 2) + " µm."));
@@ -525,7 +576,7 @@ Status DeviationsSection(std::string& html, const RunData& run) {
   html += Table({"loop", "points", "mean (µm)", "rms (µm)", "min (µm)", "max (µm)"}, rows);
   if (last->loop == 0) html += "<p>Only loop 0 has deviations, so there is no after-compensation map.</p>\n";
   FL_RETURN_IF_ERROR(
-      DeviationFigures(html, run.loops.front(), *last, ToleranceUm(run.summary)));
+      DeviationFigures(html, run.loops.front(), *last, ToleranceUm(run.summary), run.part_mask));
   CloseSection(html);
   return Status::Ok();
 }

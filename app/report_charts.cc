@@ -132,7 +132,7 @@ class PointGrid {
 };
 
 void FillField(Canvas& c, const Frame& f, const std::vector<double>& x, const std::vector<double>& y,
-               const std::vector<double>& values, double max_abs) {
+               const std::vector<double>& values, double max_abs, const MapMask& inside) {
   // The cell is also kept above 1/1000 of the frame so that a few nearly coincident points cannot
   // make the bucket grid huge.
   const double cell_mm = std::max(1.5 * PointSpacing(x, y), std::max(f.x_hi - f.x_lo, f.y_hi - f.y_lo) / 1000);
@@ -140,6 +140,10 @@ void FillField(Canvas& c, const Frame& f, const std::vector<double>& x, const st
   for (int py = f.top; py < f.top + f.height; ++py) {
     for (int px = f.left; px < f.left + f.width; ++px) {
       const double dx = f.X(px + 0.5), dy = f.Y(py + 0.5);
+      if (inside && !inside(dx, dy)) {
+        c.Set(px, py, kMaskGrey);
+        continue;
+      }
       double sum_w = 0, sum_wv = 0;
       grid.ForNear(dx, dy, [&](std::size_t i, double d) {
         const double w = 1.0 / (d * d + 1e-12);  // the epsilon keeps a pixel on a point finite
@@ -203,14 +207,14 @@ std::string TickLabel(double value, double step) {
 
 Canvas DrawFieldMap(const std::vector<double>& x_mm, const std::vector<double>& y_mm,
                     const std::vector<double>& values_um, double max_abs_um, const std::string& title,
-                    const std::string& bar_label) {
+                    const std::string& bar_label, const MapMask& inside) {
   const Frame f = MapFrame(BoundsOf(x_mm, y_mm), 70, 40, 480, 360);
   Canvas c(f.left + f.width + 40 < 600 ? 600 : f.left + f.width + 40, f.top + f.height + 110);
   DrawTitle(c, title);
   if (x_mm.empty()) {
     NoData(c, f);
   } else {
-    FillField(c, f, x_mm, y_mm, values_um, max_abs_um);
+    FillField(c, f, x_mm, y_mm, values_um, max_abs_um, inside);
   }
   DrawAxes(c, f, "x (mm)", "y (mm)");
   DrawColourBar(c, c.width() / 2, f.top + f.height + 40, 360, max_abs_um, bar_label);

@@ -6,6 +6,7 @@
 // values_um #P values (µm); clusters #P LISA cluster codes (report_image.h), or empty.
 // Every function is deterministic: the same inputs give the same pixels.
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -18,9 +19,12 @@ namespace formloop::app {
 // point spacings of each pixel and left blank farther away, so holes and outlines stay visible;
 // probe points are marked as dots. Colours: DivergingColour(value, max_abs_um), with a horizontal
 // colour bar labelled in µm, so maps drawn with the same max_abs_um compare directly.
+// With `inside` (x, y in mm -> part or not), pixels outside the part are left blank however near a point
+// they lie: outside a trimmed face's edge or over its holes nothing is extrapolated.
+using MapMask = std::function<bool(double x_mm, double y_mm)>;
 Canvas DrawFieldMap(const std::vector<double>& x_mm, const std::vector<double>& y_mm,
                     const std::vector<double>& values_um, double max_abs_um, const std::string& title,
-                    const std::string& bar_label);
+                    const std::string& bar_label, const MapMask& inside = {});
 
 // LISA clusters at the point positions (same frame as DrawFieldMap), with a legend and counts.
 Canvas DrawClusterMap(const std::vector<double>& x_mm, const std::vector<double>& y_mm, const std::vector<int>& clusters,

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 
+#include <Eigen/LU>
+
 #include <BRepAdaptor_Curve.hxx>
 #include <BRepBndLib.hxx>
 #include <BRepBuilderAPI_MakeEdge.hxx>
@@ -234,6 +236,28 @@ nlohmann::json Trim::ToJson() const {
           {"hole_lengths_mm", hole_lengths},
           {"area_mm2", area_mm2_},
           {"neighbouring_faces", neighbours_.size()}};
+}
+
+std::optional<Eigen::Vector2d> ParametersAboveXY(const BSplineSurface& q, double x, double y, Eigen::Vector2d start) {
+  const ParamDomain dom = q.domain();
+  double u = std::clamp(start.x(), dom.u_min, dom.u_max), v = std::clamp(start.y(), dom.v_min, dom.v_max);
+  for (int it = 0; it < 30; ++it) {
+    const SurfaceDerivatives d = q.Derivatives(u, v);
+    const Eigen::Vector2d r(d.p.x() - x, d.p.y() - y);
+    if (r.lpNorm<Eigen::Infinity>() < 1e-9) return Eigen::Vector2d(u, v);
+    Eigen::Matrix2d j;
+    j << d.su.x(), d.sv.x(), d.su.y(), d.sv.y();
+    const double det = j.determinant();
+    if (!(std::abs(det) > 1e-14)) return std::nullopt;
+    const Eigen::Vector2d step = j.inverse() * r;
+    const double nu = std::clamp(u - step.x(), dom.u_min, dom.u_max), nv = std::clamp(v - step.y(), dom.v_min, dom.v_max);
+    if (nu == u && nv == v) return std::nullopt;  // held at the domain's edge: (x, y) is beyond Q
+    u = nu;
+    v = nv;
+  }
+  const Eigen::Vector3d p = q.Point(u, v);
+  if (std::abs(p.x() - x) < 1e-9 && std::abs(p.y() - y) < 1e-9) return Eigen::Vector2d(u, v);
+  return std::nullopt;
 }
 
 int TrimmedGrid::inside_count() const {

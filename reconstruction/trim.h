@@ -114,6 +114,11 @@ class Trim {
   std::shared_ptr<const Impl> impl_;
 };
 
+// The parameters of the point of Q above (x, y) — S(u, v)·x̂ = x, S(u, v)·ŷ = y — by Newton from `start`
+// (Q a graph over the XY plane there, as every 3-axis surface is); nullopt when it does not converge
+// inside Q's domain to 1e-9 mm (no point of Q lies above (x, y), or the start is too far off).
+std::optional<Eigen::Vector2d> ParametersAboveXY(const BSplineSurface& q, double x, double y, Eigen::Vector2d start);
+
 // Parameter points of a regular nu × nv grid over Q's domain (corners included), row-major
 // (index = j·nu + i), with whether each lies inside Q's trim (always true without one).
 struct TrimmedGrid {
