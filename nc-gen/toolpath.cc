@@ -452,7 +452,7 @@ class Domain {
 };
 
 // The runs of usable samples of one section piece, each a new piece whose ends are moved onto the
-// boundary of the usable set by bisection along the plane (to 1e-9 mm in the abscissa).
+// boundary of the usable set by bisection along the plane (to 1e-7 mm in the abscissa).
 std::vector<Section> ClipSection(const recon::BSplineSurface& q, const recon::ParamDomain& dom, const RasterFrame& f,
                                  const Section& piece, const Domain& domain, double r, double h, int* blocked) {
   const std::size_t n = piece.uv.size();
@@ -467,7 +467,7 @@ std::vector<Section> ClipSection(const recon::BSplineSurface& q, const recon::Pa
   const auto boundary = [&](std::size_t in, std::size_t out) {
     double s_in = piece.s[in], s_out = piece.s[out];
     Eigen::Vector2d uv_in = piece.uv[in], uv_out = piece.uv[out];
-    for (int it = 0; it < 60 && std::abs(s_out - s_in) > 1e-9; ++it) {
+    for (int it = 0; it < 60 && std::abs(s_out - s_in) > 1e-7; ++it) {
       const double s_mid = 0.5 * (s_in + s_out);
       const Eigen::Vector2d guess = 0.5 * (uv_in + uv_out);
       double u = guess.x(), v = guess.y();

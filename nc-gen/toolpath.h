@@ -32,7 +32,7 @@
 // (distance from its centre ≥ r − kNeighbourClearanceToleranceMm). Each section is traced over Q's whole
 // parameter box as above (the step-over is planned there, so it never depends on where the trim cuts a
 // plane), then cut into the runs of usable samples (every 0.25 mm along the plane); where a run ends, the
-// end is found by bisection on the plane to 1e-9 mm, so passes start and end at the trim. A trim feature
+// end is found by bisection on the plane to 1e-7 mm, so passes start and end at the trim. A trim feature
 // narrower than that sampling along a plane can be missed by it; the contour passes still follow it.
 // Passes ending at a boundary that runs along them leave a wedge between the last pass and the boundary, so
 // after the raster one contour pass follows every trimming loop (outer and holes) with its CC points on the
