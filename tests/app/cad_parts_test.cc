@@ -12,6 +12,8 @@
 #include <vector>
 
 #include <BRepTopAdaptor_FClass2d.hxx>
+#include <IGESControl_Controller.hxx>
+#include <IGESControl_Writer.hxx>
 #include <STEPControl_Reader.hxx>
 #include <gtest/gtest.h>
 
@@ -20,6 +22,7 @@
 #include "app/kb_jobs.h"
 #include "app/part.h"
 #include "app/pipeline.h"
+#include "core/atomic_file.h"
 #include "core/json_io.h"
 #include "core/log.h"
 #include "core/point_io.h"
@@ -34,6 +37,7 @@
 #include "retrieval/starter.h"
 #include "tests/support/cad_fixtures.h"
 #include "tests/support/run_binary.h"
+#include "tests/support/starter_library.h"
 #include "tests/support/swept_ball.h"
 #include "tests/support/test_dir.h"
 
@@ -68,17 +72,6 @@ Json PartJson(const std::string& name, const Json& surface) {
               {"loops", {{"max", 3}}}};
 }
 
-// One starter library per test binary run; tests copy it.
-const fs::path& StarterLibrary() {
-  static const fs::path path = [] {
-    const fs::path p = fs::temp_directory_path() / ("formloop-cad-starter-" + std::to_string(::getpid()) + ".sqlite");
-    fs::remove(p);
-    EXPECT_TRUE(CreateStarterLibrary(p.string(), kData).ok());
-    return p;
-  }();
-  return path;
-}
-
 class CadPartsTest : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -97,7 +90,7 @@ class CadPartsTest : public ::testing::Test {
     o.machine = "virtual";
     o.report = false;
     if (with_kb) {
-      if (!fs::exists(dir_ / "kb.sqlite")) fs::copy_file(StarterLibrary(), dir_ / "kb.sqlite");
+      if (!fs::exists(dir_ / "kb.sqlite")) fs::copy_file(formloop::testing::StarterLibrary(), dir_ / "kb.sqlite");
       o.kb = (dir_ / "kb.sqlite").string();
       o.retain = false;
     }
@@ -291,6 +284,159 @@ TEST_F(CadPartsTest, AScanRunsLikeTheSamePartGivenAnalytically) {
   EXPECT_LE(worst, 2e-3);
   EXPECT_LE(std::abs(a->loops.back().form_error_um - b->loops.back().form_error_um), 1.0);
   EXPECT_TRUE(std::isnan(b->fit_check_max_um)) << "a scan's truth is not known; the summary says so (null)";
+}
+
+// The cos 3θ and sin 3θ coefficients of loop 0's deviations (θ the azimuth of Q's normal, the probing
+// direction), by least squares with a constant and a quadric in (x, y) for the machining fields, and their
+// standard errors.
+struct Lobes {
+  double cos_um = 0, sin_um = 0, cos_se = 0, sin_se = 0;
+};
+Lobes TriLobeTerms(const fs::path& deviations_csv) {
+  const auto points = ReadCsv(deviations_csv);
+  EXPECT_TRUE(points.ok()) << points.status().ToString();
+  const std::vector<double>& d = *points->FindScalar("deviation_um");
+  const Eigen::Index n = static_cast<Eigen::Index>(d.size());
+  Eigen::MatrixXd a(n, 8);
+  Eigen::VectorXd y(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Eigen::Vector3d p = points->points[static_cast<std::size_t>(i)];
+    const Eigen::Vector3d nrm = points->normals[static_cast<std::size_t>(i)];
+    const double theta = std::atan2(nrm.y(), nrm.x());
+    a.row(i) << 1, p.x(), p.y(), p.x() * p.x(), p.x() * p.y(), p.y() * p.y(), std::cos(3 * theta), std::sin(3 * theta);
+    y(i) = d[static_cast<std::size_t>(i)];
+  }
+  const Eigen::VectorXd b = a.colPivHouseholderQr().solve(y);
+  const double sigma2 = (y - a * b).squaredNorm() / static_cast<double>(n - 8);
+  const Eigen::MatrixXd cov = sigma2 * (a.transpose() * a).inverse();
+  return {b(6), b(7), std::sqrt(cov(6, 6)), std::sqrt(cov(7, 7))};
+}
+
+// Item 4: a tri-lobe probe (amplitude 6 um) measured with and without its profile.
+TEST_F(CadPartsTest, AProbeProfileRemovesTheTriLobeFromTheDeviations) {
+  metrology::ProbeModel trilobe;
+  trilobe.ball_radius_mm = 1.0;
+  trilobe.lobing = metrology::PretravelLobing::Zero(3, 0);
+  trilobe.lobing.cos_mm(3, 0) = 0.006;
+  ASSERT_TRUE(metrology::WriteProbeProfile(dir_ / "trilobe.json", trilobe).ok());
+  Json with = PartJson("dome-with-profile", {{"reference", "sphere_cap"}});
+  with["machine"]["probe"] = {{"profile", "trilobe.json"}};  // the probe the virtual machine has
+  Json without = with;
+  without["name"] = "dome-without-profile";
+  with["probing"]["profile"] = "trilobe.json";                // the analysis applies the profile
+  const auto a = Run(with, "with");
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  const auto b = Run(without, "without");
+  ASSERT_TRUE(b.ok()) << b.status().ToString();
+  const Lobes la = TriLobeTerms(dir_ / "with" / "loop-0" / "deviations.csv");
+  const Lobes lb = TriLobeTerms(dir_ / "without" / "loop-0" / "deviations.csv");
+  std::printf("[measured] tri-lobe probe (6 um): loop-0 cos3θ %.3f ± %.3f um, sin3θ %.3f ± %.3f um with the profile; "
+              "%.3f ± %.3f um, %.3f ± %.3f um without; form error %.2f / %.2f um\n",
+              la.cos_um, la.cos_se, la.sin_um, la.sin_se, lb.cos_um, lb.cos_se, lb.sin_um, lb.sin_se,
+              a->loops.front().form_error_um, b->loops.front().form_error_um);
+  EXPECT_LT(std::abs(la.cos_um), 3 * la.cos_se);
+  EXPECT_LT(std::abs(la.sin_um), 3 * la.sin_se);
+  EXPECT_GT(std::abs(lb.cos_um), 3 * lb.cos_se);
+  // The resolved part carries the profile inline (a run repeats from its folder without the file).
+  const Json resolved = ReadJsonFile(dir_ / "with" / "inputs" / "part.json").value();
+  EXPECT_EQ(resolved["probing"]["profile"]["lobing"]["max_order"], 3);
+  EXPECT_EQ(resolved["machine"]["probe"]["profile"]["lobing"]["max_order"], 3);
+  // The diagnosis reads the probe through the same profile: it names the lobing only when it is not applied.
+  const auto causes = [](const RunSummary& s) {
+    return std::find(s.causes.begin(), s.causes.end(), "probe_lobing") != s.causes.end();
+  };
+  EXPECT_FALSE(causes(*a));
+  EXPECT_TRUE(causes(*b));
+  std::printf("[measured] tri-lobe probe: diagnosis causes with the profile:");
+  for (const auto& c : a->causes) std::printf(" %s", c.c_str());
+  std::printf("; without:");
+  for (const auto& c : b->causes) std::printf(" %s", c.c_str());
+  std::printf("\n");
+}
+
+// Item 5: the public CAD part end to end, and a starter family given as CAD retrieves that family.
+TEST_F(CadPartsTest, APublicPartRunsAndAStarterShapeAsCadRetrievesItsFamily) {
+  fs::copy_file(kData / "cad" / "occt_bug24012_face.igs", dir_ / "occt_bug24012_face.igs");
+  Json pub = PartJson("occt-face", {{"cad", "occt_bug24012_face.igs"}});
+  pub["tool"] = {{"number", 1}, {"radius_mm", 0.5}};
+  pub["toolpath"]["lead_mm"] = 0.5;
+  pub["tolerance_mm"] = 0.02;
+  pub["probing"]["grid"] = {10, 10};
+  const auto p = Run(pub, "public");
+  ASSERT_TRUE(p.ok()) << p.status().ToString();
+  const Json tp = ReadJsonFile(dir_ / "public" / "toolpath" / "toolpath.json").value();
+  std::printf("[measured] public part (OCCT bug24012_face.igs, r = 0.5 mm): %d passes, %d CL points, %d lifted; form "
+              "error per loop",
+              tp["passes"].get<int>(), tp["cl_points"].get<int>(), tp["lifted_points"].get<int>());
+  for (const LoopSummary& l : p->loops) std::printf(" %.2f", l.form_error_um);
+  std::printf(" um (tolerance %.0f um), within tolerance %d\n", p->tolerance_um, p->within_tolerance);
+  EXPECT_FALSE(p->loops.empty());
+
+  // A dome of the starter library's "dome" family (sphere_cap, size 90 mm, radius ratio 1.4), exported as a
+  // STEP face and described like the family's parts, but with no shape family given.
+  const std::map<std::string, double> params{{"size_mm", 90}, {"radius_ratio", 1.4}};
+  const auto grid = retrieval::StarterGrid("sphere_cap", params, 41);
+  ASSERT_TRUE(grid.ok()) << grid.status().ToString();
+  recon::FitReport report;
+  const auto q = recon::FitGrid(*grid, recon::GridFitOptions{}, &report);
+  ASSERT_TRUE(q.ok());
+  ASSERT_TRUE(recon::WriteStep(dir_ / "dome.step", *q, "dome").ok());
+  Json dome = PartJson("cad-dome", {{"cad", "dome.step"}});
+  dome["tolerance_mm"] = 0.012;
+  dome["finish_ra_um"] = 0.3;
+  dome["tool"] = {{"number", 1}, {"radius_mm", 4.0}};
+  const auto r = Run(dome, "dome", /*with_kb=*/true);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  std::printf("[measured] dome given as CAD (shape concept free-form): best case %s, A %.4f, route %s\n",
+              r->case_uid.c_str(), r->similarity, r->route.c_str());
+  EXPECT_EQ(r->case_uid.rfind("dome-", 0), 0u) << r->case_uid;
+}
+
+// Item 6: bad input through `formloop run`: a clear error naming the field, exit 2, and no run folder
+// (nor .partial) left behind.
+TEST_F(CadPartsTest, BadInputsAreRefusedBeforeARunFolderExists) {
+  ASSERT_TRUE(formloop::testing::WriteStepFaces(dir_ / "holed.step",
+                                                {formloop::testing::MakeHoledFace(), formloop::testing::MakePin()},
+                                                {"top", "pin"}));
+  {
+    std::ofstream few(dir_ / "few.csv");
+    few << "x,y,z\n";
+    for (int k = 0; k < 9; ++k) few << k << "," << (k * 7) % 5 << "," << 0.1 * k << "\n";
+    IGESControl_Controller::Init();
+    IGESControl_Writer writer("MM", 0);
+    ASSERT_TRUE(writer.AddShape(formloop::testing::MakeHoledFace()));
+    writer.ComputeModel();
+    ASSERT_TRUE(writer.Write((dir_ / "with_unit.igs").string().c_str()));
+    std::string text = ReadFile(dir_ / "with_unit.igs").value();
+    const std::size_t at = text.find(",2,2HMM,");
+    ASSERT_NE(at, std::string::npos);
+    text.replace(at, 8, ",,,     ");
+    std::ofstream(dir_ / "no_unit.igs") << text;
+  }
+  struct Case {
+    const char* name;
+    Json surface;
+    std::vector<std::string> expected;
+  };
+  const std::vector<Case> cases = {
+      {"missing-cad", {{"cad", "absent.step"}}, {"field 'surface.cad'", "absent.step", "does not exist"}},
+      {"face-out-of-range", {{"cad", "holed.step"}, {"faces", {0, 9}}}, {"surface.faces", "out of range", "0 to 1"}},
+      {"unknown-face-name", {{"cad", "holed.step"}, {"face_names", {"lid"}}}, {"surface.face_names", "'top'", "'pin'"}},
+      {"too-few-points", {{"points", "few.csv"}}, {"field 'surface.points'", "holds 9 points", "at least 16"}},
+      {"unit-less-iges", {{"cad", "no_unit.igs"}}, {"field 'surface.cad'", "units", "no_unit.igs"}},
+  };
+  for (const Case& c : cases) {
+    const fs::path part = dir_ / (std::string(c.name) + ".json");
+    ASSERT_TRUE(WriteJsonFile(part, PartJson(c.name, c.surface)).ok());
+    const fs::path out = dir_ / "runs" / c.name;
+    std::string stdout_text, err;
+    const int code = formloop::testing::RunFormloop("run " + part.string() + " --out " + out.string(), &stdout_text, &err);
+    EXPECT_EQ(code, 2) << c.name << ": " << err;
+    for (const std::string& e : c.expected) EXPECT_NE(err.find(e), std::string::npos) << c.name << ": " << err;
+    EXPECT_FALSE(fs::exists(out)) << c.name;
+    EXPECT_FALSE(fs::exists(out.string() + ".partial")) << c.name;
+    std::printf("[measured] %s: %s", c.name, err.substr(err.find("bad input")).c_str());
+  }
 }
 
 }  // namespace

@@ -21,6 +21,7 @@
 #include "core/log.h"
 #include "kb/library.h"
 #include "tests/support/run_binary.h"
+#include "tests/support/starter_library.h"
 #include "tests/support/test_dir.h"
 
 namespace formloop::app {
@@ -29,25 +30,13 @@ namespace {
 namespace fs = std::filesystem;
 const fs::path kData = fs::path(FORMLOOP_SOURCE_DIR) / "data";
 
-// One starter library per test binary run (building it takes a few seconds); tests copy it.
-const fs::path& StarterLibrary() {
-  static const fs::path path = [] {
-    const fs::path p = fs::temp_directory_path() / ("formloop-starter-" + std::to_string(::getpid()) + ".sqlite");
-    fs::remove(p);
-    const auto made = CreateStarterLibrary(p.string(), kData);
-    EXPECT_TRUE(made.ok()) << made.status().ToString();
-    return p;
-  }();
-  return path;
-}
-
 class PipelineTest : public ::testing::Test {
  protected:
   void SetUp() override {
     log::SetLevel(log::Level::kWarn);
     dir_ = testing::FreshTestDir("formloop-pipeline");
     kb_ = dir_ / "kb.sqlite";
-    fs::copy_file(StarterLibrary(), kb_);
+    fs::copy_file(testing::StarterLibrary(), kb_);
   }
   void TearDown() override { fs::remove_all(dir_); }
 
