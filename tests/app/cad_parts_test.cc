@@ -12,8 +12,6 @@
 #include <vector>
 
 #include <BRepTopAdaptor_FClass2d.hxx>
-#include <IGESControl_Controller.hxx>
-#include <IGESControl_Writer.hxx>
 #include <STEPControl_Reader.hxx>
 #include <gtest/gtest.h>
 
@@ -398,21 +396,8 @@ TEST_F(CadPartsTest, BadInputsAreRefusedBeforeARunFolderExists) {
   ASSERT_TRUE(formloop::testing::WriteStepFaces(dir_ / "holed.step",
                                                 {formloop::testing::MakeHoledFace(), formloop::testing::MakePin()},
                                                 {"top", "pin"}));
-  {
-    std::ofstream few(dir_ / "few.csv");
-    few << "x,y,z\n";
-    for (int k = 0; k < 9; ++k) few << k << "," << (k * 7) % 5 << "," << 0.1 * k << "\n";
-    IGESControl_Controller::Init();
-    IGESControl_Writer writer("MM", 0);
-    ASSERT_TRUE(writer.AddShape(formloop::testing::MakeHoledFace()));
-    writer.ComputeModel();
-    ASSERT_TRUE(writer.Write((dir_ / "with_unit.igs").string().c_str()));
-    std::string text = ReadFile(dir_ / "with_unit.igs").value();
-    const std::size_t at = text.find(",2,2HMM,");
-    ASSERT_NE(at, std::string::npos);
-    text.replace(at, 8, ",,,     ");
-    std::ofstream(dir_ / "no_unit.igs") << text;
-  }
+  formloop::testing::WriteNinePoints(dir_ / "few.csv");
+  ASSERT_TRUE(formloop::testing::WriteIgesWithAndWithoutUnit(dir_ / "with_unit.igs", dir_ / "no_unit.igs"));
   struct Case {
     const char* name;
     Json surface;

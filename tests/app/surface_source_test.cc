@@ -9,8 +9,6 @@
 #include <fstream>
 #include <string>
 
-#include <IGESControl_Controller.hxx>
-#include <IGESControl_Writer.hxx>
 #include <gtest/gtest.h>
 
 #include "app/surface_source.h"
@@ -77,11 +75,7 @@ TEST_F(SurfaceSourceTest, BadInputsAreRefusedNamingTheField) {
   EXPECT_NE(m.find("colour"), std::string::npos) << m;
 
   // Too few points for the fit.
-  {
-    std::ofstream few(dir_ / "few.csv");
-    few << "x,y,z\n";
-    for (int k = 0; k < 9; ++k) few << k << "," << (k * 7) % 5 << "," << 0.1 * k << "\n";
-  }
+  formloop::testing::WriteNinePoints(dir_ / "few.csv");
   m = Refused(R"({"points": "few.csv"})");
   EXPECT_NE(m.find("field 'surface.points'"), std::string::npos) << m;
   EXPECT_NE(m.find("holds 9 points"), std::string::npos) << m;
@@ -90,18 +84,7 @@ TEST_F(SurfaceSourceTest, BadInputsAreRefusedNamingTheField) {
   EXPECT_NE(m.find("surface.method"), std::string::npos) << m;
 
   // A unit-less IGES file (the global section's unit flag and name blanked).
-  {
-    IGESControl_Controller::Init();
-    IGESControl_Writer writer("MM", 0);
-    ASSERT_TRUE(writer.AddShape(formloop::testing::MakeHoledFace()));
-    writer.ComputeModel();
-    ASSERT_TRUE(writer.Write((dir_ / "with_unit.igs").string().c_str()));
-    std::string text = ReadFile(dir_ / "with_unit.igs").value();
-    const std::size_t at = text.find(",2,2HMM,");
-    ASSERT_NE(at, std::string::npos);
-    text.replace(at, 8, ",,,     ");
-    std::ofstream(dir_ / "no_unit.igs") << text;
-  }
+  ASSERT_TRUE(formloop::testing::WriteIgesWithAndWithoutUnit(dir_ / "with_unit.igs", dir_ / "no_unit.igs"));
   ASSERT_TRUE(Parse(R"({"cad": "with_unit.igs"})").ok());
   m = Refused(R"({"cad": "no_unit.igs"})");
   EXPECT_NE(m.find("surface.cad"), std::string::npos) << m;

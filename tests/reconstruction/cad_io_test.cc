@@ -31,6 +31,7 @@
 #include "reconstruction/bspline_surface.h"
 #include "reconstruction/cad_io.h"
 #include "reconstruction/occt_support.h"
+#include "tests/support/cad_fixtures.h"
 
 namespace formloop::recon {
 namespace {
@@ -245,23 +246,8 @@ TEST_F(CadIoTest, BadInputGivesClearErrors) {
 }
 
 TEST_F(CadIoTest, IgesWithoutAUnitIsRefusedNamingTheField) {
-  const BSplineSurface q = SaddleQ();
-  const ParamDomain d = q.domain();
   const fs::path with_unit = dir_ / "q.igs", without = dir_ / "q_no_unit.igs";
-  {
-    IGESControl_Controller::Init();
-    IGESControl_Writer writer("MM", 0);
-    BRepBuilderAPI_MakeFace face(q.geom(), d.u_min, d.u_max, d.v_min, d.v_max, Precision::Confusion());
-    ASSERT_TRUE(writer.AddShape(face.Face()));
-    writer.ComputeModel();
-    ASSERT_TRUE(writer.Write(with_unit.string().c_str()));
-  }
-  // Global section parameters 14 (unit flag 2 = mm) and 15 (unit name) blanked, columns kept.
-  std::string text = ReadText(with_unit);
-  const std::size_t at = text.find(",2,2HMM,");
-  ASSERT_NE(at, std::string::npos) << "the writer's global section changed";
-  text.replace(at, 8, ",,,     ");
-  std::ofstream(without) << text;
+  ASSERT_TRUE(formloop::testing::WriteIgesWithAndWithoutUnit(with_unit, without));
   ASSERT_TRUE(ReadCadFace(with_unit, {}).ok());
   const auto refused = ReadCadFace(without, {});
   ASSERT_FALSE(refused.ok());

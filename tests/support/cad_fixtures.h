@@ -16,6 +16,8 @@
 #include <array>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -31,6 +33,8 @@
 #include <Geom2d_Ellipse.hxx>
 #include <Geom_BSplineSurface.hxx>
 #include <Geom_BezierSurface.hxx>
+#include <IGESControl_Controller.hxx>
+#include <IGESControl_Writer.hxx>
 #include <Interface_Static.hxx>
 #include <STEPControl_Writer.hxx>
 #include <StepShape_AdvancedFace.hxx>
@@ -190,6 +194,32 @@ inline bool WriteStepFaces(const std::filesystem::path& path, const std::vector<
     Handle(StepShape_AdvancedFace)::DownCast(entity)->SetName(new TCollection_HAsciiString(names[k].c_str()));
   }
   return writer.Write(path.string().c_str()) == IFSelect_RetDone;
+}
+
+// The holed face as IGES in mm (`with_unit`) and the same file with the global section's unit flag and
+// unit name blanked (`without_unit`): a unit-less IGES file. False when the writer's global section is not
+// the expected one.
+inline bool WriteIgesWithAndWithoutUnit(const std::filesystem::path& with_unit, const std::filesystem::path& without_unit) {
+  IGESControl_Controller::Init();
+  IGESControl_Writer writer("MM", 0);
+  if (!writer.AddShape(MakeHoledFace())) return false;
+  writer.ComputeModel();
+  if (!writer.Write(with_unit.string().c_str())) return false;
+  std::stringstream text;
+  text << std::ifstream(with_unit).rdbuf();
+  std::string iges = text.str();
+  const std::size_t at = iges.find(",2,2HMM,");  // parameters 14 (unit flag 2 = mm) and 15 (unit name)
+  if (at == std::string::npos) return false;
+  iges.replace(at, 8, ",,,     ");                // same columns
+  std::ofstream(without_unit) << iges;
+  return true;
+}
+
+// A point file with too few points for any fit (9).
+inline void WriteNinePoints(const std::filesystem::path& path) {
+  std::ofstream few(path);
+  few << "x,y,z\n";
+  for (int k = 0; k < 9; ++k) few << k << "," << (k * 7) % 5 << "," << 0.1 * k << "\n";
 }
 
 }  // namespace formloop::testing
