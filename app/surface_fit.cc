@@ -13,6 +13,7 @@
 #include "reconstruction/analytic_surface.h"
 #include "reconstruction/foot_point.h"
 #include "reconstruction/quadric_fit.h"
+#include "reconstruction/trim.h"
 
 namespace formloop::app {
 namespace {
@@ -344,10 +345,10 @@ Result<ProjectOutcome> ProjectPoints(const ProjectRequest& request) {
   auto feet = projector.ProjectAll(set.points);
   if (!feet.ok()) return feet.status().WithContext("projecting '" + request.points + "'");
   const std::size_t n = set.size();
-  std::vector<double> deviation(n), u(n), v(n), fx(n), fy(n), fz(n), boundary(n);
+  std::vector<double> deviation(n), u(n), v(n), fx(n), fy(n), fz(n), boundary(n), outside(n);
   set.normals.assign(n, Eigen::Vector3d::Zero());
   double sum2 = 0, max_abs = 0;
-  long boundary_count = 0;
+  long boundary_count = 0, outside_count = 0;
   for (std::size_t i = 0; i < n; ++i) {
     const recon::FootPoint& f = (*feet)[i];
     deviation[i] = f.deviation_mm;
@@ -357,6 +358,8 @@ Result<ProjectOutcome> ProjectPoints(const ProjectRequest& request) {
     fy[i] = f.foot.y();
     fz[i] = f.foot.z();
     boundary[i] = f.on_boundary ? 1 : 0;
+    outside[i] = f.outside_trim ? 1 : 0;
+    outside_count += f.outside_trim ? 1 : 0;
     set.normals[i] = f.normal;
     sum2 += f.deviation_mm * f.deviation_mm;
     max_abs = std::max(max_abs, std::abs(f.deviation_mm));
@@ -369,6 +372,9 @@ Result<ProjectOutcome> ProjectPoints(const ProjectRequest& request) {
   set.SetScalar("foot_y", std::move(fy));
   set.SetScalar("foot_z", std::move(fz));
   set.SetScalar("on_boundary", std::move(boundary));
+  // A trimmed face (reconstruction/trim.h): foot points over a hole or past the face's edge.
+  const bool trimmed = face.surface.trim() != nullptr && !face.surface.trim()->natural();
+  if (trimmed) set.SetScalar("outside_trim", std::move(outside));
   ProjectOutcome outcome;
   outcome.summary = {{"surface", request.surface},
                      {"face_index", face.info.index},
@@ -378,6 +384,7 @@ Result<ProjectOutcome> ProjectPoints(const ProjectRequest& request) {
                      {"max_abs_deviation_mm", max_abs},
                      {"n_on_boundary", boundary_count},
                      {"out", request.out}};
+  if (trimmed) outcome.summary["n_outside_trim"] = outside_count;
   outcome.deviations = std::move(set);
   return outcome;
 }
@@ -392,6 +399,11 @@ Status RunProject(const ProjectRequest& request) {
     log::Warn("project: {} of {} points have their foot point on the edge of the surface (on_boundary = 1): "
               "they lie beyond Q and their deviation is not a normal distance",
               outcome.summary["n_on_boundary"].get<long>(), outcome.summary["n_points"].get<std::size_t>());
+  }
+  if (outcome.summary.value("n_outside_trim", 0L) > 0) {
+    log::Warn("project: {} of {} points have their foot point outside the trimmed face (outside_trim = 1): over a "
+              "hole or past the face's edge, their deviation is not from the part",
+              outcome.summary["n_outside_trim"].get<long>(), outcome.summary["n_points"].get<std::size_t>());
   }
   return Status::Ok();
 }

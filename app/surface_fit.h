@@ -73,7 +73,8 @@ struct ProjectRequest {
 // Foot points of every input point: the output keeps the input points, ids and times, sets the
 // normals to the unit normals of Q at the foot points and adds the scalars deviation_mm (signed,
 // positive = material left), foot_u, foot_v, foot_x, foot_y, foot_z and on_boundary (1 when the foot point
-// is clamped to the edge of Q's domain). The summary says how many, RMS and max |deviation|.
+// is clamped to the edge of Q's domain), and for a trimmed face outside_trim (1 when the foot point lies over
+// a hole or past the face's edge). The summary says how many, RMS and max |deviation|.
 struct ProjectOutcome {
   PointSet deviations;
   nlohmann::json summary;

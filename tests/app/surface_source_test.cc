@@ -11,6 +11,7 @@
 
 #include <gtest/gtest.h>
 
+#include "app/surface_fit.h"
 #include "app/surface_source.h"
 #include "core/atomic_file.h"
 #include "core/file_hash.h"
@@ -168,6 +169,28 @@ TEST_F(SurfaceSourceTest, ThreeFacesBecomeOneQAndAScanIsFittedWithinItsBox) {
               worst_corner, worst_inside * 1e3);
   EXPECT_LT(worst_corner, 0.5);
   EXPECT_LT(worst_inside, 5e-3);
+}
+
+TEST_F(SurfaceSourceTest, ProjectFlagsFootPointsOutsideTheTrim) {
+  // Three points 0.2 mm above the holed face: over the hole, over the face, past the ellipse's edge.
+  {
+    std::ofstream points(dir_ / "points.csv");
+    points << "x,y,z\n";
+    for (const auto& [x, y] : std::vector<std::pair<double, double>>{{10, -5}, {-20, 10}, {40, 20}}) {
+      points << x << "," << y << "," << formloop::testing::BezierTop::Height(x, y) + 0.2 << "\n";
+    }
+  }
+  ProjectRequest request;
+  request.surface = (dir_ / "holed.step").string();
+  request.face.name = "top";
+  request.points = (dir_ / "points.csv").string();
+  request.out = (dir_ / "deviations.csv").string();
+  const auto outcome = ProjectPoints(request);
+  ASSERT_TRUE(outcome.ok()) << outcome.status().ToString();
+  const std::vector<double>* outside = outcome->deviations.FindScalar("outside_trim");
+  ASSERT_NE(outside, nullptr);
+  EXPECT_EQ(*outside, (std::vector<double>{1, 0, 1}));
+  EXPECT_EQ(outcome->summary["n_outside_trim"], 2);
 }
 
 }  // namespace
