@@ -40,18 +40,21 @@ Status ReadProbeProfileField(const JsonFields& f, const std::string& source, met
                             "a probe profile is given together with ball_radius_mm or pretravel_mm",
                             "give the profile alone: it holds the ball radius and the pretravel");
   }
-  const Json& value = f.json().at("profile");
   Result<metrology::ProbeModel> read = Status::Internal("unset");
-  if (value.is_string()) {
-    const std::filesystem::path given_path(value.get<std::string>());
-    const std::filesystem::path path =
-        given_path.is_absolute() ? given_path : std::filesystem::path(source).parent_path() / given_path;
-    read = metrology::ReadProbeProfile(path);
-  } else if (value.is_object()) {
-    read = metrology::ProbeProfileFromJson(value, source + " field '" + field + "'");
+  if (f.json().at("profile").is_object()) {
+    std::optional<JsonFields> inline_profile;
+    FL_RETURN_IF_ERROR(f.Object("profile", &inline_profile));
+    read = metrology::ProbeProfileFromJson(inline_profile->json(), source + " field '" + field + "'");
   } else {
-    return Status::BadInput(Where{.file = source, .field = field}, "must be a file name or a probe profile object",
-                            "write e.g. \"profile\": \"probe.json\" (from `formloop calibrate sphere --out probe.json`)");
+    std::string name;
+    if (!f.String("profile", &name).ok() || name.empty()) {
+      return Status::BadInput(Where{.file = source, .field = field}, "must be a file name or a probe profile object",
+                              "write e.g. \"profile\": \"probe.json\" (from `formloop calibrate sphere --out "
+                              "probe.json`)");
+    }
+    const std::filesystem::path given_path(name);
+    read = metrology::ReadProbeProfile(
+        given_path.is_absolute() ? given_path : std::filesystem::path(source).parent_path() / given_path);
   }
   if (!read.ok()) {
     return Status::BadInput(FormatWhere(Where{.file = source, .field = field}) + read.status().message());

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <system_error>
 
 #include <Geom_BSplineSurface.hxx>
@@ -29,38 +30,14 @@ Status InSurface(const std::string& part_source, const std::string& field, const
                 part_source + ": field 'surface." + field + "': " + status.message());
 }
 
-Status ReadIntArray(const JsonFields& f, const std::string& key, std::vector<int>* out) {
-  if (!f.Has(key)) return Status::Ok();
-  const Json& a = f.json().at(key);
-  if (!a.is_array() || a.empty()) {
-    return Status::BadInput(Where{.file = f.source(), .field = f.Path(key)}, "must be a non-empty array of face indices",
-                            "write e.g. [3, 4, 7] (0-based, as `formloop fit FILE --list-faces` numbers them)");
-  }
-  for (std::size_t k = 0; k < a.size(); ++k) {
-    if (!a[k].is_number_integer()) {
-      return Status::BadInput(Where{.file = f.source(), .field = f.Path(key) + "[" + std::to_string(k) + "]"},
-                              "must be an integer face index");
-    }
-    out->push_back(a[k].get<int>());
-  }
-  return Status::Ok();
-}
-
-Status ReadStringArray(const JsonFields& f, const std::string& key, std::vector<std::string>* out) {
-  if (!f.Has(key)) return Status::Ok();
-  const Json& a = f.json().at(key);
-  if (!a.is_array() || a.empty()) {
-    return Status::BadInput(Where{.file = f.source(), .field = f.Path(key)}, "must be a non-empty array of face names",
-                            "write e.g. [\"top\"] (the names `formloop fit FILE --list-faces` prints)");
-  }
-  for (std::size_t k = 0; k < a.size(); ++k) {
-    if (!a[k].is_string()) {
-      return Status::BadInput(Where{.file = f.source(), .field = f.Path(key) + "[" + std::to_string(k) + "]"},
-                              "must be a face name (text)");
-    }
-    out->push_back(a[k].get<std::string>());
-  }
-  return Status::Ok();
+// "faces" / "face_names" through JsonFields, plus the rule they share: when given, not empty.
+template <typename T>
+Status NonEmpty(const JsonFields& f, const std::string& key, const std::vector<T>& read, const std::string& example) {
+  if (!f.Has(key) || !read.empty()) return Status::Ok();
+  return Status::BadInput(Where{.file = f.source(), .field = f.Path(key)}, "is an empty array",
+                          "write e.g. " + example +
+                              " (as `formloop fit FILE --list-faces` lists them), or leave it "
+                              "out for a file with one face");
 }
 
 recon::CadRegionSelector RegionOf(const SurfaceFile& file) {
@@ -149,8 +126,8 @@ Result<SurfaceFile> ParseSurfaceFile(const JsonFields& s, const std::string& par
   f.kind = cad ? SurfaceFile::Kind::kCad : SurfaceFile::Kind::kPoints;
   const std::string key = cad ? "cad" : "points";
   if (cad) {
-    FL_RETURN_IF_ERROR(s.CheckKnown({"cad", "faces", "face_names", "sha256", "sample_spacing_mm",
-                                     "max_deviation_fraction"}));
+    FL_RETURN_IF_ERROR(
+        s.CheckKnown({"cad", "faces", "face_names", "sha256", "sample_spacing_mm", "max_deviation_fraction"}));
   } else {
     FL_RETURN_IF_ERROR(s.CheckKnown({"points", "sha256", "method", "poles", "tolerance_mm"}));
   }
@@ -163,10 +140,10 @@ Result<SurfaceFile> ParseSurfaceFile(const JsonFields& s, const std::string& par
   f.path = given.is_absolute() ? given : fs::path(part_source).parent_path() / given;
   std::error_code ec;
   if (!fs::is_regular_file(f.path, ec)) {
-    return Status::BadInput(Where{.file = part_source, .field = "surface." + key},
-                            "file '" + f.name + "' does not exist (looked for " + f.path.string() + ")",
-                            "give the path of the " + std::string(cad ? "STEP or IGES file" : "point file") +
-                                " relative to the part file");
+    return Status::BadInput(
+        Where{.file = part_source, .field = "surface." + key},
+        "file '" + f.name + "' does not exist (looked for " + f.path.string() + ")",
+        "give the path of the " + std::string(cad ? "STEP or IGES file" : "point file") + " relative to the part file");
   }
   FL_ASSIGN_OR_RETURN(f.sha256, Sha256OfFile(f.path));
   std::string expected;
@@ -178,8 +155,17 @@ Result<SurfaceFile> ParseSurfaceFile(const JsonFields& s, const std::string& par
                             "use the file the run was made with, or remove \"sha256\" to accept the new one");
   }
   if (cad) {
-    FL_RETURN_IF_ERROR(ReadIntArray(s, "faces", &f.faces));
-    FL_RETURN_IF_ERROR(ReadStringArray(s, "face_names", &f.face_names));
+    if (s.Has("faces")) {
+      std::vector<long long> faces;
+      FL_RETURN_IF_ERROR(
+          s.IntegerArray("faces", &faces, std::numeric_limits<int>::min(), std::numeric_limits<int>::max()));
+      FL_RETURN_IF_ERROR(NonEmpty(s, "faces", faces, "[3, 4, 7] (0-based)"));
+      f.faces.assign(faces.begin(), faces.end());
+    }
+    if (s.Has("face_names")) {
+      FL_RETURN_IF_ERROR(s.StringArray("face_names", &f.face_names));
+      FL_RETURN_IF_ERROR(NonEmpty(s, "face_names", f.face_names, "[\"top\"]"));
+    }
     if (!f.faces.empty() && !f.face_names.empty()) {
       return Status::BadInput(Where{.file = part_source, .field = "surface.faces"},
                               "both \"faces\" and \"face_names\" are given", "choose the faces one way");
@@ -201,14 +187,15 @@ Result<SurfaceFile> ParseSurfaceFile(const JsonFields& s, const std::string& par
                               "unknown fit method '" + f.method + "'", "use \"scattered\" or \"adaptive\"");
     }
     if (s.Has("poles")) {
-      const Json& p = s.json().at("poles");
-      if (!p.is_array() || p.size() != 2 || !p[0].is_number_integer() || !p[1].is_number_integer() ||
-          p[0].get<int>() < 4 || p[1].get<int>() < 4 || p[0].get<int>() > 1000 || p[1].get<int>() > 1000) {
-        return Status::BadInput(Where{.file = part_source, .field = "surface.poles"}, "expected [nu, nv]",
+      std::vector<long long> poles;
+      FL_RETURN_IF_ERROR(s.IntegerArray("poles", &poles, 4, 1000));
+      if (poles.size() != 2) {
+        return Status::BadInput(Where{.file = part_source, .field = "surface.poles"},
+                                "expected [nu, nv], got " + std::to_string(poles.size()) + " numbers",
                                 "two integers from 4 to 1000, or leave it out for an automatic net");
       }
-      f.u_poles = p[0].get<int>();
-      f.v_poles = p[1].get<int>();
+      f.u_poles = static_cast<int>(poles[0]);
+      f.v_poles = static_cast<int>(poles[1]);
     }
     FL_RETURN_IF_ERROR(s.OptionalNumber("tolerance_mm", &f.fit_tolerance_mm, kPositive));
     // Read now: a file formloop cannot read, or too few points for the fit, is refused before the run.
