@@ -246,9 +246,8 @@ Result<Programs> WritePrograms(const PartSpec& part, const recon::BSplineSurface
   FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("toolpath") / "toolpath.json", p.nominal.ReportJson()));
   log::Info("      {} passes, {} CL points, {:.0f} s cutting", p.nominal.passes, p.nominal.points.size(),
             p.nominal.total_time_s);
-  FL_ASSIGN_OR_RETURN(p.probing_plan,
-                      metrology::PlanProbingGrid(q, part.probe_nu, part.probe_nv, part.probe_inset_fraction,
-                                                 part.probe_edge_margin_mm));
+  FL_ASSIGN_OR_RETURN(p.probing_plan, metrology::PlanProbingGrid(q, part.probe_nu, part.probe_nv,
+                                                                 part.probe_inset_fraction, part.probe_edge_margin_mm));
   FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("toolpath") / "probing_plan.json", p.probing_plan.ToJson()));
   nc::ProbeProgramOptions probe_options = part.probe_program;
   probe_options.post = p.post;

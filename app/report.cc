@@ -5,8 +5,8 @@
 #include <limits>
 #include <memory>
 #include <optional>
-#include <unordered_map>
 #include <string_view>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -81,9 +81,9 @@ MapMask TrimMask(const fs::path& run_dir) {
     if (state->last) uv = recon::ParametersAboveXY(state->q, x, y, *state->last);
     if (!uv) {
       const Eigen::Vector2d xy(x, y);
-      const auto nearest = std::min_element(state->starts.begin(), state->starts.end(), [&](const auto& a, const auto& b) {
-        return (a.first - xy).squaredNorm() < (b.first - xy).squaredNorm();
-      });
+      const auto nearest = std::min_element(
+          state->starts.begin(), state->starts.end(),
+          [&](const auto& a, const auto& b) { return (a.first - xy).squaredNorm() < (b.first - xy).squaredNorm(); });
       uv = recon::ParametersAboveXY(state->q, x, y, nearest->second);
     }
     if (uv) state->last = uv;
@@ -523,13 +523,13 @@ Status DeviationFigures(std::string& html, const LoopData& first, const LoopData
   if (last.loop != first.loop) shown.push_back(&last);
   for (const LoopData* loop : shown) {
     const std::string when = loop == &first ? "before compensation" : "after compensation";
-    FL_ASSIGN_OR_RETURN(std::string fig,
-                        Figure(DrawFieldMap(Column(*loop->points, "x"), Column(*loop->points, "y"),
-                                            Column(*loop->points, "deviation_um"), scale,
-                                            "DEVIATION LOOP " + std::to_string(loop->loop), "DEVIATION (µm)",
-                                            part_mask),
-                               "Colour map of the deviations of loop " + std::to_string(loop->loop) + " " + when,
-                               "Deviation of loop " + std::to_string(loop->loop) + " (" + when + "). " + common));
+    FL_ASSIGN_OR_RETURN(
+        std::string fig,
+        Figure(
+            DrawFieldMap(Column(*loop->points, "x"), Column(*loop->points, "y"), Column(*loop->points, "deviation_um"),
+                         scale, "DEVIATION LOOP " + std::to_string(loop->loop), "DEVIATION (µm)", part_mask),
+            "Colour map of the deviations of loop " + std::to_string(loop->loop) + " " + when,
+            "Deviation of loop " + std::to_string(loop->loop) + " (" + when + "). " + common));
     html += fig;
   }
   const std::vector<double> ds = Column(p0, "systematic_um");
@@ -541,7 +541,8 @@ Status DeviationFigures(std::string& html, const LoopData& first, const LoopData
                                             "SYSTEMATIC FIELD LOOP 0", "d_s (µm)", part_mask),
                                "Colour map of the systematic deviation field of loop 0",
                                "Systematic field d_s of loop 0 (the part compensation acts on), on its own symmetric "
-                               "scale ±" + FormatFixed(MaxAbs(ds), 2) + " µm."));
+                               "scale ±" +
+                                   FormatFixed(MaxAbs(ds), 2) + " µm."));
     html += fig;
   }
   std::vector<HistogramSeries> series{{d0, "LOOP " + std::to_string(first.loop), HexColour(0xe66101)}};
@@ -575,8 +576,7 @@ Status DeviationsSection(std::string& html, const RunData& run) {
   if (last->loop != 0) rows.push_back(DeviationStats(*last));
   html += Table({"loop", "points", "mean (µm)", "rms (µm)", "min (µm)", "max (µm)"}, rows);
   if (last->loop == 0) html += "<p>Only loop 0 has deviations, so there is no after-compensation map.</p>\n";
-  FL_RETURN_IF_ERROR(
-      DeviationFigures(html, run.loops.front(), *last, ToleranceUm(run.summary), run.part_mask));
+  FL_RETURN_IF_ERROR(DeviationFigures(html, run.loops.front(), *last, ToleranceUm(run.summary), run.part_mask));
   CloseSection(html);
   return Status::Ok();
 }

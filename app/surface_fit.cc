@@ -401,9 +401,10 @@ Status RunProject(const ProjectRequest& request) {
               outcome.summary["n_on_boundary"].get<long>(), outcome.summary["n_points"].get<std::size_t>());
   }
   if (outcome.summary.value("n_outside_trim", 0L) > 0) {
-    log::Warn("project: {} of {} points have their foot point outside the trimmed face (outside_trim = 1): over a "
-              "hole or past the face's edge, their deviation is not from the part",
-              outcome.summary["n_outside_trim"].get<long>(), outcome.summary["n_points"].get<std::size_t>());
+    log::Warn(
+        "project: {} of {} points have their foot point outside the trimmed face (outside_trim = 1): over a "
+        "hole or past the face's edge, their deviation is not from the part",
+        outcome.summary["n_outside_trim"].get<long>(), outcome.summary["n_points"].get<std::size_t>());
   }
   return Status::Ok();
 }

@@ -1,7 +1,5 @@
 #include "metrology/probe.h"
 
-#include "reconstruction/trim.h"
-
 #include <cmath>
 #include <map>
 #include <optional>
@@ -13,6 +11,7 @@
 #include "core/json_io.h"
 #include "core/number_text.h"
 #include "core/point_io.h"
+#include "reconstruction/trim.h"
 
 namespace formloop::metrology {
 
@@ -29,8 +28,9 @@ nlohmann::json ProbingPlan::ToJson() const {
   if (trimmed) {
     out["trim"] = {{"edge_margin_mm", edge_margin_mm},
                    {"left_out", left_out},
-                   {"rule", "points inside the trimmed face (OpenCASCADE classification) and at least edge_margin_mm "
-                            "(3-D distance) from its loops"}};
+                   {"rule",
+                    "points inside the trimmed face (OpenCASCADE classification) and at least edge_margin_mm "
+                    "(3-D distance) from its loops"}};
   }
   return out;
 }

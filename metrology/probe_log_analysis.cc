@@ -34,7 +34,8 @@ Status ProjectAll(const recon::FootPointProjector& projector, double max_distanc
     } else if (m.foot.on_boundary) {
       m.flag = "beyond the edge of Q (foot point held at the boundary; not a normal deviation)";
     } else if (m.foot.outside_trim) {
-      m.flag = "outside the trimmed face (foot point over a hole or past the face's edge; not a deviation from the part)";
+      m.flag =
+          "outside the trimmed face (foot point over a hole or past the face's edge; not a deviation from the part)";
     }
   }
   return Status::Ok();

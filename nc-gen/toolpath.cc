@@ -409,7 +409,6 @@ std::vector<Eigen::Vector3d> LeadArc(const recon::BSplineSurface& q, const ClPoi
   return out;
 }
 
-
 // What the planner must respect beyond Q's parameter box: the trim (which (u, v) are the part) and the
 // neighbouring faces (the ball must stay clear of them). Without a trim every (u, v) is usable.
 class Domain {
@@ -589,7 +588,8 @@ Result<Toolpath> PlanRaster(const recon::BSplineSurface& surface, const Toolpath
     // ball and the leads): rapids between passes run above it.
     Eigen::AlignedBox3d reach;
     for (int j = 0; j <= 32; ++j) {
-      for (int i = 0; i <= 32; ++i) reach.extend(surface.Point(dom.u_min + dom.u_span() * i / 32, dom.v_min + dom.v_span() * j / 32));
+      for (int i = 0; i <= 32; ++i)
+        reach.extend(surface.Point(dom.u_min + dom.u_span() * i / 32, dom.v_min + dom.v_span() * j / 32));
     }
     const double margin = r + options.lead_mm + 1.0;
     double top = -1e300;
@@ -637,16 +637,18 @@ Result<Toolpath> PlanRaster(const recon::BSplineSurface& surface, const Toolpath
     if (clear(offsets)) return offsets;
     const int k_max = static_cast<int>(offsets.size());
     for (const Eigen::Vector3d& direction : {Eigen::Vector3d(end.normal), Eigen::Vector3d(Eigen::Vector3d::UnitZ())}) {
-      for (int k = 1; k <= k_max; ++k) offsets[static_cast<std::size_t>(k - 1)] = options.lead_mm * k / k_max * direction;
+      for (int k = 1; k <= k_max; ++k)
+        offsets[static_cast<std::size_t>(k - 1)] = options.lead_mm * k / k_max * direction;
       if (clear(offsets)) {
         ++(direction.z() == 1.0 && direction.head<2>().isZero() ? path.leads_vertical : path.leads_along_normal);
         return offsets;
       }
     }
-    return Status::Failed("tool path: the pass ending at (" + FormatFixed(end.cc.x(), 3) + ", " +
-                          FormatFixed(end.cc.y(), 3) + ", " + FormatFixed(end.cc.z(), 3) +
-                          ") has no lead that keeps the ball clear of the neighbouring faces (arc, along the normal and "
-                          "vertical all reach them); choose a smaller tool or machine this region from another set-up");
+    return Status::Failed(
+        "tool path: the pass ending at (" + FormatFixed(end.cc.x(), 3) + ", " + FormatFixed(end.cc.y(), 3) + ", " +
+        FormatFixed(end.cc.z(), 3) +
+        ") has no lead that keeps the ball clear of the neighbouring faces (arc, along the normal and "
+        "vertical all reach them); choose a smaller tool or machine this region from another set-up");
   };
 
   int pass = 0;  // one pass per piece of a section, then one per contour run
@@ -726,7 +728,8 @@ Result<Toolpath> PlanRaster(const recon::BSplineSurface& surface, const Toolpath
     std::vector<Section> cut_sections;
     if (domain.trimmed() || domain.has_neighbours()) {
       for (const Section& piece : sections) {
-        for (Section& clipped : ClipSection(surface, dom, frame, piece, domain, r, h, &path.neighbour_blocked_samples)) {
+        for (Section& clipped :
+             ClipSection(surface, dom, frame, piece, domain, r, h, &path.neighbour_blocked_samples)) {
           cut_sections.push_back(std::move(clipped));
         }
       }
@@ -881,32 +884,35 @@ void UpdateCutterLocations(Toolpath* path) {
 }
 
 nlohmann::json Toolpath::ReportJson() const {
-  nlohmann::json out = {{"strategy", "section-plane raster"},
-          {"raster_angle_deg", options.raster_angle_deg},
-          {"zigzag", options.zigzag},
-          {"lead_mm", options.lead_mm},
-          {"tool", {{"number", options.tool.number}, {"type", "ball_end"}, {"radius_mm", options.tool.radius_mm}}},
-          {"scallop_target_um", options.scallop_um},
-          {"chord_tolerance_um", options.chord_tolerance_um},
-          {"passes", passes},
-          {"cl_points", points.size()},
-          {"step_over_mm", {{"min", min_step_over_mm}, {"max", max_step_over_mm}}},
-          {"cutting_length_mm", total_length_mm},
-          {"cutting_time_s", total_time_s},
-          {"safe_z_mm", safe_z_mm},
-          {"gouge_risk_points", gouge_risk_points},
-          {"lifted",
-           {{"note", "CL points lifted along the tool axis so the ball stays out of Q where its concave radius is below "
-                     "the ball radius: the region is never cut to Q"},
-            {"points", lifted_points},
-            {"max_lift_mm", max_lift_mm},
-            {"cc_box_min_mm", {lifted_box_min.x(), lifted_box_min.y(), lifted_box_min.z()}},
-            {"cc_box_max_mm", {lifted_box_max.x(), lifted_box_max.y(), lifted_box_max.z()}},
-            {"cl_indices", lifted_indices}}},
-          {"lifted_points", lifted_points}};
+  nlohmann::json out = {
+      {"strategy", "section-plane raster"},
+      {"raster_angle_deg", options.raster_angle_deg},
+      {"zigzag", options.zigzag},
+      {"lead_mm", options.lead_mm},
+      {"tool", {{"number", options.tool.number}, {"type", "ball_end"}, {"radius_mm", options.tool.radius_mm}}},
+      {"scallop_target_um", options.scallop_um},
+      {"chord_tolerance_um", options.chord_tolerance_um},
+      {"passes", passes},
+      {"cl_points", points.size()},
+      {"step_over_mm", {{"min", min_step_over_mm}, {"max", max_step_over_mm}}},
+      {"cutting_length_mm", total_length_mm},
+      {"cutting_time_s", total_time_s},
+      {"safe_z_mm", safe_z_mm},
+      {"gouge_risk_points", gouge_risk_points},
+      {"lifted",
+       {{"note",
+         "CL points lifted along the tool axis so the ball stays out of Q where its concave radius is below "
+         "the ball radius: the region is never cut to Q"},
+        {"points", lifted_points},
+        {"max_lift_mm", max_lift_mm},
+        {"cc_box_min_mm", {lifted_box_min.x(), lifted_box_min.y(), lifted_box_min.z()}},
+        {"cc_box_max_mm", {lifted_box_max.x(), lifted_box_max.y(), lifted_box_max.z()}},
+        {"cl_indices", lifted_indices}}},
+      {"lifted_points", lifted_points}};
   if (trimmed || neighbours_checked) {
-    out["trim"] = {{"note", "passes end at the trim (OpenCASCADE classification); a contour pass follows every trimming "
-                            "loop; leads and retracts keep the ball clear of the neighbouring faces"},
+    out["trim"] = {{"note",
+                    "passes end at the trim (OpenCASCADE classification); a contour pass follows every trimming "
+                    "loop; leads and retracts keep the ball clear of the neighbouring faces"},
                    {"trimmed", trimmed},
                    {"contour_passes", contour_passes},
                    {"neighbours_checked", neighbours_checked},

@@ -270,10 +270,10 @@ Result<CadFace> MakeCadFace(const std::filesystem::path& path, const LoadedCad& 
     }
     Handle(Geom_BSplineSurface) bspline = Handle(Geom_BSplineSurface)::DownCast(BRep_Tool::Surface(face));
     if (bspline.IsNull()) {
-      return Status::BadInput(Where{.file = path.string()},
-                              which + " of type " + result.info.surface_type +
-                                  " could not be converted to a B-spline surface",
-                              "convert the face to a NURBS surface in the CAD system");
+      return Status::BadInput(
+          Where{.file = path.string()},
+          which + " of type " + result.info.surface_type + " could not be converted to a B-spline surface",
+          "convert the face to a NURBS surface in the CAD system");
     }
     bspline = Handle(Geom_BSplineSurface)::DownCast(bspline->Copy());  // Q must not alias the reader's model
     // Restrict Q to the face's parameter box (exact): the rest of a large underlying patch is never used.

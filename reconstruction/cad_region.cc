@@ -18,7 +18,7 @@
 #include <TopoDS_Wire.hxx>
 #include <gp_Pnt.hxx>
 
-#include "core/point_io.h"
+#include "core/number_text.h"
 #include "core/random.h"
 #include "reconstruction/foot_point.h"
 #include "reconstruction/occt_support.h"
@@ -92,8 +92,10 @@ Result<RegionFit> FitCadRegion(const std::vector<CadFace>& faces, const RegionFi
   std::vector<Eigen::Vector3d> points;
   for (const CadFace& face : faces) {
     const ParamDomain d = face.surface.domain();
-    const int nu = std::clamp(static_cast<int>(std::ceil(MiddleIsoLength(face.surface, true) / options.sample_spacing_mm)), 2, 4000);
-    const int nv = std::clamp(static_cast<int>(std::ceil(MiddleIsoLength(face.surface, false) / options.sample_spacing_mm)), 2, 4000);
+    const int nu = std::clamp(
+        static_cast<int>(std::ceil(MiddleIsoLength(face.surface, true) / options.sample_spacing_mm)), 2, 4000);
+    const int nv = std::clamp(
+        static_cast<int>(std::ceil(MiddleIsoLength(face.surface, false) / options.sample_spacing_mm)), 2, 4000);
     for (int j = 0; j < nv; ++j) {
       for (int i = 0; i < nu; ++i) {
         const double u = d.u_min + d.u_span() * (i + 0.5) / nu, v = d.v_min + d.v_span() * (j + 0.5) / nv;
@@ -125,16 +127,16 @@ Result<RegionFit> FitCadRegion(const std::vector<CadFace>& faces, const RegionFi
     int open = 0;
     for (TopExp_Explorer it(free_bounds.GetOpenWires(), TopAbs_WIRE); it.More(); it.Next()) ++open;
     if (boundary.empty() || open > 0) {
-      return Status::Failed("the " + std::to_string(faces.size()) + " faces do not bound one region: " +
-                            std::to_string(boundary.size()) + " closed and " + std::to_string(open) +
-                            " open free boundaries at a sewing tolerance of " +
-                            FormatExact(options.sewing_tolerance_mm) +
-                            " mm. Choose faces that meet edge to edge (or heal the model)");
+      return Status::Failed(
+          "the " + std::to_string(faces.size()) + " faces do not bound one region: " + std::to_string(boundary.size()) +
+          " closed and " + std::to_string(open) + " open free boundaries at a sewing tolerance of " +
+          FormatExact(options.sewing_tolerance_mm) + " mm. Choose faces that meet edge to edge (or heal the model)");
     }
   } catch (const Standard_Failure& failure) {
     return Status::Failed("sewing the region's faces: " + occt::Message(failure));
   }
-  const double step = std::max(1, static_cast<int>(std::lround(options.sample_spacing_mm / options.boundary_spacing_mm)));
+  const double step =
+      std::max(1, static_cast<int>(std::lround(options.sample_spacing_mm / options.boundary_spacing_mm)));
   for (const auto& loop : boundary) {
     for (std::size_t k = 0; k < loop.size(); k += static_cast<std::size_t>(step)) points.push_back(loop[k]);
   }
@@ -149,8 +151,8 @@ Result<RegionFit> FitCadRegion(const std::vector<CadFace>& faces, const RegionFi
   for (const auto& loop : boundary) {
     std::vector<Eigen::Vector2d> uv;
     for (std::size_t k = 0; k < loop.size(); ++k) {
-      FL_ASSIGN_OR_RETURN(const FootPoint foot,
-                          k == 0 ? projector.Project(loop[k]) : projector.ProjectFrom(loop[k], uv.back().x(), uv.back().y()));
+      FL_ASSIGN_OR_RETURN(const FootPoint foot, k == 0 ? projector.Project(loop[k])
+                                                       : projector.ProjectFrom(loop[k], uv.back().x(), uv.back().y()));
       const Eigen::Vector2d p(foot.u, foot.v);
       if (uv.empty() || (p - uv.back()).norm() > 1e-9) uv.push_back(p);
     }
@@ -186,26 +188,28 @@ Result<RegionFit> FitCadRegion(const std::vector<CadFace>& faces, const RegionFi
   }
   out.cad_deviation_rms_mm = out.check_points > 0 ? std::sqrt(sum2 / out.check_points) : 0.0;
   out.report.details["region"] = {
-      {"method", "faces sampled inside their trims, one scattered B-spline fit, region trim from the sewn faces' "
-                 "free boundary projected onto Q"},
+      {"method",
+       "faces sampled inside their trims, one scattered B-spline fit, region trim from the sewn faces' "
+       "free boundary projected onto Q"},
       {"faces", out.faces},
       {"samples", out.samples},
       {"boundary_loops", out.loops},
       {"check_points", out.check_points},
       {"cad_deviation_rms_mm", out.cad_deviation_rms_mm},
       {"cad_deviation_max_mm", out.cad_deviation_max_mm},
-      {"cad_deviation_max_at_mm", {out.cad_deviation_max_at.x(), out.cad_deviation_max_at.y(), out.cad_deviation_max_at.z()}},
+      {"cad_deviation_max_at_mm",
+       {out.cad_deviation_max_at.x(), out.cad_deviation_max_at.y(), out.cad_deviation_max_at.z()}},
       {"cad_deviation_max_face", out.cad_deviation_max_face},
       {"trim", trim->ToJson()}};
   if (options.max_cad_deviation_mm > 0 && out.cad_deviation_max_mm > options.max_cad_deviation_mm) {
-    return Status::Failed("the one B-spline fitted over the " + std::to_string(faces.size()) + " faces deviates from them by up to " +
-                          FormatFixed(out.cad_deviation_max_mm * 1e3, 3) + " um (at face " +
-                          std::to_string(out.cad_deviation_max_face) + ", (" + FormatFixed(out.cad_deviation_max_at.x(), 3) +
-                          ", " + FormatFixed(out.cad_deviation_max_at.y(), 3) + ", " +
-                          FormatFixed(out.cad_deviation_max_at.z(), 3) + ")), more than the limit of " +
-                          FormatFixed(options.max_cad_deviation_mm * 1e3, 3) +
-                          " um. Fix: the faces probably meet at a crease; machine them as separate parts, or sample "
-                          "them more densely (fit.sample_spacing_mm)");
+    return Status::Failed(
+        "the one B-spline fitted over the " + std::to_string(faces.size()) + " faces deviates from them by up to " +
+        FormatFixed(out.cad_deviation_max_mm * 1e3, 3) + " um (at face " + std::to_string(out.cad_deviation_max_face) +
+        ", (" + FormatFixed(out.cad_deviation_max_at.x(), 3) + ", " + FormatFixed(out.cad_deviation_max_at.y(), 3) +
+        ", " + FormatFixed(out.cad_deviation_max_at.z(), 3) + ")), more than the limit of " +
+        FormatFixed(options.max_cad_deviation_mm * 1e3, 3) +
+        " um. Fix: the faces probably meet at a crease; machine them as separate parts, or sample "
+        "them more densely (fit.sample_spacing_mm)");
   }
   return out;
 }

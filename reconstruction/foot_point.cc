@@ -12,7 +12,6 @@
 // one-point functions, use a GeomAdaptor_Surface per call.
 
 #include "reconstruction/foot_point.h"
-#include "reconstruction/trim.h"
 
 #include <algorithm>
 #include <array>
@@ -36,6 +35,7 @@
 #include "reconstruction/bspline_surface.h"
 #include "reconstruction/occt_support.h"
 #include "reconstruction/point_checks.h"
+#include "reconstruction/trim.h"
 
 namespace formloop::recon {
 namespace {
@@ -633,7 +633,8 @@ Result<std::vector<FootPoint>> FootPointProjector::ProjectAll(const std::vector<
       pcl::Indices found;  // reused by every point
       std::vector<float> found_d2;
       for (; index < points.size(); ++index) {
-        Result<FootPoint> foot = MarkTrim(impl_->trim.get(), impl_->GlobalProject(eval, points[index], found, found_d2));
+        Result<FootPoint> foot =
+            MarkTrim(impl_->trim.get(), impl_->GlobalProject(eval, points[index], found, found_d2));
         if (!foot.ok()) {
           return Status(foot.status().code(), "points[" + std::to_string(index) + "] of " +
                                                   std::to_string(points.size()) + ": " + foot.status().message());

@@ -164,7 +164,8 @@ Status Trim::Build(const BSplineSurface& q) {
       return Status::BadInput(Where{}, "the face has no boundary loop", "export the face with its trimming curves");
     }
     // The outer loop first.
-    std::stable_sort(loops_.begin(), loops_.end(), [](const TrimLoop& a, const TrimLoop& b) { return a.outer > b.outer; });
+    std::stable_sort(loops_.begin(), loops_.end(),
+                     [](const TrimLoop& a, const TrimLoop& b) { return a.outer > b.outer; });
     natural_ = wire_count == 1 && on_box;
     GProp_GProps props;
     BRepGProp::SurfaceProperties(face_, props);
@@ -250,7 +251,8 @@ std::optional<Eigen::Vector2d> ParametersAboveXY(const BSplineSurface& q, double
     const double det = j.determinant();
     if (!(std::abs(det) > 1e-14)) return std::nullopt;
     const Eigen::Vector2d step = j.inverse() * r;
-    const double nu = std::clamp(u - step.x(), dom.u_min, dom.u_max), nv = std::clamp(v - step.y(), dom.v_min, dom.v_max);
+    const double nu = std::clamp(u - step.x(), dom.u_min, dom.u_max),
+                 nv = std::clamp(v - step.y(), dom.v_min, dom.v_max);
     if (nu == u && nv == v) return std::nullopt;  // held at the domain's edge: (x, y) is beyond Q
     u = nu;
     v = nv;
@@ -260,9 +262,7 @@ std::optional<Eigen::Vector2d> ParametersAboveXY(const BSplineSurface& q, double
   return std::nullopt;
 }
 
-int TrimmedGrid::inside_count() const {
-  return static_cast<int>(std::count(inside.begin(), inside.end(), 1));
-}
+int TrimmedGrid::inside_count() const { return static_cast<int>(std::count(inside.begin(), inside.end(), 1)); }
 
 TrimmedGrid SampleTrimmedGrid(const BSplineSurface& q, int nu, int nv) {
   TrimmedGrid g;

@@ -11,9 +11,9 @@
 #include <string>
 #include <vector>
 
+#include <gtest/gtest.h>
 #include <BRepTopAdaptor_FClass2d.hxx>
 #include <STEPControl_Reader.hxx>
-#include <gtest/gtest.h>
 
 #include <Eigen/Dense>
 
@@ -112,9 +112,8 @@ TopoDS_Face FirstBSplineFace(const fs::path& step) {
 
 // Item 1: a trimmed free-form face with a hole (and a pin standing in it).
 TEST_F(CadPartsTest, TrimmedFaceWithAHoleReachesToleranceWithinOneLoop) {
-  ASSERT_TRUE(formloop::testing::WriteStepFaces(dir_ / "holed.step",
-                                                {formloop::testing::MakeHoledFace(), formloop::testing::MakePin()},
-                                                {"top", "pin"}));
+  ASSERT_TRUE(formloop::testing::WriteStepFaces(
+      dir_ / "holed.step", {formloop::testing::MakeHoledFace(), formloop::testing::MakePin()}, {"top", "pin"}));
   const auto summary = Run(PartJson("holed", {{"cad", "holed.step"}, {"face_names", {"top"}}}), "holed");
   ASSERT_TRUE(summary.ok()) << summary.status().ToString();
   std::printf("[measured] holed face: form error per loop");
@@ -151,7 +150,8 @@ TEST_F(CadPartsTest, TrimmedFaceWithAHoleReachesToleranceWithinOneLoop) {
   EXPECT_TRUE(fs::exists(dir_ / "holed" / "inputs" / "holed.step"));
   const auto again = ReadPart(dir_ / "holed" / "inputs" / "part.json");
   ASSERT_TRUE(again.ok()) << again.status().ToString();
-  EXPECT_EQ(again->surface_file->sha256, ReadJsonFile(dir_ / "holed" / "inputs" / "part.json").value()["surface"]["sha256"]);
+  EXPECT_EQ(again->surface_file->sha256,
+            ReadJsonFile(dir_ / "holed" / "inputs" / "part.json").value()["surface"]["sha256"]);
 }
 
 // Item 2: a region of three faces fitted as one Q; the seams judged on the exact CAD faces.
@@ -162,8 +162,9 @@ TEST_F(CadPartsTest, ThreeFaceRegionRunsAndItsSeamsMeetTheScallopBounds) {
   ASSERT_TRUE(summary.ok()) << summary.status().ToString();
   const Json surface = ReadJsonFile(dir_ / "strips" / "surface" / "surface.json").value();
   const double deviation_um = surface["region"]["cad_deviation_max_mm"].get<double>() * 1e3;
-  std::printf("[measured] three faces: Q's deviation from the CAD faces max %.4f um (limit %.1f um); form error per loop",
-              deviation_um, surface["deviation_limit_mm"].get<double>() * 1e3);
+  std::printf(
+      "[measured] three faces: Q's deviation from the CAD faces max %.4f um (limit %.1f um); form error per loop",
+      deviation_um, surface["deviation_limit_mm"].get<double>() * 1e3);
   for (const LoopSummary& l : summary->loops) std::printf(" %.2f", l.form_error_um);
   std::printf(" um\n");
   EXPECT_LE(deviation_um, 0.1 * summary->tolerance_um);
@@ -206,9 +207,10 @@ TEST_F(CadPartsTest, ThreeFaceRegionRunsAndItsSeamsMeetTheScallopBounds) {
     }
   }
   const double bound = path->options.scallop_um + path->options.chord_tolerance_um;
-  std::printf("[measured] three faces, seams: %d samples on the CAD faces, %d uncovered; max scallop %.3f um, max "
-              "gouge %.3f um (bounds %.1f and 1.0)\n",
-              samples, uncovered, max_scallop, max_gouge, bound);
+  std::printf(
+      "[measured] three faces, seams: %d samples on the CAD faces, %d uncovered; max scallop %.3f um, max "
+      "gouge %.3f um (bounds %.1f and 1.0)\n",
+      samples, uncovered, max_scallop, max_gouge, bound);
   EXPECT_EQ(uncovered, 0);
   EXPECT_LE(max_scallop, bound);
   EXPECT_LE(max_gouge, 1.0);
@@ -273,11 +275,12 @@ TEST_F(CadPartsTest, AScanRunsLikeTheSamePartGivenAnalytically) {
       }
     }
   }
-  std::printf("[measured] scan vs analytic saddle: route %s / %s (A %.4f / %.4f); tool-path envelopes differ by at most "
-              "%.3f um over %d points; final form error %.3f / %.3f um (difference %.3f um); %zu / %zu loops\n",
-              a->route.c_str(), b->route.c_str(), a->similarity, b->similarity, worst * 1e3, compared,
-              a->loops.back().form_error_um, b->loops.back().form_error_um,
-              std::abs(a->loops.back().form_error_um - b->loops.back().form_error_um), a->loops.size(), b->loops.size());
+  std::printf(
+      "[measured] scan vs analytic saddle: route %s / %s (A %.4f / %.4f); tool-path envelopes differ by at most "
+      "%.3f um over %d points; final form error %.3f / %.3f um (difference %.3f um); %zu / %zu loops\n",
+      a->route.c_str(), b->route.c_str(), a->similarity, b->similarity, worst * 1e3, compared,
+      a->loops.back().form_error_um, b->loops.back().form_error_um,
+      std::abs(a->loops.back().form_error_um - b->loops.back().form_error_um), a->loops.size(), b->loops.size());
   EXPECT_GT(compared, 150000);
   EXPECT_LE(worst, 2e-3);
   EXPECT_LE(std::abs(a->loops.back().form_error_um - b->loops.back().form_error_um), 1.0);
@@ -321,17 +324,18 @@ TEST_F(CadPartsTest, AProbeProfileRemovesTheTriLobeFromTheDeviations) {
   with["machine"]["probe"] = {{"profile", "trilobe.json"}};  // the probe the virtual machine has
   Json without = with;
   without["name"] = "dome-without-profile";
-  with["probing"]["profile"] = "trilobe.json";                // the analysis applies the profile
+  with["probing"]["profile"] = "trilobe.json";  // the analysis applies the profile
   const auto a = Run(with, "with");
   ASSERT_TRUE(a.ok()) << a.status().ToString();
   const auto b = Run(without, "without");
   ASSERT_TRUE(b.ok()) << b.status().ToString();
   const Lobes la = TriLobeTerms(dir_ / "with" / "loop-0" / "deviations.csv");
   const Lobes lb = TriLobeTerms(dir_ / "without" / "loop-0" / "deviations.csv");
-  std::printf("[measured] tri-lobe probe (6 um): loop-0 cos3θ %.3f ± %.3f um, sin3θ %.3f ± %.3f um with the profile; "
-              "%.3f ± %.3f um, %.3f ± %.3f um without; form error %.2f / %.2f um\n",
-              la.cos_um, la.cos_se, la.sin_um, la.sin_se, lb.cos_um, lb.cos_se, lb.sin_um, lb.sin_se,
-              a->loops.front().form_error_um, b->loops.front().form_error_um);
+  std::printf(
+      "[measured] tri-lobe probe (6 um): loop-0 cos3θ %.3f ± %.3f um, sin3θ %.3f ± %.3f um with the profile; "
+      "%.3f ± %.3f um, %.3f ± %.3f um without; form error %.2f / %.2f um\n",
+      la.cos_um, la.cos_se, la.sin_um, la.sin_se, lb.cos_um, lb.cos_se, lb.sin_um, lb.sin_se,
+      a->loops.front().form_error_um, b->loops.front().form_error_um);
   EXPECT_LT(std::abs(la.cos_um), 3 * la.cos_se);
   EXPECT_LT(std::abs(la.sin_um), 3 * la.sin_se);
   EXPECT_GT(std::abs(lb.cos_um), 3 * lb.cos_se);
@@ -363,9 +367,10 @@ TEST_F(CadPartsTest, APublicPartRunsAndAStarterShapeAsCadRetrievesItsFamily) {
   const auto p = Run(pub, "public");
   ASSERT_TRUE(p.ok()) << p.status().ToString();
   const Json tp = ReadJsonFile(dir_ / "public" / "toolpath" / "toolpath.json").value();
-  std::printf("[measured] public part (OCCT bug24012_face.igs, r = 0.5 mm): %d passes, %d CL points, %d lifted; form "
-              "error per loop",
-              tp["passes"].get<int>(), tp["cl_points"].get<int>(), tp["lifted_points"].get<int>());
+  std::printf(
+      "[measured] public part (OCCT bug24012_face.igs, r = 0.5 mm): %d passes, %d CL points, %d lifted; form "
+      "error per loop",
+      tp["passes"].get<int>(), tp["cl_points"].get<int>(), tp["lifted_points"].get<int>());
   for (const LoopSummary& l : p->loops) std::printf(" %.2f", l.form_error_um);
   std::printf(" um (tolerance %.0f um), within tolerance %d\n", p->tolerance_um, p->within_tolerance);
   EXPECT_FALSE(p->loops.empty());
@@ -393,9 +398,8 @@ TEST_F(CadPartsTest, APublicPartRunsAndAStarterShapeAsCadRetrievesItsFamily) {
 // Item 6: bad input through `formloop run`: a clear error naming the field, exit 2, and no run folder
 // (nor .partial) left behind.
 TEST_F(CadPartsTest, BadInputsAreRefusedBeforeARunFolderExists) {
-  ASSERT_TRUE(formloop::testing::WriteStepFaces(dir_ / "holed.step",
-                                                {formloop::testing::MakeHoledFace(), formloop::testing::MakePin()},
-                                                {"top", "pin"}));
+  ASSERT_TRUE(formloop::testing::WriteStepFaces(
+      dir_ / "holed.step", {formloop::testing::MakeHoledFace(), formloop::testing::MakePin()}, {"top", "pin"}));
   formloop::testing::WriteNinePoints(dir_ / "few.csv");
   ASSERT_TRUE(formloop::testing::WriteIgesWithAndWithoutUnit(dir_ / "with_unit.igs", dir_ / "no_unit.igs"));
   struct Case {
@@ -415,7 +419,8 @@ TEST_F(CadPartsTest, BadInputsAreRefusedBeforeARunFolderExists) {
     ASSERT_TRUE(WriteJsonFile(part, PartJson(c.name, c.surface)).ok());
     const fs::path out = dir_ / "runs" / c.name;
     std::string stdout_text, err;
-    const int code = formloop::testing::RunFormloop("run " + part.string() + " --out " + out.string(), &stdout_text, &err);
+    const int code =
+        formloop::testing::RunFormloop("run " + part.string() + " --out " + out.string(), &stdout_text, &err);
     EXPECT_EQ(code, 2) << c.name << ": " << err;
     for (const std::string& e : c.expected) EXPECT_NE(err.find(e), std::string::npos) << c.name << ": " << err;
     EXPECT_FALSE(fs::exists(out)) << c.name;

@@ -33,9 +33,8 @@ class SurfaceSourceTest : public ::testing::Test {
   void SetUp() override {
     recon::occt::KeepStdoutClean();
     dir_ = formloop::testing::FreshTestDir("formloop_surface_source");
-    ASSERT_TRUE(formloop::testing::WriteStepFaces(dir_ / "holed.step",
-                                                  {formloop::testing::MakeHoledFace(), formloop::testing::MakePin()},
-                                                  {"top", "pin"}));
+    ASSERT_TRUE(formloop::testing::WriteStepFaces(
+        dir_ / "holed.step", {formloop::testing::MakeHoledFace(), formloop::testing::MakePin()}, {"top", "pin"}));
     ASSERT_TRUE(formloop::testing::WriteStepFaces(dir_ / "strips.step", formloop::testing::MakeThreeStrips(),
                                                   {"left", "middle", "right"}));
   }
@@ -128,7 +127,8 @@ TEST_F(SurfaceSourceTest, ThreeFacesBecomeOneQAndAScanIsFittedWithinItsBox) {
   ASSERT_TRUE(strict.ok());
   const auto refused = BuildSurfaceFromFile(*strict, 0.01);
   ASSERT_FALSE(refused.ok());
-  EXPECT_NE(refused.status().ToString().find("max_deviation_fraction"), std::string::npos) << refused.status().ToString();
+  EXPECT_NE(refused.status().ToString().find("max_deviation_fraction"), std::string::npos)
+      << refused.status().ToString();
   EXPECT_NE(refused.status().ToString().find(" um"), std::string::npos);
 
   // A scan of the strips' bump with 5 um noise along z, 61 x 49 points over [-50, 50] x [-40, 40].
@@ -156,17 +156,19 @@ TEST_F(SurfaceSourceTest, ThreeFacesBecomeOneQAndAScanIsFittedWithinItsBox) {
   for (const double u : {d.u_min, d.u_max}) {
     for (const double v : {d.v_min, d.v_max}) {
       const Eigen::Vector3d p = fitted->q.Point(u, v);
-      worst_corner = std::max(worst_corner, std::min(std::abs(std::abs(p.x()) - 50), 1.0) +
-                                                std::min(std::abs(std::abs(p.y()) - 40), 1.0));
+      worst_corner = std::max(
+          worst_corner, std::min(std::abs(std::abs(p.x()) - 50), 1.0) + std::min(std::abs(std::abs(p.y()) - 40), 1.0));
     }
   }
   for (int k = 0; k < 400; ++k) {
-    const Eigen::Vector3d p = fitted->q.Point(d.u_min + d.u_span() * (k % 20 + 0.5) / 20, d.v_min + d.v_span() * (k / 20 + 0.5) / 20);
+    const Eigen::Vector3d p =
+        fitted->q.Point(d.u_min + d.u_span() * (k % 20 + 0.5) / 20, d.v_min + d.v_span() * (k / 20 + 0.5) / 20);
     worst_inside = std::max(worst_inside, std::abs(p.z() - formloop::testing::StripHeight(p.x(), p.y())));
   }
-  std::printf("[measured] scan of the bump (2989 points, 5 um noise): corners within %.4f mm of the scanned rectangle's, "
-              "Q within %.2f um of the truth at 400 points\n",
-              worst_corner, worst_inside * 1e3);
+  std::printf(
+      "[measured] scan of the bump (2989 points, 5 um noise): corners within %.4f mm of the scanned rectangle's, "
+      "Q within %.2f um of the truth at 400 points\n",
+      worst_corner, worst_inside * 1e3);
   EXPECT_LT(worst_corner, 0.5);
   EXPECT_LT(worst_inside, 5e-3);
 }

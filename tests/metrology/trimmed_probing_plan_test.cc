@@ -9,9 +9,9 @@
 #include <filesystem>
 #include <vector>
 
+#include <gtest/gtest.h>
 #include <BRepTopAdaptor_FClass2d.hxx>
 #include <STEPControl_Reader.hxx>
-#include <gtest/gtest.h>
 
 #include "metrology/probe.h"
 #include "metrology/probing_plan.h"

@@ -13,9 +13,9 @@
 #include <cstdio>
 #include <filesystem>
 
+#include <gtest/gtest.h>
 #include <BRepTopAdaptor_FClass2d.hxx>
 #include <STEPControl_Reader.hxx>
-#include <gtest/gtest.h>
 
 #include "nc-gen/toolpath.h"
 #include "nc-gen/toolpath_io.h"
@@ -57,8 +57,8 @@ class TrimmedToolpathTest : public ::testing::Test {
     recon::occt::KeepStdoutClean();
     dir_ = formloop::testing::FreshTestDir("formloop_trimmed_toolpath");
     step_ = dir_ / "holed_pin.step";
-    ASSERT_TRUE(formloop::testing::WriteStepFaces(step_, {formloop::testing::MakeHoledFace(), formloop::testing::MakePin()},
-                                                  {"top", "pin"}));
+    ASSERT_TRUE(formloop::testing::WriteStepFaces(
+        step_, {formloop::testing::MakeHoledFace(), formloop::testing::MakePin()}, {"top", "pin"}));
   }
   void TearDown() override { fs::remove_all(dir_); }
   fs::path dir_, step_;
@@ -101,7 +101,8 @@ TEST_F(TrimmedToolpathTest, CutsOnlyInsideTheFaceLeadsClearThePinAndMeetsTheScal
       const TopAbs_State state = classifier.Perform(gp_Pnt2d(cl.cc.x(), cl.cc.y()), Standard_False);
       ASSERT_TRUE(state == TopAbs_IN || state == TopAbs_ON) << "CL " << k << " at " << cl.cc.transpose();
       on_edge += state == TopAbs_ON;
-      ASSERT_TRUE(HoledDomain::Inside(cl.cc.x(), cl.cc.y()) || formloop::testing::NearHoledBoundary(cl.cc.x(), cl.cc.y(), 1e-3))
+      ASSERT_TRUE(HoledDomain::Inside(cl.cc.x(), cl.cc.y()) ||
+                  formloop::testing::NearHoledBoundary(cl.cc.x(), cl.cc.y(), 1e-3))
           << "CL " << k << " at " << cl.cc.transpose();
       EXPECT_NEAR(cl.cc.z(), BezierTop::Height(cl.cc.x(), cl.cc.y()), 1e-7);
       min_pin = std::min(min_pin, PinDistance(cl.centre));
@@ -117,11 +118,12 @@ TEST_F(TrimmedToolpathTest, CutsOnlyInsideTheFaceLeadsClearThePinAndMeetsTheScal
       }
     }
   }
-  std::printf("[measured] holed face: %zu CL (%d cutting, %d on the trim), %d passes (%d contour), leads changed "
-              "%d along n + %d vertical; nearest ball to the pin %.3f mm (cutting), %.3f mm (leads, retracts); "
-              "safe Z %.2f mm\n",
-              path->points.size(), cut, on_edge, path->passes, path->contour_passes, path->leads_along_normal,
-              path->leads_vertical, min_pin, min_lead_pin, path->safe_z_mm);
+  std::printf(
+      "[measured] holed face: %zu CL (%d cutting, %d on the trim), %d passes (%d contour), leads changed "
+      "%d along n + %d vertical; nearest ball to the pin %.3f mm (cutting), %.3f mm (leads, retracts); "
+      "safe Z %.2f mm\n",
+      path->points.size(), cut, on_edge, path->passes, path->contour_passes, path->leads_along_normal,
+      path->leads_vertical, min_pin, min_lead_pin, path->safe_z_mm);
   EXPECT_GT(on_edge, 100) << "passes start and end at the trim";
   EXPECT_GE(min_pin, r - 1e-3);
   EXPECT_GE(min_lead_pin, r - 1e-3);
@@ -147,17 +149,19 @@ TEST_F(TrimmedToolpathTest, CutsOnlyInsideTheFaceLeadsClearThePinAndMeetsTheScal
         continue;
       }
       const double e = 1e-6;
-      const Eigen::Vector3d n = Eigen::Vector3d(-(BezierTop::Height(x + e, y) - BezierTop::Height(x - e, y)) / (2 * e),
-                                                -(BezierTop::Height(x, y + e) - BezierTop::Height(x, y - e)) / (2 * e), 1)
-                                    .normalized();
+      const Eigen::Vector3d n =
+          Eigen::Vector3d(-(BezierTop::Height(x + e, y) - BezierTop::Height(x - e, y)) / (2 * e),
+                          -(BezierTop::Height(x, y + e) - BezierTop::Height(x, y - e)) / (2 * e), 1)
+              .normalized();
       const double normal_um = (z - BezierTop::Height(x, y)) * n.z() * 1e3;
       max_scallop = std::max(max_scallop, normal_um);
       max_gouge = std::max(max_gouge, -normal_um);
     }
   }
-  std::printf("[measured] holed face: %d samples inside, %d uncovered; max scallop %.3f um, max gouge %.3f um "
-              "(bounds %.1f and 1.0)\n",
-              samples, uncovered, max_scallop, max_gouge, o.scallop_um + o.chord_tolerance_um);
+  std::printf(
+      "[measured] holed face: %d samples inside, %d uncovered; max scallop %.3f um, max gouge %.3f um "
+      "(bounds %.1f and 1.0)\n",
+      samples, uncovered, max_scallop, max_gouge, o.scallop_um + o.chord_tolerance_um);
   EXPECT_EQ(uncovered, 0);
   EXPECT_LE(max_scallop, o.scallop_um + o.chord_tolerance_um);
   EXPECT_LE(max_gouge, 1.0);

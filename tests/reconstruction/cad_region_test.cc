@@ -7,9 +7,9 @@
 #include <cstdio>
 #include <filesystem>
 
+#include <gtest/gtest.h>
 #include <BRepBuilderAPI_MakeFace.hxx>
 #include <Geom_Plane.hxx>
-#include <gtest/gtest.h>
 
 #include "core/random.h"
 #include "reconstruction/cad_io.h"
@@ -28,17 +28,19 @@ TEST(CadRegionTest, ThreeStripsBecomeOneQWithinAMicrometreOfTheFaces) {
   occt::KeepStdoutClean();
   const fs::path dir = formloop::testing::FreshTestDir("formloop_cad_region");
   const fs::path step = dir / "strips.step";
-  ASSERT_TRUE(formloop::testing::WriteStepFaces(step, formloop::testing::MakeThreeStrips(), {"left", "middle", "right"}));
+  ASSERT_TRUE(
+      formloop::testing::WriteStepFaces(step, formloop::testing::MakeThreeStrips(), {"left", "middle", "right"}));
   const auto faces = ReadCadFaces(step, CadRegionSelector{.names = {"left", "middle", "right"}});
   ASSERT_TRUE(faces.ok()) << faces.status().ToString();
   RegionFitOptions options;
   options.max_cad_deviation_mm = 1e-3;
   const auto fit = FitCadRegion(*faces, options);
   ASSERT_TRUE(fit.ok()) << fit.status().ToString();
-  std::printf("[measured] 3 strips: %d samples, net %d x %d, fit rms %.3f um; deviation from the faces at %d check "
-              "points: rms %.3f um, max %.3f um (face %d)\n",
-              fit->samples, fit->q.u_poles(), fit->q.v_poles(), fit->report.rms_mm * 1e3, fit->check_points,
-              fit->cad_deviation_rms_mm * 1e3, fit->cad_deviation_max_mm * 1e3, fit->cad_deviation_max_face);
+  std::printf(
+      "[measured] 3 strips: %d samples, net %d x %d, fit rms %.3f um; deviation from the faces at %d check "
+      "points: rms %.3f um, max %.3f um (face %d)\n",
+      fit->samples, fit->q.u_poles(), fit->q.v_poles(), fit->report.rms_mm * 1e3, fit->check_points,
+      fit->cad_deviation_rms_mm * 1e3, fit->cad_deviation_max_mm * 1e3, fit->cad_deviation_max_face);
   EXPECT_EQ(fit->loops, 1);
   EXPECT_EQ(fit->check_points, 3 * options.check_points_per_face);
   EXPECT_LT(fit->cad_deviation_max_mm, 1e-3);

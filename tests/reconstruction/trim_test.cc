@@ -183,8 +183,8 @@ TEST_F(TrimTest, TrimmedQSurvivesTheStepRoundTripAndFlagsFootPointsOutsideIt) {
   // A point above the hole projects onto the patch inside the hole: flagged; one above the face: not.
   const auto projector = FootPointProjector::Build(again->surface);
   ASSERT_TRUE(projector.ok());
-  const auto over_hole = projector->Project(BezierTop::Point(HoledDomain::kHoleX, HoledDomain::kHoleY) +
-                                            Eigen::Vector3d(0, 0, 0.5));
+  const auto over_hole =
+      projector->Project(BezierTop::Point(HoledDomain::kHoleX, HoledDomain::kHoleY) + Eigen::Vector3d(0, 0, 0.5));
   ASSERT_TRUE(over_hole.ok());
   EXPECT_TRUE(over_hole->outside_trim);
   EXPECT_FALSE(over_hole->on_boundary);

@@ -47,9 +47,10 @@ TEST(TrimmedFeatures, DescribeTheFaceNotTheUnderlyingPatch) {
   const double area = face->surface.trim()->area_mm2();
   // The grid has 48 cells per direction over the 90 × 70 mm box: cells of 1.9 × 1.5 mm, so the
   // midpoint rule is within about half a cell times the loops' length (≈ 300 mm) of the face's area.
-  std::printf("[measured] holed face: area %.1f mm2 (trimmed features) vs %.1f mm2 (OpenCASCADE) vs %.1f mm2 (whole "
-              "patch); extents %.2f x %.2f mm (exact 90 x 70); %d samples outside the trim\n",
-              d[3], area, whole->descriptors[3], d[0], d[1], trimmed->samples_outside_trim);
+  std::printf(
+      "[measured] holed face: area %.1f mm2 (trimmed features) vs %.1f mm2 (OpenCASCADE) vs %.1f mm2 (whole "
+      "patch); extents %.2f x %.2f mm (exact 90 x 70); %d samples outside the trim\n",
+      d[3], area, whole->descriptors[3], d[0], d[1], trimmed->samples_outside_trim);
   EXPECT_NEAR(d[3], area, 0.02 * area);
   EXPECT_GT(whole->descriptors[3], 1.2 * area);
   EXPECT_NEAR(d[0], 2 * HoledDomain::kA, 1e-3);

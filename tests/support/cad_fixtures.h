@@ -27,10 +27,10 @@
 #include <BRepLib.hxx>
 #include <BRepPrimAPI_MakeCylinder.hxx>
 #include <BRep_Builder.hxx>
-#include <GeomAPI_PointsToBSplineSurface.hxx>
-#include <GeomConvert.hxx>
 #include <Geom2d_Circle.hxx>
 #include <Geom2d_Ellipse.hxx>
+#include <GeomAPI_PointsToBSplineSurface.hxx>
+#include <GeomConvert.hxx>
 #include <Geom_BSplineSurface.hxx>
 #include <Geom_BezierSurface.hxx>
 #include <IGESControl_Controller.hxx>
@@ -59,10 +59,8 @@ namespace formloop::testing {
 
 struct BezierTop {
   static constexpr double kLo = -50, kHi = 50;
-  static constexpr std::array<std::array<double, 4>, 4> kHeights = {{{0.0, 3.0, 2.0, 0.5},
-                                                                     {2.0, 9.0, 7.0, 1.0},
-                                                                     {1.0, 8.0, 10.0, 3.0},
-                                                                     {0.0, 2.0, 4.0, 1.5}}};
+  static constexpr std::array<std::array<double, 4>, 4> kHeights = {
+      {{0.0, 3.0, 2.0, 0.5}, {2.0, 9.0, 7.0, 1.0}, {1.0, 8.0, 10.0, 3.0}, {0.0, 2.0, 4.0, 1.5}}};
   static double Bernstein(int i, double t) {
     static constexpr double kBinomial[4] = {1, 3, 3, 1};
     return kBinomial[i] * std::pow(t, i) * std::pow(1 - t, 3 - i);
@@ -101,12 +99,12 @@ struct BezierTop {
 
 // The holed face's exact domain in (x, y).
 struct HoledDomain {
-  static constexpr double kA = 45, kB = 35;                       // outer ellipse semi-axes
+  static constexpr double kA = 45, kB = 35;                      // outer ellipse semi-axes
   static constexpr double kHoleX = 10, kHoleY = -5, kHoleR = 8;  // the hole
   static constexpr double kPinR = 4, kPinZ0 = -10, kPinZ1 = 40;  // the pin standing in it
   static double EllipseLevel(double x, double y) { return (x / kA) * (x / kA) + (y / kB) * (y / kB); }
   static double HoleDistance(double x, double y) { return std::hypot(x - kHoleX, y - kHoleY); }
-    static bool Inside(double x, double y) { return EllipseLevel(x, y) < 1 && HoleDistance(x, y) > kHoleR; }
+  static bool Inside(double x, double y) { return EllipseLevel(x, y) < 1 && HoleDistance(x, y) > kHoleR; }
   // True within `band` mm (in x, y; first order for the ellipse) of either boundary.
   static bool NearBoundary(double x, double y, double band) {
     const double level = EllipseLevel(x, y);
@@ -199,7 +197,8 @@ inline bool WriteStepFaces(const std::filesystem::path& path, const std::vector<
 // The holed face as IGES in mm (`with_unit`) and the same file with the global section's unit flag and
 // unit name blanked (`without_unit`): a unit-less IGES file. False when the writer's global section is not
 // the expected one.
-inline bool WriteIgesWithAndWithoutUnit(const std::filesystem::path& with_unit, const std::filesystem::path& without_unit) {
+inline bool WriteIgesWithAndWithoutUnit(const std::filesystem::path& with_unit,
+                                        const std::filesystem::path& without_unit) {
   IGESControl_Controller::Init();
   IGESControl_Writer writer("MM", 0);
   if (!writer.AddShape(MakeHoledFace())) return false;
@@ -210,7 +209,7 @@ inline bool WriteIgesWithAndWithoutUnit(const std::filesystem::path& with_unit, 
   std::string iges = text.str();
   const std::size_t at = iges.find(",2,2HMM,");  // parameters 14 (unit flag 2 = mm) and 15 (unit name)
   if (at == std::string::npos) return false;
-  iges.replace(at, 8, ",,,     ");                // same columns
+  iges.replace(at, 8, ",,,     ");  // same columns
   std::ofstream(without_unit) << iges;
   return true;
 }
