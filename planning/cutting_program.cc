@@ -21,6 +21,12 @@ struct EngagedBlock {
 
 std::string Mm(double v) { return FormatFixed(v, 3); }
 
+// RS274NGC and Fanuc programs are read as shop programs (arcs, helices, G91, G20); Sinumerik programs are
+// formloop's own output, read with its reader.
+ProgramReading ReadingOf(const std::string& dialect) {
+  return dialect == "sinumerik" ? ProgramReading::kFormloopSubset : ProgramReading::kShopProgram;
+}
+
 Result<std::vector<EngagedBlock>> Locate(const EditableProgram& program, const std::string& source,
                                          const std::vector<BlockEngagement>& engagement) {
   const bool numbered = program.NumberedBlocks();
@@ -49,12 +55,36 @@ Result<std::vector<EngagedBlock>> Locate(const EditableProgram& program, const s
       return Status::BadInput(where, name + " appears twice", "give one row per block");
     }
     const auto move = static_cast<std::size_t>(line.move);
-    const Eigen::Vector3d start = program.MoveStart(move), end = program.moves()[move].tip;
-    const double length = start.allFinite() && end.allFinite() ? (end - start).norm() : 0.0;
+    const double length = program.MoveLengthMm(move);
+    if (!std::isfinite(length)) {
+      return Status::BadInput(where,
+                              name + " of " + source +
+                                  " starts or ends where the program's position is not known (none programmed before "
+                                  "it, or after G28, G30, G53, G92 or a work-offset change): its length and volume "
+                                  "are unknown",
+                              "state X, Y and Z absolutely before the block");
+    }
     out.push_back({it->second, move, e.a_p_mm, e.a_e_mm, length});
   }
   std::sort(out.begin(), out.end(), [](const EngagedBlock& a, const EngagedBlock& b) { return a.line < b.line; });
   return out;
+}
+
+// One tool operation per program: S is written on every spindle line, so a second tool would get this
+// tool's speed. Refused, naming the line of the second tool.
+Status CheckOneTool(const EditableProgram& program, const std::string& source) {
+  std::string t, first;
+  for (std::size_t i = 0; i < program.lines().size(); ++i) {
+    if (!program.GetWord(i, 'T', &t)) continue;
+    if (first.empty()) first = t;
+    if (std::atof(t.c_str()) != std::atof(first.c_str())) {
+      return Status::BadInput(Where{.file = source, .line = static_cast<long>(i + 1)},
+                              program.BlockName(i) + " selects tool T" + t + " after T" + first +
+                                  ": Level 1 optimises one tool operation, and its S would reach the other tool",
+                              "give the program of one tool operation");
+    }
+  }
+  return Status::Ok();
 }
 
 int ToolNumber(const EditableProgram& program) {
@@ -160,7 +190,8 @@ nlohmann::json CuttingProgramReport::ToJson() const {
 
 Status CheckDepthOfCut(const std::string& program_text, const std::string& dialect, const std::string& source,
                        const std::vector<BlockEngagement>& engagement, const CuttingCoefficients& coefficients) {
-  FL_ASSIGN_OR_RETURN(EditableProgram program, EditableProgram::Parse(program_text, dialect, source));
+  FL_ASSIGN_OR_RETURN(EditableProgram program,
+                      EditableProgram::Parse(program_text, dialect, source, ReadingOf(dialect)));
   FL_ASSIGN_OR_RETURN(std::vector<EngagedBlock> blocks, Locate(program, source, engagement));
   return DepthCheck(program, blocks, coefficients);
 }
@@ -171,9 +202,11 @@ Result<CuttingProgramReport> OptimiseCuttingProgram(const std::string& program_t
                                                     const CuttingCoefficients& coefficients,
                                                     const CuttingProgramOptions& options) {
   FL_RETURN_IF_ERROR(options.Validate());
-  FL_ASSIGN_OR_RETURN(EditableProgram program, EditableProgram::Parse(program_text, dialect, source));
+  FL_ASSIGN_OR_RETURN(EditableProgram program,
+                      EditableProgram::Parse(program_text, dialect, source, ReadingOf(dialect)));
   FL_ASSIGN_OR_RETURN(std::vector<EngagedBlock> blocks, Locate(program, source, engagement));
   FL_RETURN_IF_ERROR(DepthCheck(program, blocks, coefficients));
+  FL_RETURN_IF_ERROR(CheckOneTool(program, source));
 
   CuttingProgramReport report;
   report.parent_sha256 = Sha256Hex(program_text);
@@ -181,6 +214,7 @@ Result<CuttingProgramReport> OptimiseCuttingProgram(const std::string& program_t
   report.seed = options.seed;
   report.tool_number = ToolNumber(program);
   report.warnings = coefficients.base.Warnings();
+  for (const std::string& w : program.warnings()) report.warnings.push_back(w);
 
   // Groups by (a_p, a_e) within the tolerance, first fit in program order.
   std::vector<EngagedBlock> cutting;
@@ -274,7 +308,9 @@ Result<CuttingProgramReport> OptimiseCuttingProgram(const std::string& program_t
   for (const ProgramLine& l : program.lines()) before.push_back(l.text);
   std::string word;
   for (std::size_t i = 0; i < program.lines().size(); ++i) {
-    if (program.lines()[i].move < 0 && program.GetWord(i, 'S', &word)) program.SetWord(i, 'S', FeedWord(n_op));
+    // A shop program may set S on a move line ("G0 X0 Y0 S12000 M3"); formloop's own output never does.
+    const bool spindle_line = program.lines()[i].move < 0 || ReadingOf(dialect) == ProgramReading::kShopProgram;
+    if (spindle_line && program.GetWord(i, 'S', &word)) program.SetWord(i, 'S', FeedWord(n_op));
   }
   std::map<std::size_t, double> desired;  // move index -> feed
   for (std::size_t i = 0; i < cutting.size(); ++i) {

@@ -3,8 +3,9 @@
 // check, then the metal-removal-rate optimum per group of blocks written into the program's F and S
 // words.
 //
-// Input: a formloop word-address program (planning/program_edit.h; formloop's own readers — the general
-// G-code reader of the path-deviation issue had not landed) and the engagement of its cutting blocks
+// Input: a word-address program — RS274NGC ("linuxcnc") and Fanuc programs read as shop programs through the
+// G-code reader (planning/program_edit.h, ProgramReading::kShopProgram: arcs, helices, G91, G20), Sinumerik
+// as formloop writes it — and the engagement of its cutting blocks
 // (a_p axial, a_e radial, from the path generator's stock model or simulation/engagement.h). Blocks
 // without an engagement row, rapids and blocks with a_e = 0 pass through unchanged.
 //
@@ -17,8 +18,8 @@
 // group is optimised once by the GA at its largest a_p and a_e, so its limits hold for every block of
 // the group. The spindle speed stays constant in the tool operation: n_op is the (fused) optimum of the
 // group that removes the most volume, rounded to whole rpm; every other group gets f_z = min(f_z,max,
-// cap_g(n_op)). Each cutting block's F becomes f_z z n_op rounded down to whole mm/min (never above the
-// optimum); non-cutting feed blocks keep their original feed (an F word is added where the modal feed
+// cap_g(n_op)). Each cutting block's F becomes f_z z n_op rounded down to whole mm/min (in a G20
+// section inch/min rounded down to 0.01; never above the optimum); non-cutting feed blocks keep their original feed (an F word is added where the modal feed
 // would otherwise carry over). Header comments record the parent's SHA-256, the coefficient set, the
 // seed and w_m. One tool per program (formloop programs change tools never).
 

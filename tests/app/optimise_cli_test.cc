@@ -17,6 +17,7 @@
 #include "app/part.h"
 #include "core/json_io.h"
 #include "core/number_text.h"
+#include "core/point_io.h"
 #include "core/random.h"
 #include "metrology/probe.h"
 #include "nc-gen/moves.h"
@@ -198,6 +199,37 @@ TEST_F(OptimiseCliTest, FeedControlMeetsTheCriteriaAndTheProgramIsReoptimisedFro
   EXPECT_NE(err.find("L1-DOC-RANGE"), std::string::npos) << err;
   EXPECT_TRUE(std::regex_search(err, std::regex("N[0-9]+"))) << err;
   EXPECT_FALSE(fs::exists(dir_ / "deep"));
+}
+
+// A shop program through the binary: LinuxCNC's public sample (inch, R-form arcs) with a per-block
+// engagement; the file gets its S and the F of the engaged cut in inch/min, nothing else changes, and
+// the input is left as it was.
+TEST_F(OptimiseCliTest, ShopProgramWithArcsInInchGetsItsFeedAndSpeedThroughTheReader) {
+  const fs::path program = kSource / "data" / "nc-programs" / "linuxcnc_cds.ngc";
+  const std::string before = ReadText(program);
+  json blocks = json::array();
+  for (int n = 180; n <= 500; n += 10) blocks.push_back({{"block", n}, {"a_p_mm", 5}, {"a_e_mm", 1}});
+  const fs::path engagement = dir_ / "engagement.json";
+  std::ofstream(engagement) << json{{"blocks", blocks}}.dump();
+  std::string out, err;
+  const fs::path cut = dir_ / "cut";
+  ASSERT_EQ(
+      RunFormloop("optimise cutting --coefficients " + kS1 + " --program " + program.string() +
+                      " --dialect linuxcnc --engagement " + engagement.string() + " --seed 1 --out " + cut.string(),
+                  &out, &err),
+      0)
+      << err;
+  const json c = json::parse(out);
+  EXPECT_EQ(c["program"]["cutting_blocks"].get<int>(), 33);
+  EXPECT_EQ(c["program"]["lines_changed"].get<int>(), 3);  // S on n0140, F on n0180, F16. back on n0510
+  const double feed_mm = std::floor(c["program"]["groups"][0]["written"]["v_f_mm_per_min"].get<double>() + 1e-9);
+  const std::string written = ReadText(cut / "program.ngc");
+  EXPECT_NE(written.find("n0180 G1 Z+1.6875 F" + FormatFixed(std::floor(feed_mm / 25.4 * 100 + 1e-9) / 100, 2) +
+                         " (start left circle zigzag)"),
+            std::string::npos)
+      << written;
+  EXPECT_NE(written.find("n0510 G1 Y+0.875 F16."), std::string::npos);
+  EXPECT_EQ(ReadText(program), before);
 }
 
 // A run folder of the demo part (saddle) as `formloop run` leaves it, with the nominal program, and an
