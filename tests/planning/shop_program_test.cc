@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <numbers>
@@ -49,8 +50,10 @@ std::vector<std::string> Lines(const std::string& text) {
 std::set<std::size_t> ChangedLines(const std::string& before, const std::string& after) {
   std::vector<std::string> a = Lines(before), b;
   for (const std::string& l : Lines(after)) {
-    if (l.find("formloop optimise cutting: parent sha256") == std::string::npos &&
-        l.find("(coefficient set ") == std::string::npos) {
+    std::string lower = l;  // Fanuc comments are upper case
+    for (char& c : lower) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    if (lower.find("formloop optimise cutting: parent sha256") == std::string::npos &&
+        lower.find("(coefficient set ") == std::string::npos) {
       b.push_back(l);
     }
   }
@@ -280,6 +283,53 @@ TEST(ShopProgram, PublicLinuxCncProgramKeepsRs274sCanonicalPath) {
   EXPECT_NE(canon.find("SET_SPINDLE_SPEED(0, " + FeedWord(r->spindle_rpm) + ".0000)"), std::string::npos);
   std::printf("[shop] linuxcnc_cds.ngc: %zu canonical moves unchanged, %zu at F%s in/min, %zu at F16.0, S%s\n",
               canon_feeds.size(), at_new, FormatFixed(feed_in, 2).c_str(), at_old, FeedWord(r->spindle_rpm).c_str());
+}
+
+// A Fanuc shop program: O number, '%' lines, numbers without a decimal point in least increments
+// (Y10000 = 10 mm on IS-B) inside a G91 section, an R-form arc. The edit keeps its spelling.
+TEST(ShopProgram, FanucProgramWithLeastIncrementsIsEditedInItsOwnSpelling) {
+  const std::string text =
+      "%\n"
+      "O1000 (SHOP)\n"
+      "G21 G90 G17 G94\n"
+      "G0 X0. Y0. Z5. S3000 M3\n"
+      "G1 Z-2. F200.\n"
+      "N100 G1 X20. F500.\n"
+      "N110 G3 X30. Y10. R10.\n"
+      "N120 G91 G1 Y10000\n"
+      "N130 G90 G1 X0. Y0.\n"
+      "G0 Z5.\n"
+      "M30\n"
+      "%\n";
+  const EditableProgram p = EditableProgram::Parse(text, "fanuc", "shop.nc", ProgramReading::kShopProgram).value();
+  std::vector<double> lengths;
+  for (const ProgramLine& l : p.lines()) {
+    if (l.number >= 100) lengths.push_back(p.MoveLengthMm(static_cast<std::size_t>(l.move)));
+  }
+  ASSERT_EQ(lengths.size(), 4u);
+  EXPECT_NEAR(lengths[1], 5 * kPi, 1e-9);
+  EXPECT_NEAR(lengths[2], 10, 1e-12);  // Y10000 in least increments of 0.001 mm
+  EXPECT_NEAR(lengths[3], std::hypot(30.0, 20.0), 1e-9);
+  std::vector<BlockEngagement> e;
+  for (long n : {100, 110, 120, 130}) e.push_back({n, 5, 1});
+  auto r = OptimiseCuttingProgram(text, "fanuc", "shop.nc", e, S1(), {.seed = 3});
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(ChangedLines(text, r->program), (std::set<std::size_t>{4, 6}));
+  const double feed = std::floor(r->groups[0].state.v_f_mm_per_min + 1e-9);
+  const std::vector<std::string> out = Lines(r->program);
+  EXPECT_EQ(out[7], "N100 G1 X20. F" + FeedWord(feed)) << r->program;  // line 6 after 2 header comments
+  nc::ReaderOptions fanuc;
+  fanuc.dialect = nc::GcodeDialect::kFanuc;
+  const auto read = nc::ReadProgramPath(r->program, fanuc, "out.nc");
+  ASSERT_TRUE(read.ok()) << read.status().ToString();
+  int cuts = 0;
+  for (const nc::PathMove& m : read->moves) {
+    if (m.motion != nc::Motion::kRapid && m.end.z() == -2 && m.start.z() == -2) {
+      EXPECT_EQ(m.feed, feed);
+      ++cuts;
+    }
+  }
+  EXPECT_EQ(cuts, 4);
 }
 
 TEST(ShopProgram, WhatCannotBeEditedSafelyIsRefusedWithItsLine) {
