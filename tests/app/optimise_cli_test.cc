@@ -17,7 +17,6 @@
 #include "app/part.h"
 #include "core/json_io.h"
 #include "core/number_text.h"
-#include "core/point_io.h"
 #include "core/random.h"
 #include "metrology/probe.h"
 #include "nc-gen/moves.h"

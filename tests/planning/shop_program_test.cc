@@ -18,7 +18,7 @@
 
 #include "core/atomic_file.h"
 #include "core/json_io.h"
-#include "core/point_io.h"
+#include "core/number_text.h"
 #include "nc-gen/gcode_reader.h"
 #include "planning/cutting_program.h"
 #include "planning/program_edit.h"
