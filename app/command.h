@@ -55,5 +55,7 @@ void AddReportCommand(CLI::App& root, CommandAction* action);
 void AddLinkCommand(CLI::App& root, CommandAction* action);
 // `optimise cutting|feed|program` (app/cmd_optimise.cc).
 void AddOptimiseCommand(CLI::App& root, CommandAction* action);
+// `tune` (app/cmd_tune.cc).
+void AddTuneCommand(CLI::App& root, CommandAction* action);
 
 }  // namespace formloop::app

@@ -39,6 +39,7 @@ int main(int argc, char** argv) {
   app::AddReportCommand(app, &action);
   app::AddLinkCommand(app, &action);
   app::AddOptimiseCommand(app, &action);
+  app::AddTuneCommand(app, &action);
 
   try {
     app.parse(argc, argv);
