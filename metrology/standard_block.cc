@@ -63,6 +63,7 @@ Result<StandardBlock> ReadStandardBlockCsv(const std::filesystem::path& path) {
   std::map<std::pair<int, double>, long> seen;
   while (std::getline(in, line)) {
     ++line_no;
+    if (line_no == 1 && line.rfind("\xEF\xBB\xBF", 0) == 0) line.erase(0, 3);  // UTF-8 byte-order mark
     const std::string trimmed = Trim(line);
     if (trimmed.empty() || trimmed[0] == '#') continue;
     const auto cells = SplitComma(trimmed);

@@ -53,6 +53,9 @@ std::string Join(const std::vector<std::string>& v, const std::string& sep = ", 
 
 Json OptionalNumber(const std::optional<double>& v) { return v ? Json(*v) : Json(nullptr); }
 
+// A length for a message: binary noise below a picometre dropped ("0.025", not "0.025000000000000355").
+std::string MmText(double mm) { return Json(std::round(mm * 1e9) / 1e9).dump(); }
+
 // One pass: block, dimensions, offset problem, strategy, rounding, limits.
 Result<TuneAttempt> Attempt(const MeasurementModel& model, const std::map<int, MeasuredPoint>& measured,
                             const fs::path& block_path, const std::map<std::string, double>& previous,
@@ -106,8 +109,8 @@ Result<TuneAttempt> Attempt(const MeasurementModel& model, const std::map<int, M
         if (!mp.measured[a]) continue;
         const double off = it->second.position(a) - mp.reference_mm(a);
         if (std::abs(off) > model.max_point_deviation_mm) {
-          invalid.push_back("point " + std::to_string(ref.id) + ", axis " + "XYZ"[a] + ": " + Json(off).dump() +
-                            " mm from its reference (limit " + Json(model.max_point_deviation_mm).dump() + " mm)");
+          invalid.push_back("point " + std::to_string(ref.id) + ", axis " + "XYZ"[a] + ": " + MmText(off) +
+                            " mm from its reference (limit " + MmText(model.max_point_deviation_mm) + " mm)");
         }
         p.position(a) = it->second.position(a);
       }
@@ -292,9 +295,9 @@ std::vector<std::string> BlockReasons(const MeasurementModel& model, const TuneA
   if (at.average && at.average->alarm && !options.accept_alarm) {
     std::vector<std::string> cells;
     for (const auto& c : at.average->cells) {
-      if (c.alarm) cells.push_back(model.offsets[c.offset].id + " " + Json(c.value_mm).dump() + " mm");
+      if (c.alarm) cells.push_back(model.offsets[c.offset].id + " " + MmText(c.value_mm) + " mm");
     }
-    reasons.push_back("ALARM: " + Join(cells) + " beyond the allowed maximum " + Json(model.average.max_mm).dump() +
+    reasons.push_back("ALARM: " + Join(cells) + " beyond the allowed maximum " + MmText(model.average.max_mm) +
                       " mm; send only after the operator confirms (--accept-alarm)");
   }
   return reasons;
@@ -419,6 +422,12 @@ Status PrepareOutput(const TuneOptions& options, fs::path* partial) {
                                                            options.out.string() + "'",
                               "choose an output folder that holds none of the inputs");
     }
+  }
+  const fs::path cwd = fs::weakly_canonical(fs::current_path(ec), ec);
+  if (const auto rel = cwd.lexically_relative(out); !rel.empty() && *rel.begin() != "..") {
+    return Status::BadInput(Where{.field = "--out"}, "the output folder '" + options.out.string() +
+                                                         "' contains the current directory",
+                            "choose an output folder outside the current directory's path");
   }
   if (fs::exists(options.out, ec)) {
     if (!options.force) {
