@@ -35,7 +35,8 @@ Status Tune(const TuneArgs& args) {
   o.current_offsets = args.offsets;
   o.out = args.out;
   if (!tuning::ParseStrategy(args.strategy, &o.strategy)) {
-    return Status::BadInput(Where{.field = "--strategy"}, "value '" + args.strategy + "' is unknown", "write wls or average");
+    return Status::BadInput(Where{.field = "--strategy"}, "value '" + args.strategy + "' is unknown",
+                            "write wls or average");
   }
   o.confirm = args.confirm;
   o.accept_alarm = args.accept_alarm;
@@ -70,16 +71,22 @@ void AddTuneCommand(CLI::App& root, CommandAction* action) {
   cmd->add_option("--block", args->block, "standard-block CSV of this session: axis,reference_mm,measured_mm[,t]");
   cmd->add_option("--recheck-block", args->recheck_block,
                   "the standard block probed again after a RECHECK: recompute and decide SAFE or INTERVENE");
-  cmd->add_option("--offsets", args->offsets,
-                  "current offsets read at acquisition start (formloop.current_offsets); without it nothing can be written");
+  cmd->add_option(
+      "--offsets", args->offsets,
+      "current offsets read at acquisition start (formloop.current_offsets); without it nothing can be written");
   cmd->add_option("--strategy", args->strategy, "wls (weighted bounded solve) or average (seed-004 averaging)")
       ->capture_default_str();
-  cmd->add_option("--out", args->out, "output folder (must not exist; --force replaces an earlier tune output)")->required();
-  cmd->add_flag("--confirm", args->confirm, "the operator confirms the whole set (only a SAFE plan is marked confirmed)");
-  cmd->add_option("--acknowledge-ng", args->acknowledge, "dimension ids the operator accepts will stay NG")->delimiter(',');
-  cmd->add_flag("--accept-alarm", args->accept_alarm, "average strategy: send values beyond the allowed maximum (logged)");
+  cmd->add_option("--out", args->out, "output folder (must not exist; --force replaces an earlier tune output)")
+      ->required();
+  cmd->add_flag("--confirm", args->confirm,
+                "the operator confirms the whole set (only a SAFE plan is marked confirmed)");
+  cmd->add_option("--acknowledge-ng", args->acknowledge, "dimension ids the operator accepts will stay NG")
+      ->delimiter(',');
+  cmd->add_flag("--accept-alarm", args->accept_alarm,
+                "average strategy: send values beyond the allowed maximum (logged)");
   cmd->add_option("--session", args->session, "session text for the plan (default: part code and points file name)");
-  cmd->add_option("--measured-at", args->measured_at, "measurement time, ISO 8601 with time zone, for the report records");
+  cmd->add_option("--measured-at", args->measured_at,
+                  "measurement time, ISO 8601 with time zone, for the report records");
   cmd->add_flag("--force", args->force, "replace an earlier tune output in --out");
   cmd->callback([args, action] { *action = [args] { return Tune(*args); }; });
 }

@@ -36,10 +36,14 @@ struct MethodName {
   const char* name;
 };
 constexpr MethodName kMethodNames[] = {
-    {DimensionMethod::kDefault, "DEFAULT"},    {DimensionMethod::kTwoPoint, "TWO_POINT"},
-    {DimensionMethod::kFaceToFace, "FACE_TO_FACE"}, {DimensionMethod::kCircle, "CIRCLE"},
-    {DimensionMethod::kCylinder, "CYLINDER"},  {DimensionMethod::kPoint, "POINT"},
-    {DimensionMethod::kPlane, "PLANE"},        {DimensionMethod::kAxis, "AXIS"},
+    {DimensionMethod::kDefault, "DEFAULT"},
+    {DimensionMethod::kTwoPoint, "TWO_POINT"},
+    {DimensionMethod::kFaceToFace, "FACE_TO_FACE"},
+    {DimensionMethod::kCircle, "CIRCLE"},
+    {DimensionMethod::kCylinder, "CYLINDER"},
+    {DimensionMethod::kPoint, "POINT"},
+    {DimensionMethod::kPlane, "PLANE"},
+    {DimensionMethod::kAxis, "AXIS"},
     {DimensionMethod::kLine, "LINE"},
 };
 
@@ -58,26 +62,37 @@ class Evaluator {
 
   Result<double> Value() const {
     switch (def_.type) {
-      case DimensionType::kLength: return Length();
+      case DimensionType::kLength:
+        return Length();
       case DimensionType::kDiameter:
-      case DimensionType::kRadius: return Size();
-      case DimensionType::kPosition: return Position();
-      case DimensionType::kTruePosition: return TruePosition();
-      case DimensionType::kFlatness: return Flatness();
-      case DimensionType::kRoundness: return Roundness();
-      case DimensionType::kParallelism: return Parallelism();
-      case DimensionType::kPerpendicularity: return Perpendicularity();
-      case DimensionType::kCoaxiality: return Coaxiality();
-      case DimensionType::kSymmetry: return Symmetry();
-      case DimensionType::kAngle: return Angle();
+      case DimensionType::kRadius:
+        return Size();
+      case DimensionType::kPosition:
+        return Position();
+      case DimensionType::kTruePosition:
+        return TruePosition();
+      case DimensionType::kFlatness:
+        return Flatness();
+      case DimensionType::kRoundness:
+        return Roundness();
+      case DimensionType::kParallelism:
+        return Parallelism();
+      case DimensionType::kPerpendicularity:
+        return Perpendicularity();
+      case DimensionType::kCoaxiality:
+        return Coaxiality();
+      case DimensionType::kSymmetry:
+        return Symmetry();
+      case DimensionType::kAngle:
+        return Angle();
     }
     return Status::Internal("unknown dimension type");
   }
 
  private:
   Status Missing(const std::string& role, int have, int need, const std::string& what) const {
-    return Status::BadInput("dimension " + def_.id + ": role " + role + " has " + std::to_string(have) +
-                            " point(s); " + what + " needs at least " + std::to_string(need) +
+    return Status::BadInput("dimension " + def_.id + ": role " + role + " has " + std::to_string(have) + " point(s); " +
+                            what + " needs at least " + std::to_string(need) +
                             " (DIM_INSUFFICIENT_POINTS). Fix: list the probe points of " + role +
                             " in the model and measure them");
   }
@@ -370,18 +385,25 @@ bool ParseDimensionMethod(const std::string& text, DimensionMethod* method) {
 std::vector<DimensionMethod> MethodsOf(DimensionType type) {
   using M = DimensionMethod;
   switch (type) {
-    case DimensionType::kLength: return {M::kTwoPoint, M::kFaceToFace};
+    case DimensionType::kLength:
+      return {M::kTwoPoint, M::kFaceToFace};
     case DimensionType::kDiameter:
-    case DimensionType::kRadius: return {M::kCircle, M::kCylinder};
+    case DimensionType::kRadius:
+      return {M::kCircle, M::kCylinder};
     case DimensionType::kPosition:
-    case DimensionType::kTruePosition: return {M::kPoint, M::kCircle};
-    case DimensionType::kPerpendicularity: return {M::kPlane, M::kAxis};
-    case DimensionType::kAngle: return {M::kPlane, M::kLine};
+    case DimensionType::kTruePosition:
+      return {M::kPoint, M::kCircle};
+    case DimensionType::kPerpendicularity:
+      return {M::kPlane, M::kAxis};
+    case DimensionType::kAngle:
+      return {M::kPlane, M::kLine};
     case DimensionType::kFlatness:
     case DimensionType::kParallelism:
-    case DimensionType::kSymmetry: return {M::kPlane};
+    case DimensionType::kSymmetry:
+      return {M::kPlane};
     case DimensionType::kRoundness:
-    case DimensionType::kCoaxiality: return {M::kCircle};
+    case DimensionType::kCoaxiality:
+      return {M::kCircle};
   }
   return {};
 }
@@ -400,8 +422,10 @@ bool IsZoneType(DimensionType type) {
     case DimensionType::kParallelism:
     case DimensionType::kPerpendicularity:
     case DimensionType::kCoaxiality:
-    case DimensionType::kSymmetry: return true;
-    default: return false;
+    case DimensionType::kSymmetry:
+      return true;
+    default:
+      return false;
   }
 }
 
@@ -416,13 +440,17 @@ std::vector<std::string> RequiredRoles(DimensionType type, DimensionMethod metho
     case DimensionType::kPosition:
     case DimensionType::kTruePosition:
     case DimensionType::kFlatness:
-    case DimensionType::kRoundness: return {"FEATURE"};
-    case DimensionType::kParallelism: return {"DATUM", "FEATURE"};
+    case DimensionType::kRoundness:
+      return {"FEATURE"};
+    case DimensionType::kParallelism:
+      return {"DATUM", "FEATURE"};
     case DimensionType::kPerpendicularity:
       return method == DimensionMethod::kAxis ? std::vector<std::string>{"DATUM", "LEVEL_1", "LEVEL_2"}
                                               : std::vector<std::string>{"DATUM", "FEATURE"};
-    case DimensionType::kCoaxiality: return {"DATUM_1", "FEATURE_1"};
-    case DimensionType::kSymmetry: return {"WALL_A", "WALL_B", "DATUM_A", "DATUM_B"};
+    case DimensionType::kCoaxiality:
+      return {"DATUM_1", "FEATURE_1"};
+    case DimensionType::kSymmetry:
+      return {"WALL_A", "WALL_B", "DATUM_A", "DATUM_B"};
     case DimensionType::kAngle:
       return method == DimensionMethod::kLine ? std::vector<std::string>{"LINE_A", "LINE_B"}
                                               : std::vector<std::string>{"FACE_A", "FACE_B"};

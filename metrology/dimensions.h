@@ -106,7 +106,7 @@ struct ProbedPoint {
   int id = 0;
   Eigen::Vector3d position = Eigen::Vector3d::Zero();  // mm, process WCS, block-corrected
   Eigen::Vector3d approach = Eigen::Vector3d::Zero();  // probing direction (into the material); 0 = unknown
-  std::array<bool, 3> measured = {true, true, true};  // axes the probe measured (the others are nominal)
+  std::array<bool, 3> measured = {true, true, true};   // axes the probe measured (the others are nominal)
   double u_mm = 0;                                     // standard uncertainty on each measured axis
 };
 
@@ -133,9 +133,9 @@ struct DimensionDefinition {
 Result<double> EvaluateDimensionValue(const DimensionDefinition& definition, const std::vector<RolePoints>& roles);
 
 struct DimensionEvaluation {
-  double value = 0;          // mm (deg for ANGLE)
-  double u = 0;              // standard uncertainty, same unit
-  double expanded_u = 0;     // U = 2u
+  double value = 0;       // mm (deg for ANGLE)
+  double u = 0;           // standard uncertainty, same unit
+  double expanded_u = 0;  // U = 2u
   int points = 0;
 };
 Result<DimensionEvaluation> EvaluateDimension(const DimensionDefinition& definition,
@@ -151,8 +151,8 @@ struct Tolerance {
 struct Judgement {
   double deviation = 0;  // value − nominal
   bool ok = false;
-  double excess = 0;      // max(0, dev − u, l − dev)
-  bool ambiguous = false; // a limit lies within U of the value
+  double excess = 0;       // max(0, dev − u, l − dev)
+  bool ambiguous = false;  // a limit lies within U of the value
 };
 inline constexpr double kJudgementEpsilonMm = 1e-9;
 Judgement Judge(const Tolerance& tolerance, double value, double expanded_u = 0);

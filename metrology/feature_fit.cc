@@ -18,8 +18,7 @@ void Complete(const Eigen::Vector3d& axis, Eigen::Vector3d* e1, Eigen::Vector3d*
 
 }  // namespace
 
-Result<CircleFit> FitCircle(const std::vector<Eigen::Vector2d>& points, double step_tolerance_mm,
-                            int max_iterations) {
+Result<CircleFit> FitCircle(const std::vector<Eigen::Vector2d>& points, double step_tolerance_mm, int max_iterations) {
   const int n = static_cast<int>(points.size());
   if (n < 3) {
     return Status::BadInput("circle fit: " + std::to_string(n) +
@@ -97,7 +96,8 @@ Result<PlaneFit> FitPlane(const std::vector<Eigen::Vector3d>& points) {
 
 Result<LineFit2d> FitLine2d(const std::vector<Eigen::Vector2d>& points) {
   const int n = static_cast<int>(points.size());
-  if (n < 2) return Status::BadInput("line fit: " + std::to_string(n) + " points (DIM_INSUFFICIENT_POINTS); a line needs 2");
+  if (n < 2)
+    return Status::BadInput("line fit: " + std::to_string(n) + " points (DIM_INSUFFICIENT_POINTS); a line needs 2");
   LineFit2d fit;
   for (const auto& p : points) fit.centroid += p;
   fit.centroid /= n;

@@ -34,9 +34,12 @@ const char* kAxisNames[] = {"X", "Y", "Z"};
 
 const char* BlockModeName(BlockMode mode) {
   switch (mode) {
-    case BlockMode::kNearest: return "NEAREST";
-    case BlockMode::kLinear: return "LINEAR";
-    case BlockMode::kScale: return "SCALE";
+    case BlockMode::kNearest:
+      return "NEAREST";
+    case BlockMode::kLinear:
+      return "LINEAR";
+    case BlockMode::kScale:
+      return "SCALE";
   }
   return "?";
 }
@@ -69,10 +72,14 @@ Result<StandardBlock> ReadStandardBlockCsv(const std::filesystem::path& path) {
     const auto cells = SplitComma(trimmed);
     if (!have_header) {
       for (int i = 0; i < static_cast<int>(cells.size()); ++i) {
-        if (cells[i] == "axis") col_axis = i;
-        else if (cells[i] == "reference_mm") col_ref = i;
-        else if (cells[i] == "measured_mm") col_meas = i;
-        else if (cells[i] == "t") col_t = i;
+        if (cells[i] == "axis")
+          col_axis = i;
+        else if (cells[i] == "reference_mm")
+          col_ref = i;
+        else if (cells[i] == "measured_mm")
+          col_meas = i;
+        else if (cells[i] == "t")
+          col_t = i;
         else {
           return Status::BadInput(Where{.file = block.source, .line = line_no, .field = cells[i]}, "unknown column",
                                   "the block file has columns axis,reference_mm,measured_mm and optionally t");
@@ -93,9 +100,12 @@ Result<StandardBlock> ReadStandardBlockCsv(const std::filesystem::path& path) {
     }
     CalibrationPoint p;
     const std::string& axis = cells[col_axis];
-    if (axis == "X" || axis == "x") p.axis = 0;
-    else if (axis == "Y" || axis == "y") p.axis = 1;
-    else if (axis == "Z" || axis == "z") p.axis = 2;
+    if (axis == "X" || axis == "x")
+      p.axis = 0;
+    else if (axis == "Y" || axis == "y")
+      p.axis = 1;
+    else if (axis == "Z" || axis == "z")
+      p.axis = 2;
     else {
       return Status::BadInput(Where{.file = block.source, .line = line_no, .field = "axis"},
                               "value '" + axis + "' is not an axis", "write X, Y or Z");
@@ -214,7 +224,9 @@ AxisCorrection BlockCorrector::ErrorAt(int axis, double p) const {
       out.error_mm = a.error_mm[lo] + w * (a.error_mm[hi] - a.error_mm[lo]);
       return out;
     }
-    case BlockMode::kScale: out.error_mm = a.alpha + a.beta * p; return out;
+    case BlockMode::kScale:
+      out.error_mm = a.alpha + a.beta * p;
+      return out;
   }
   return out;
 }

@@ -42,7 +42,7 @@ const char* BlockModeName(BlockMode mode);
 bool ParseBlockMode(const std::string& text, BlockMode* mode);  // "NEAREST" | "LINEAR" | "SCALE"
 
 struct CalibrationPoint {
-  int axis = 0;  // 0 = X, 1 = Y, 2 = Z
+  int axis = 0;             // 0 = X, 1 = Y, 2 = Z
   double reference_mm = 0;  // R_j (certificate)
   double measured_mm = 0;   // M_j (this run)
   std::optional<double> time_s;
@@ -87,9 +87,9 @@ class BlockCorrector {
 };
 
 struct BlockAge {
-  bool checked = false;   // both the block and the points carry times
-  double max_gap_s = 0;   // largest |t_block − t_point|
-  bool stale = false;     // max_gap_s > max_age_s
+  bool checked = false;  // both the block and the points carry times
+  double max_gap_s = 0;  // largest |t_block − t_point|
+  bool stale = false;    // max_gap_s > max_age_s
 };
 BlockAge CheckBlockAge(const StandardBlock& block, const std::vector<double>& point_times_s, double max_age_s);
 

@@ -17,10 +17,14 @@ Status Bad(const std::string& source, const std::string& field, const std::strin
 }
 
 Status ParseAxis(const std::string& source, const std::string& field, const std::string& text, int* axis) {
-  if (text == "X") *axis = 0;
-  else if (text == "Y") *axis = 1;
-  else if (text == "Z") *axis = 2;
-  else return Bad(source, field, "value '" + text + "' is not an axis", "write \"X\", \"Y\" or \"Z\"");
+  if (text == "X")
+    *axis = 0;
+  else if (text == "Y")
+    *axis = 1;
+  else if (text == "Z")
+    *axis = 2;
+  else
+    return Bad(source, field, "value '" + text + "' is not an axis", "write \"X\", \"Y\" or \"Z\"");
   return Status::Ok();
 }
 
@@ -36,7 +40,8 @@ Status Vector3(const std::string& source, const std::string& field, const Json& 
 }
 
 Status ParsePoint(const Json& j, const std::string& source, double default_u, ModelPoint* p) {
-  if (!j.is_object()) return Bad(source, "points[]", "expected an object", "write {\"id\": 1, \"reference_mm\": [...]}");
+  if (!j.is_object())
+    return Bad(source, "points[]", "expected an object", "write {\"id\": 1, \"reference_mm\": [...]}");
   long long id = 0;
   JsonFields f(j, source, "points[].");
   FL_RETURN_IF_ERROR(f.Integer("id", &id, 1, 2000));
@@ -61,10 +66,15 @@ Status ParsePoint(const Json& j, const std::string& source, double default_u, Mo
   FL_RETURN_IF_ERROR(g.OptionalString("axes", &axes));
   p->measured = {false, false, false};
   for (char c : axes) {
-    if (c == 'X') p->measured[0] = true;
-    else if (c == 'Y') p->measured[1] = true;
-    else if (c == 'Z') p->measured[2] = true;
-    else return Bad(source, prefix + "axes", "value '" + axes + "' has a letter that is not X, Y or Z", "e.g. \"X\" or \"XYZ\"");
+    if (c == 'X')
+      p->measured[0] = true;
+    else if (c == 'Y')
+      p->measured[1] = true;
+    else if (c == 'Z')
+      p->measured[2] = true;
+    else
+      return Bad(source, prefix + "axes", "value '" + axes + "' has a letter that is not X, Y or Z",
+                 "e.g. \"X\" or \"XYZ\"");
   }
   if (axes.empty()) return Bad(source, prefix + "axes", "is empty", "list at least one measured axis");
   p->u_mm = default_u;
@@ -83,10 +93,15 @@ Status ParseOffset(const Json& j, const std::string& source, ModelOffset* o) {
                                    "delta_max_mm", "limit_mm", "baseline_mm", "step_limit_mm", "weight"}));
   std::string kind;
   FL_RETURN_IF_ERROR(f.String("kind", &kind));
-  if (kind == "TOOL_RADIUS_WEAR") o->kind = OffsetKind::kToolRadiusWear;
-  else if (kind == "TOOL_LENGTH_WEAR") o->kind = OffsetKind::kToolLengthWear;
-  else if (kind == "WORK_OFFSET") o->kind = OffsetKind::kWorkOffset;
-  else return Bad(source, prefix + "kind", "value '" + kind + "' is unknown", "write TOOL_RADIUS_WEAR, TOOL_LENGTH_WEAR or WORK_OFFSET");
+  if (kind == "TOOL_RADIUS_WEAR")
+    o->kind = OffsetKind::kToolRadiusWear;
+  else if (kind == "TOOL_LENGTH_WEAR")
+    o->kind = OffsetKind::kToolLengthWear;
+  else if (kind == "WORK_OFFSET")
+    o->kind = OffsetKind::kWorkOffset;
+  else
+    return Bad(source, prefix + "kind", "value '" + kind + "' is unknown",
+               "write TOOL_RADIUS_WEAR, TOOL_LENGTH_WEAR or WORK_OFFSET");
   if (o->kind == OffsetKind::kWorkOffset) {
     FL_RETURN_IF_ERROR(f.String("wcs", &o->wcs));
     FL_RETURN_IF_ERROR(f.String("axis", &o->axis));
@@ -124,9 +139,26 @@ Status ParseDimension(const Json& j, const MeasurementModel& model, ModelDimensi
   if (d->id.empty()) return Bad(source, "dimensions[].id", "is empty", "give each dimension an id");
   const std::string prefix = "dimensions[" + d->id + "].";
   JsonFields f(j, source, prefix);
-  FL_RETURN_IF_ERROR(f.CheckKnown({"id", "name", "process", "type", "method", "axis", "nominal_mm", "tol_upper_mm",
-                                   "tol_lower_mm", "tolerance_mm", "nominal_deg", "tol_upper_deg", "tol_lower_deg",
-                                   "nominal_position_mm", "feature_axis", "weight", "mode", "target", "points", "k_row"}));
+  FL_RETURN_IF_ERROR(f.CheckKnown({"id",
+                                   "name",
+                                   "process",
+                                   "type",
+                                   "method",
+                                   "axis",
+                                   "nominal_mm",
+                                   "tol_upper_mm",
+                                   "tol_lower_mm",
+                                   "tolerance_mm",
+                                   "nominal_deg",
+                                   "tol_upper_deg",
+                                   "tol_lower_deg",
+                                   "nominal_position_mm",
+                                   "feature_axis",
+                                   "weight",
+                                   "mode",
+                                   "target",
+                                   "points",
+                                   "k_row"}));
   d->definition.id = d->id;
   FL_RETURN_IF_ERROR(f.OptionalString("name", &d->name));
   FL_RETURN_IF_ERROR(f.OptionalString("process", &d->process));
@@ -167,7 +199,8 @@ Status ParseDimension(const Json& j, const MeasurementModel& model, ModelDimensi
   d->angle = t == DimensionType::kAngle;
   d->tolerance.zone = zone;
   if (zone) {
-    for (const char* k : {"nominal_mm", "tol_upper_mm", "tol_lower_mm", "nominal_deg", "tol_upper_deg", "tol_lower_deg"}) {
+    for (const char* k :
+         {"nominal_mm", "tol_upper_mm", "tol_lower_mm", "nominal_deg", "tol_upper_deg", "tol_lower_deg"}) {
       if (f.Has(k)) {
         return Bad(source, prefix + k, type + " is a zone: its nominal is 0 and its band [0, t]",
                    "give only \"tolerance_mm\": t");
@@ -182,7 +215,8 @@ Status ParseDimension(const Json& j, const MeasurementModel& model, ModelDimensi
                  "give tol_upper and tol_lower as signed deviations");
     }
     const std::string unit = d->angle ? "_deg" : "_mm";
-    for (const char* k : {"nominal_mm", "tol_upper_mm", "tol_lower_mm", "nominal_deg", "tol_upper_deg", "tol_lower_deg"}) {
+    for (const char* k :
+         {"nominal_mm", "tol_upper_mm", "tol_lower_mm", "nominal_deg", "tol_upper_deg", "tol_lower_deg"}) {
       const std::string key = k;
       if (f.Has(key) && !key.ends_with(unit)) {
         return Bad(source, prefix + key, "this type's values are in " + std::string(d->angle ? "degrees" : "mm"),
@@ -205,24 +239,34 @@ Status ParseDimension(const Json& j, const MeasurementModel& model, ModelDimensi
       return Bad(source, prefix + "nominal_position_mm", "missing or not [u, v]",
                  "give the nominal position along the two axes normal to \"axis\"");
     }
-    d->definition.nominal_position = {j["nominal_position_mm"][0].get<double>(), j["nominal_position_mm"][1].get<double>()};
+    d->definition.nominal_position = {j["nominal_position_mm"][0].get<double>(),
+                                      j["nominal_position_mm"][1].get<double>()};
   } else if (f.Has("nominal_position_mm")) {
     return Bad(source, prefix + "nominal_position_mm", "only TRUE_POSITION takes a nominal position", "remove it");
   }
   FL_RETURN_IF_ERROR(f.OptionalNumber("weight", &d->weight, {.min = 0, .exclusive_min = true}));
   FL_RETURN_IF_ERROR(f.OptionalString("mode", &mode));
-  if (mode == "COMPENSATE") d->mode = DimensionMode::kCompensate;
-  else if (mode == "TOLERANCE_ONLY" || mode == "CHECK_ONLY") d->mode = DimensionMode::kToleranceOnly;
-  else if (mode == "IGNORE") d->mode = DimensionMode::kIgnore;
-  else return Bad(source, prefix + "mode", "value '" + mode + "' is unknown", "write COMPENSATE, TOLERANCE_ONLY or IGNORE");
+  if (mode == "COMPENSATE")
+    d->mode = DimensionMode::kCompensate;
+  else if (mode == "TOLERANCE_ONLY" || mode == "CHECK_ONLY")
+    d->mode = DimensionMode::kToleranceOnly;
+  else if (mode == "IGNORE")
+    d->mode = DimensionMode::kIgnore;
+  else
+    return Bad(source, prefix + "mode", "value '" + mode + "' is unknown",
+               "write COMPENSATE, TOLERANCE_ONLY or IGNORE");
   FL_RETURN_IF_ERROR(f.OptionalString("target", &target));
-  if (target == "NOMINAL") d->target = DimensionTarget::kNominal;
-  else if (target == "BAND_CENTRE") d->target = DimensionTarget::kBandCentre;
-  else return Bad(source, prefix + "target", "value '" + target + "' is unknown", "write NOMINAL or BAND_CENTRE");
+  if (target == "NOMINAL")
+    d->target = DimensionTarget::kNominal;
+  else if (target == "BAND_CENTRE")
+    d->target = DimensionTarget::kBandCentre;
+  else
+    return Bad(source, prefix + "target", "value '" + target + "' is unknown", "write NOMINAL or BAND_CENTRE");
 
   // Points and roles.
   if (!f.Has("points") || !j["points"].is_array() || j["points"].empty()) {
-    return Bad(source, prefix + "points", "missing or empty", "list the probe points as [{\"id\": 1, \"role\": \"WALL_A\"}, ...]");
+    return Bad(source, prefix + "points", "missing or empty",
+               "list the probe points as [{\"id\": 1, \"role\": \"WALL_A\"}, ...]");
   }
   std::set<std::string> roles;
   for (const auto& pj : j["points"]) {
@@ -240,8 +284,9 @@ Status ParseDimension(const Json& j, const MeasurementModel& model, ModelDimensi
     if (!metrology::RoleAccepted(t, d->definition.method, ref.role)) {
       std::string list;
       for (const auto& r : metrology::RequiredRoles(t, d->definition.method)) list += (list.empty() ? "" : ", ") + r;
-      return Bad(source, prefix + "points", "role '" + ref.role + "' does not belong to a " + type + " (" +
-                                                 metrology::DimensionMethodName(metrology::ResolvedMethod(t, d->definition.method)) + ")",
+      return Bad(source, prefix + "points",
+                 "role '" + ref.role + "' does not belong to a " + type + " (" +
+                     metrology::DimensionMethodName(metrology::ResolvedMethod(t, d->definition.method)) + ")",
                  "use the roles " + list + (t == DimensionType::kCoaxiality ? " (and DATUM_2, FEATURE_2, ...)" : ""));
     }
     roles.insert(ref.role);
@@ -254,7 +299,8 @@ Status ParseDimension(const Json& j, const MeasurementModel& model, ModelDimensi
   }
   // K row.
   if (f.Has("k_row")) {
-    if (!j["k_row"].is_object()) return Bad(source, prefix + "k_row", "expected an object", "write {\"offset id\": K, ...}");
+    if (!j["k_row"].is_object())
+      return Bad(source, prefix + "k_row", "expected an object", "write {\"offset id\": K, ...}");
     for (const auto& [key, value] : j["k_row"].items()) {
       if (model.OffsetIndex(key) < 0) {
         return Bad(source, prefix + "k_row." + key, "offset '" + key + "' is not in the model's offsets",
@@ -288,18 +334,24 @@ Status ParseDimension(const Json& j, const MeasurementModel& model, ModelDimensi
 
 const char* DimensionModeName(DimensionMode mode) {
   switch (mode) {
-    case DimensionMode::kCompensate: return "COMPENSATE";
-    case DimensionMode::kToleranceOnly: return "TOLERANCE_ONLY";
-    case DimensionMode::kIgnore: return "IGNORE";
+    case DimensionMode::kCompensate:
+      return "COMPENSATE";
+    case DimensionMode::kToleranceOnly:
+      return "TOLERANCE_ONLY";
+    case DimensionMode::kIgnore:
+      return "IGNORE";
   }
   return "?";
 }
 
 const char* OffsetKindName(OffsetKind kind) {
   switch (kind) {
-    case OffsetKind::kToolRadiusWear: return "TOOL_RADIUS_WEAR";
-    case OffsetKind::kToolLengthWear: return "TOOL_LENGTH_WEAR";
-    case OffsetKind::kWorkOffset: return "WORK_OFFSET";
+    case OffsetKind::kToolRadiusWear:
+      return "TOOL_RADIUS_WEAR";
+    case OffsetKind::kToolLengthWear:
+      return "TOOL_LENGTH_WEAR";
+    case OffsetKind::kWorkOffset:
+      return "WORK_OFFSET";
   }
   return "?";
 }
@@ -322,9 +374,9 @@ Result<MeasurementModel> ParseMeasurementModel(const Json& json, const std::stri
   MeasurementModel model;
   model.source = source;
   JsonFields f(json, source);
-  FL_RETURN_IF_ERROR(f.CheckKnown({"format", "version", "project", "part", "machine", "processes",
-                                   "point_uncertainty_mm", "max_point_deviation_mm", "points", "offsets",
-                                   "dimensions", "block", "solver", "average"}));
+  FL_RETURN_IF_ERROR(
+      f.CheckKnown({"format", "version", "project", "part", "machine", "processes", "point_uncertainty_mm",
+                    "max_point_deviation_mm", "points", "offsets", "dimensions", "block", "solver", "average"}));
   std::string format;
   FL_RETURN_IF_ERROR(f.String("format", &format));
   if (format != "formloop.measurement_model") {
@@ -348,7 +400,8 @@ Result<MeasurementModel> ParseMeasurementModel(const Json& json, const std::stri
   }
   std::set<std::string> processes;
   if (f.Has("processes")) {
-    if (!json["processes"].is_array()) return Bad(source, "processes", "expected an array", "write [{\"id\": \"OP10\"}, ...]");
+    if (!json["processes"].is_array())
+      return Bad(source, "processes", "expected an array", "write [{\"id\": \"OP10\"}, ...]");
     for (const auto& pj : json["processes"]) {
       JsonFields pf(pj, source, "processes[].");
       FL_RETURN_IF_ERROR(pf.CheckKnown({"id", "nc_program", "measuring_program", "tools", "wcs"}));
@@ -361,7 +414,8 @@ Result<MeasurementModel> ParseMeasurementModel(const Json& json, const std::stri
   }
   double default_u = 0.0005;
   FL_RETURN_IF_ERROR(f.OptionalNumber("point_uncertainty_mm", &default_u, {.min = 0}));
-  FL_RETURN_IF_ERROR(f.OptionalNumber("max_point_deviation_mm", &model.max_point_deviation_mm, {.min = 0, .exclusive_min = true}));
+  FL_RETURN_IF_ERROR(
+      f.OptionalNumber("max_point_deviation_mm", &model.max_point_deviation_mm, {.min = 0, .exclusive_min = true}));
 
   if (!f.Has("points") || !json["points"].is_array() || json["points"].empty()) {
     return Bad(source, "points", "missing or empty", "list the probe points with their reference coordinates");
@@ -373,8 +427,8 @@ Result<MeasurementModel> ParseMeasurementModel(const Json& json, const std::stri
       return Bad(source, "points[id " + std::to_string(p.id) + "]", "id is given twice", "give each point a unique id");
     }
     if (!p.process.empty() && !processes.empty() && !processes.count(p.process)) {
-      return Bad(source, "points[id " + std::to_string(p.id) + "].process", "process '" + p.process + "' is not in \"processes\"",
-                 "add the process or fix the name");
+      return Bad(source, "points[id " + std::to_string(p.id) + "].process",
+                 "process '" + p.process + "' is not in \"processes\"", "add the process or fix the name");
     }
     model.points.push_back(p);
   }
@@ -422,7 +476,8 @@ Result<MeasurementModel> ParseMeasurementModel(const Json& json, const std::stri
   if (solver) {
     FL_RETURN_IF_ERROR(solver->CheckKnown({"rho", "band_shrink"}));
     FL_RETURN_IF_ERROR(solver->OptionalNumber("rho", &model.solver.rho, {.min = 0, .exclusive_min = true}));
-    FL_RETURN_IF_ERROR(solver->OptionalNumber("band_shrink", &model.solver.band_shrink, {.min = 0, .max = 1, .exclusive_min = true}));
+    FL_RETURN_IF_ERROR(
+        solver->OptionalNumber("band_shrink", &model.solver.band_shrink, {.min = 0, .max = 1, .exclusive_min = true}));
   }
   FL_RETURN_IF_ERROR(f.Object("average", &average));
   if (average) {

@@ -2,8 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <map>
 #include <limits>
+#include <map>
 #include <numeric>
 #include <string>
 
@@ -48,9 +48,9 @@ Status OffsetProblem::Validate() const {
   FL_RETURN_IF_ERROR(FiniteVector(target_mm, dimension_ids, "target", "dimension"));
   for (int i = 0; i < n; ++i) {
     if (!(tol_lower_mm(i) < tol_upper_mm(i))) {
-      return Status::BadInput(Where{.field = "tol_lower_mm"}, "dimension " + dimension_ids[i] + ": lower tolerance " +
-                                                                  std::to_string(tol_lower_mm(i)) + " is not below upper " +
-                                                                  std::to_string(tol_upper_mm(i)),
+      return Status::BadInput(Where{.field = "tol_lower_mm"},
+                              "dimension " + dimension_ids[i] + ": lower tolerance " + std::to_string(tol_lower_mm(i)) +
+                                  " is not below upper " + std::to_string(tol_upper_mm(i)),
                               "give tolerances as signed deviations with tol_lower_mm < tol_upper_mm");
     }
     if (!(weight(i) > 0) || !std::isfinite(weight(i))) {
@@ -78,9 +78,10 @@ Status OffsetProblem::Validate() const {
   for (int j = 0; j < k.outerSize(); ++j) {
     for (Eigen::SparseMatrix<double>::InnerIterator it(k, j); it; ++it) {
       if (!std::isfinite(it.value())) {
-        return Status::BadInput(Where{.field = "k_row"}, "dimension " + dimension_ids[it.row()] + ", offset " +
-                                                             offset_ids[j] + ": coefficient is not finite",
-                                "give a finite K coefficient");
+        return Status::BadInput(
+            Where{.field = "k_row"},
+            "dimension " + dimension_ids[it.row()] + ", offset " + offset_ids[j] + ": coefficient is not finite",
+            "give a finite K coefficient");
       }
     }
   }
@@ -188,9 +189,7 @@ Result<RoundedOffsets> RoundOffsets(const OffsetProblem& p, const Eigen::VectorX
     for (int i = 0; i < n; ++i) f += w_t(i) * (t(i) - p.target_mm(i) * 1e3) * (t(i) - p.target_mm(i) * 1e3);
     return 0.5 * f;
   };
-  auto inside = [&](int j, double v) {
-    return v >= p.delta_min_mm(j) - 1e-12 && v <= p.delta_max_mm(j) + 1e-12;
-  };
+  auto inside = [&](int j, double v) { return v >= p.delta_min_mm(j) - 1e-12 && v <= p.delta_max_mm(j) + 1e-12; };
   out.delta_rounded_mm = out.delta_mm;
   out.rule.assign(k, "");
   std::vector<double> floor_v(k), ceil_v(k);
@@ -211,7 +210,8 @@ Result<RoundedOffsets> RoundOffsets(const OffsetProblem& p, const Eigen::VectorX
     double v = q * std::round(ratio);
     std::string rule = "nearest multiple of the resolution (halves away from zero)";
     if (!inside(j, v)) {
-      v = v > p.delta_max_mm(j) ? q * std::floor(p.delta_max_mm(j) / q + 1e-9) : q * std::ceil(p.delta_min_mm(j) / q - 1e-9);
+      v = v > p.delta_max_mm(j) ? q * std::floor(p.delta_max_mm(j) / q + 1e-9)
+                                : q * std::ceil(p.delta_min_mm(j) / q - 1e-9);
       rule = "largest multiple of the resolution inside [delta_min_mm, delta_max_mm]";
     }
     out.delta_rounded_mm(j) = v;
@@ -268,7 +268,8 @@ Result<RoundedOffsets> RoundOffsets(const OffsetProblem& p, const Eigen::VectorX
     if (m <= options.exhaustive_rounding_max) {
       for (long mask = 0; mask < (1L << m); ++mask) {
         Eigen::VectorXd candidate = out.delta_rounded_mm;
-        for (int b = 0; b < m; ++b) candidate(involved[b]) = (mask >> b) & 1 ? ceil_v[involved[b]] : floor_v[involved[b]];
+        for (int b = 0; b < m; ++b)
+          candidate(involved[b]) = (mask >> b) & 1 ? ceil_v[involved[b]] : floor_v[involved[b]];
         consider(candidate);
       }
     } else {
@@ -284,8 +285,8 @@ Result<RoundedOffsets> RoundOffsets(const OffsetProblem& p, const Eigen::VectorX
       for (int j : involved) {
         if (best(j) == out.delta_rounded_mm(j)) continue;
         out.rule[j] = std::string(best(j) < out.delta_mm(j) ? "floor" : "ceiling") +
-                               " of the continuous value instead of the nearest, to keep " + broken_list +
-                               " within tolerance (smallest objective among the feasible floor/ceiling choices)";
+                      " of the continuous value instead of the nearest, to keep " + broken_list +
+                      " within tolerance (smallest objective among the feasible floor/ceiling choices)";
       }
       out.delta_rounded_mm = best;
     } else {
@@ -297,7 +298,6 @@ Result<RoundedOffsets> RoundOffsets(const OffsetProblem& p, const Eigen::VectorX
   for (int i = 0; i < n; ++i) out.predicted_ok[i] = InBand(out.predicted_mm(i), p.tol_lower_mm(i), p.tol_upper_mm(i));
   return out;
 }
-
 
 Result<OffsetSolution> SolveOffsets(const OffsetProblem& p, const OffsetSolveOptions& options) {
   FL_ASSIGN_OR_RETURN(const PenaltyForm form, BuildPenaltyForm(p, options));
@@ -352,8 +352,10 @@ Result<OffsetSolution> SolveOffsets(const OffsetProblem& p, const OffsetSolveOpt
         for (int c = 0; c < kk; ++c) {
           if (std::abs(kernel(c, v)) <= 1e-9 * scale) continue;
           involved[c] = 1;
-          if (first < 0) first = c;
-          else parent[Root(parent, c)] = Root(parent, first);
+          if (first < 0)
+            first = c;
+          else
+            parent[Root(parent, c)] = Root(parent, first);
         }
       }
       std::map<int, std::vector<std::string>> groups;

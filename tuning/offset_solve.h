@@ -65,8 +65,8 @@ struct OffsetProblem {
 };
 
 struct OffsetSolveOptions {
-  double rho = 1e3;               // penalty on the equality e = K·c + t (µm units)
-  double band_shrink = 1.0;       // β ∈ (0, 1]: aim inside the band, not at its edge
+  double rho = 1e3;                  // penalty on the equality e = K·c + t (µm units)
+  double band_shrink = 1.0;          // β ∈ (0, 1]: aim inside the band, not at its edge
   double reach_tolerance_um = 1e-3;  // |r_eq| above this: NOT_REACHABLE
   int exhaustive_rounding_max = 10;  // offsets on broken dimensions up to which every floor/ceil mix is tried
   BoundedLsqOptions lsq;
@@ -75,11 +75,11 @@ struct OffsetSolveOptions {
 
 // The rounded change of §5.1 for a continuous change δ (from the solve or the averaging strategy).
 struct RoundedOffsets {
-  Eigen::VectorXd delta_mm;                // k: the continuous δ rounded from
-  Eigen::VectorXd delta_rounded_mm;        // k: δq
-  std::vector<std::string> rule;           // k: how δq came about
-  Eigen::VectorXd predicted_mm;            // n: e + K·δq, the predicted deviation after the change
-  std::vector<bool> predicted_ok;          // n: inside [l, u] (ε = 1e-9 mm)
+  Eigen::VectorXd delta_mm;                    // k: the continuous δ rounded from
+  Eigen::VectorXd delta_rounded_mm;            // k: δq
+  std::vector<std::string> rule;               // k: how δq came about
+  Eigen::VectorXd predicted_mm;                // n: e + K·δq, the predicted deviation after the change
+  std::vector<bool> predicted_ok;              // n: inside [l, u] (ε = 1e-9 mm)
   std::vector<std::string> ng_after_rounding;  // ids OK with δ but NG with δq (no feasible repair)
 };
 // Offsets with δmin = δmax keep that value; offsets no dimension depends on (zero K column) get 0.
@@ -87,12 +87,12 @@ Result<RoundedOffsets> RoundOffsets(const OffsetProblem& problem, const Eigen::V
                                     const OffsetSolveOptions& options = {});
 
 struct OffsetSolution {
-  std::vector<std::string> dimension_ids, offset_ids;  // copies of the problem's, for reports
-  Eigen::VectorXd t_mm;              // n: where each dimension lands (continuous solution)
-  Eigen::VectorXd r_eq_mm;           // n: e − K·c − t
-  std::vector<bool> not_reachable;   // n
-  RoundedOffsets rounded;            // δ = −c and its rounding
-  int k_rank = 0;                                 // numerical rank of K over the solved offsets
+  std::vector<std::string> dimension_ids, offset_ids;       // copies of the problem's, for reports
+  Eigen::VectorXd t_mm;                                     // n: where each dimension lands (continuous solution)
+  Eigen::VectorXd r_eq_mm;                                  // n: e − K·c − t
+  std::vector<bool> not_reachable;                          // n
+  RoundedOffsets rounded;                                   // δ = −c and its rounding
+  int k_rank = 0;                                           // numerical rank of K over the solved offsets
   std::vector<std::vector<std::string>> indistinguishable;  // offset groups K cannot tell apart
   std::vector<std::string> fixed_offsets, zero_offsets;     // removed before solving
   BoundedLsqReport solver;

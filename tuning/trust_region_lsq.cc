@@ -1,6 +1,7 @@
 #include "tuning/trust_region_lsq.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <complex>
 #include <limits>
@@ -67,8 +68,8 @@ class Structured {
     sep_.resize(nt_);
     for (int j = 0; j < nt_; ++j) {
       for (ColMatrix::InnerIterator it(a_, kc_ + j); it; ++it) {
-        Entry e{static_cast<int>(it.row()), it.value(), ac_rows_.outerIndexPtr()[it.row() + 1] >
-                                                           ac_rows_.outerIndexPtr()[it.row()]};
+        Entry e{static_cast<int>(it.row()), it.value(),
+                ac_rows_.outerIndexPtr()[it.row() + 1] > ac_rows_.outerIndexPtr()[it.row()]};
         sep_[j].push_back(e);
         in_sep[it.row()] = 1;
       }
@@ -84,6 +85,7 @@ class Structured {
   int cols() const { return n_; }
   int coupled() const { return kc_; }
   int separable() const { return nt_; }
+  int factorizations() const { return factorizations_; }
   const std::vector<int>& order() const { return order_; }
   const ColMatrix& a() const { return a_; }
   const VectorXd& atb() const { return atb_; }
@@ -98,6 +100,7 @@ class Structured {
   // Factorises the Schur complement for scaling d and diagonal C. False when it is not positive
   // definite (or a separable pivot vanishes).
   bool Factor(const VectorXd& d, const VectorXd& c) {
+    ++factorizations_;
     d_ = d;
     c_ = c;
     tt_.resize(nt_);
@@ -181,7 +184,7 @@ class Structured {
     }
   }
 
-  int m_, n_, kc_ = 0, nt_ = 0;
+  int m_, n_, kc_ = 0, nt_ = 0, factorizations_ = 0;
   std::vector<int> order_;  // order_[new column] = original column
   ColMatrix a_;
   RowMatrix ac_rows_;
@@ -313,8 +316,10 @@ Eigen::Vector2d SolveTrustRegion2d(const Eigen::Matrix2d& b, const Eigen::Vector
     // A few Newton steps on dφ/dθ sharpen a root the eigenvalue solver left inexact.
     for (int k = 0; k < 3; ++k) {
       const double cs = std::cos(theta), sn = std::sin(theta);
-      const double d1 = delta * (-a1 * sn + a2 * cs) + delta * delta * ((b22 - b11) * sn * cs + b12 * (cs * cs - sn * sn));
-      const double d2 = delta * (-a1 * cs - a2 * sn) + delta * delta * ((b22 - b11) * (cs * cs - sn * sn) - 4 * b12 * sn * cs);
+      const double d1 =
+          delta * (-a1 * sn + a2 * cs) + delta * delta * ((b22 - b11) * sn * cs + b12 * (cs * cs - sn * sn));
+      const double d2 =
+          delta * (-a1 * cs - a2 * sn) + delta * delta * ((b22 - b11) * (cs * cs - sn * sn) - 4 * b12 * sn * cs);
       if (!(d2 > 0)) break;
       theta -= d1 / d2;
     }
@@ -380,11 +385,16 @@ Status BoundedLsqOptions::Validate() const {
 
 const char* BoundedLsqStatusName(BoundedLsqStatus status) {
   switch (status) {
-    case BoundedLsqStatus::kUnconstrained: return "UNCONSTRAINED";
-    case BoundedLsqStatus::kGtol: return "GTOL";
-    case BoundedLsqStatus::kFtol: return "FTOL";
-    case BoundedLsqStatus::kXtol: return "XTOL";
-    case BoundedLsqStatus::kMaxIter: return "MAX_ITER";
+    case BoundedLsqStatus::kUnconstrained:
+      return "UNCONSTRAINED";
+    case BoundedLsqStatus::kGtol:
+      return "GTOL";
+    case BoundedLsqStatus::kFtol:
+      return "FTOL";
+    case BoundedLsqStatus::kXtol:
+      return "XTOL";
+    case BoundedLsqStatus::kMaxIter:
+      return "MAX_ITER";
   }
   return "?";
 }
@@ -425,7 +435,8 @@ Result<BoundedLsqReport> SolveBoundedLsq(const Eigen::SparseMatrix<double>& a_in
     }
   }
   for (int i = 0; i < m; ++i) {
-    if (!std::isfinite(b_in(i))) return Status::BadInput("bounded least squares: b(" + std::to_string(i) + ") is not finite");
+    if (!std::isfinite(b_in(i)))
+      return Status::BadInput("bounded least squares: b(" + std::to_string(i) + ") is not finite");
   }
   for (int j = 0; j < n; ++j) {
     if (std::isnan(lb_in(j)) || std::isnan(ub_in(j)) || !(lb_in(j) < ub_in(j))) {
@@ -434,6 +445,10 @@ Result<BoundedLsqReport> SolveBoundedLsq(const Eigen::SparseMatrix<double>& a_in
     }
   }
 
+  using Clock = std::chrono::steady_clock;
+  auto since = [](Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); };
+  auto phase = Clock::now();
+  BoundedLsqReport report;
   Structured problem(a_in, b_in);
   const auto& order = problem.order();
   VectorXd b = b_in, lb(n), ub(n);
@@ -445,11 +460,15 @@ Result<BoundedLsqReport> SolveBoundedLsq(const Eigen::SparseMatrix<double>& a_in
   const double gtol_abs = options.gtol * std::max(1.0, problem.atb().lpNorm<Eigen::Infinity>());
   const int max_iterations = options.max_iterations > 0 ? options.max_iterations : 200 * n;
 
-  BoundedLsqReport report;
   report.separable_columns = problem.separable();
+  report.timing.setup_s = since(phase);
+  phase = Clock::now();
   const VectorXd ones = VectorXd::Ones(n), zeros = VectorXd::Zero(n);
 
-  auto residual = [&](const VectorXd& x) { VectorXd r = a * x - b; return r; };
+  auto residual = [&](const VectorXd& x) {
+    VectorXd r = a * x - b;
+    return r;
+  };
   auto finish = [&](VectorXd x) -> BoundedLsqReport {
     const VectorXd r = residual(x);
     const VectorXd g = a.transpose() * r;
@@ -481,6 +500,8 @@ Result<BoundedLsqReport> SolveBoundedLsq(const Eigen::SparseMatrix<double>& a_in
   for (int j = 0; j < n; ++j) inside = inside && x_u(j) >= lb(j) && x_u(j) <= ub(j);
   if (inside) {
     report.status = BoundedLsqStatus::kUnconstrained;
+    report.timing.start_s = since(phase);
+    report.timing.factorizations = problem.factorizations();
     return finish(x_u);
   }
 
@@ -516,6 +537,8 @@ Result<BoundedLsqReport> SolveBoundedLsq(const Eigen::SparseMatrix<double>& a_in
   double delta = x.cwiseQuotient(v.cwiseSqrt()).norm();
   if (!(delta > 0) || !std::isfinite(delta)) delta = 1;
 
+  report.timing.start_s = since(phase);
+  phase = Clock::now();
   report.status = BoundedLsqStatus::kMaxIter;
   int iteration = 0;
   for (; iteration < max_iterations; ++iteration) {
@@ -654,6 +677,8 @@ Result<BoundedLsqReport> SolveBoundedLsq(const Eigen::SparseMatrix<double>& a_in
     }
   }
   report.iterations = iteration;
+  report.timing.iterations_s = since(phase);
+  phase = Clock::now();
 
   // Active-set polish: fix the components the gradient holds against a bound, solve the rest exactly.
   if (options.polish && report.status != BoundedLsqStatus::kMaxIter) {
@@ -715,7 +740,10 @@ Result<BoundedLsqReport> SolveBoundedLsq(const Eigen::SparseMatrix<double>& a_in
       if (report.polished) break;
     }
   }
-  return finish(x);
+  BoundedLsqReport out = finish(x);
+  out.timing.polish_s = since(phase);
+  out.timing.factorizations = problem.factorizations();
+  return out;
 }
 
 }  // namespace formloop::tuning

@@ -66,9 +66,9 @@
 namespace formloop::tuning {
 
 struct BoundedLsqOptions {
-  double gtol = 1e-15;   // GTOL: o ≤ gtol·max(1, ‖Aᵀb‖∞)
-  double ftol = 1e-12;   // FTOL: ared < ftol·f on a step with ratio > ¼
-  double xtol = 1e-12;   // XTOL: ‖s‖ < xtol·(xtol + ‖x‖)
+  double gtol = 1e-15;     // GTOL: o ≤ gtol·max(1, ‖Aᵀb‖∞)
+  double ftol = 1e-12;     // FTOL: ared < ftol·f on a step with ratio > ¼
+  double xtol = 1e-12;     // XTOL: ‖s‖ < xtol·(xtol + ‖x‖)
   int max_iterations = 0;  // 0: 200·N (spec §4.3)
   bool polish = true;      // the active-set polish of the header (off only to study the bare method)
   // Components within this fraction of their range (absolute when a bound is infinite: times
@@ -81,16 +81,24 @@ enum class BoundedLsqStatus { kUnconstrained, kGtol, kFtol, kXtol, kMaxIter };
 const char* BoundedLsqStatusName(BoundedLsqStatus status);
 
 struct BoundedLsqReport {
-  Eigen::VectorXd x;        // N, the solution (inside [lb, ub]; on a bound where polished)
-  double cost = 0;          // f(x) = ½‖A·x − b‖²
-  double optimality = 0;    // o = ‖v ⊙ g‖∞ at x (0 when x is polished and KKT)
-  int iterations = 0;       // trust-region iterations (accepted and rejected steps)
+  Eigen::VectorXd x;      // N, the solution (inside [lb, ub]; on a bound where polished)
+  double cost = 0;        // f(x) = ½‖A·x − b‖²
+  double optimality = 0;  // o = ‖v ⊙ g‖∞ at x (0 when x is polished and KKT)
+  int iterations = 0;     // trust-region iterations (accepted and rejected steps)
   BoundedLsqStatus status = BoundedLsqStatus::kGtol;
-  std::vector<int> active;  // N: −1 at the lower bound, +1 at the upper, 0 free
-  bool polished = false;    // the active-set polish replaced the last iterate
+  std::vector<int> active;    // N: −1 at the lower bound, +1 at the upper, 0 free
+  bool polished = false;      // the active-set polish replaced the last iterate
   int separable_columns = 0;  // eliminated columns (diagonal block of AᵀA)
   int cg_directions = 0;      // Newton directions that came from conjugate gradients
-  nlohmann::json ToJson() const;  // everything but x
+  // Where the time went (wall clock; for bench/tuning_bench.cc, not serialised so outputs stay identical).
+  struct Timing {
+    double setup_s = 0;       // structure detection, reordering, the constant part of the Schur complement
+    double start_s = 0;       // unconstrained solution and the strictly feasible start
+    double iterations_s = 0;  // trust-region iterations
+    double polish_s = 0;      // active-set polish and the final report
+    int factorizations = 0;   // Schur complement assemblies + Cholesky factorisations
+  } timing;
+  nlohmann::json ToJson() const;  // everything but x and timing
 };
 
 // Errors: sizes that disagree, a non-finite entry, lb_i ≥ ub_i (fixed variables are removed by the

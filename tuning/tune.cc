@@ -32,13 +32,15 @@ Result<std::map<int, MeasuredPoint>> ReadMeasuredPoints(const fs::path& path) {
   for (std::size_t i = 0; i < set.size(); ++i) {
     const auto id = set.ids[i];
     if (id < 1 || id > 2000) {
-      return Status::BadInput(Where{.file = path.string(), .field = "id"}, "point id " + std::to_string(id) + " is outside 1..2000",
+      return Status::BadInput(Where{.file = path.string(), .field = "id"},
+                              "point id " + std::to_string(id) + " is outside 1..2000",
                               "use the model's probe point ids");
     }
     MeasuredPoint p{set.points[i], std::nullopt};
     if (set.has_times()) p.time_s = set.times_s[i];
     if (!out.emplace(static_cast<int>(id), p).second) {
-      return Status::BadInput(Where{.file = path.string(), .field = "id"}, "point id " + std::to_string(id) + " appears twice",
+      return Status::BadInput(Where{.file = path.string(), .field = "id"},
+                              "point id " + std::to_string(id) + " appears twice",
                               "keep one measurement per point (the collector de-duplicates by id)");
     }
   }
@@ -70,12 +72,17 @@ Result<TuneAttempt> Attempt(const MeasurementModel& model, const std::map<int, M
     FL_ASSIGN_OR_RETURN(at.corrector, metrology::BlockCorrector::Build(block, model.block_mode));
     at.block_file = block_path.string();
     at.block_age = metrology::CheckBlockAge(block, times, model.block_max_age_s);
-    Json line = {{"step", "block"}, {"file", at.block_file}, {"correction", at.corrector->ToJson()},
-                 {"age_checked", at.block_age.checked}, {"max_gap_s", at.block_age.max_gap_s},
-                 {"max_age_s", model.block_max_age_s}, {"stale", at.block_age.stale}};
+    Json line = {{"step", "block"},
+                 {"file", at.block_file},
+                 {"correction", at.corrector->ToJson()},
+                 {"age_checked", at.block_age.checked},
+                 {"max_gap_s", at.block_age.max_gap_s},
+                 {"max_age_s", model.block_max_age_s},
+                 {"stale", at.block_age.stale}};
     if (!at.block_age.checked) line["note"] = "the block or the points carry no times: the block's age was not checked";
     audit->push_back(line);
-    if (!at.block_age.checked) log::Warn("standard block: no times in the block or the points file, its age is not checked");
+    if (!at.block_age.checked)
+      log::Warn("standard block: no times in the block or the points file, its age is not checked");
   } else {
     audit->push_back({{"step", "block"}, {"file", nullptr}, {"note", "no standard-block correction"}});
   }
@@ -143,8 +150,12 @@ Result<TuneAttempt> Attempt(const MeasurementModel& model, const std::map<int, M
         r.judgement = metrology::Judge(d.tolerance, e->value, e->expanded_u);
       }
     }
-    Json line = {{"step", "dimension"}, {"id", d.id}, {"type", metrology::DimensionTypeName(d.definition.type)},
-                 {"mode", DimensionModeName(d.mode)}, {"points", r.point_ids}, {"state", r.state}};
+    Json line = {{"step", "dimension"},
+                 {"id", d.id},
+                 {"type", metrology::DimensionTypeName(d.definition.type)},
+                 {"mode", DimensionModeName(d.mode)},
+                 {"points", r.point_ids},
+                 {"state", r.state}};
     if (r.state == "MEASURED") {
       line["value"] = r.evaluation.value;
       line["u"] = r.evaluation.u;
@@ -185,7 +196,9 @@ Result<TuneAttempt> Attempt(const MeasurementModel& model, const std::map<int, M
   const int n = static_cast<int>(p.dimension_ids.size());
   p.k.resize(n, k);
   p.k.setFromTriplets(triplets.begin(), triplets.end());
-  auto vec = [](const std::vector<double>& v) { return Eigen::VectorXd(Eigen::Map<const Eigen::VectorXd>(v.data(), v.size())); };
+  auto vec = [](const std::vector<double>& v) {
+    return Eigen::VectorXd(Eigen::Map<const Eigen::VectorXd>(v.data(), v.size()));
+  };
   p.deviation_mm = vec(e);
   p.tol_lower_mm = vec(lo);
   p.tol_upper_mm = vec(hi);
@@ -211,16 +224,23 @@ Result<TuneAttempt> Attempt(const MeasurementModel& model, const std::map<int, M
       r.not_reachable = at.wls->not_reachable[row];
       r.r_eq_mm = at.wls->r_eq_mm(row);
     }
-    Json line = {{"step", "solve"}, {"strategy", "wls"}, {"rho", model.solver.rho},
-                 {"band_shrink", model.solver.band_shrink}, {"dimensions", p.dimension_ids}, {"offsets", p.offset_ids},
+    Json line = {{"step", "solve"},
+                 {"strategy", "wls"},
+                 {"rho", model.solver.rho},
+                 {"band_shrink", model.solver.band_shrink},
+                 {"dimensions", p.dimension_ids},
+                 {"offsets", p.offset_ids},
                  {"deviation_mm", std::vector<double>(p.deviation_mm.data(), p.deviation_mm.data() + n)},
                  {"result", at.wls->ToJson()}};
     audit->push_back(line);
   } else if (n > 0) {
     FL_ASSIGN_OR_RETURN(at.average, AverageWearCompensation(p, model.average));
     FL_ASSIGN_OR_RETURN(at.rounded, RoundOffsets(p, at.average->delta_mm, model.solver));
-    audit->push_back({{"step", "solve"}, {"strategy", "average"}, {"skip_band_mm", model.average.skip_band_mm},
-                      {"max_mm", model.average.max_mm}, {"result", at.average->ToJson(p)}});
+    audit->push_back({{"step", "solve"},
+                      {"strategy", "average"},
+                      {"skip_band_mm", model.average.skip_band_mm},
+                      {"max_mm", model.average.max_mm},
+                      {"result", at.average->ToJson(p)}});
   } else {
     at.rounded.delta_mm = delta;
     at.rounded.delta_rounded_mm = delta;
@@ -228,10 +248,14 @@ Result<TuneAttempt> Attempt(const MeasurementModel& model, const std::map<int, M
     audit->push_back({{"step", "solve"}, {"note", "no COMPENSATE dimension was measured: nothing to solve"}});
   }
   for (int j = 0; j < k; ++j) {
-    audit->push_back({{"step", "rounding"}, {"offset", model.offsets[j].id}, {"delta_mm", at.rounded.delta_mm(j)},
+    audit->push_back({{"step", "rounding"},
+                      {"offset", model.offsets[j].id},
+                      {"delta_mm", at.rounded.delta_mm(j)},
                       {"resolution_mm", model.offsets[j].resolution_mm},
-                      {"delta_min_mm", model.offsets[j].delta_min_mm}, {"delta_max_mm", model.offsets[j].delta_max_mm},
-                      {"rounded_mm", at.rounded.delta_rounded_mm(j)}, {"rule", at.rounded.rule[j]}});
+                      {"delta_min_mm", model.offsets[j].delta_min_mm},
+                      {"delta_max_mm", model.offsets[j].delta_max_mm},
+                      {"rounded_mm", at.rounded.delta_rounded_mm(j)},
+                      {"rule", at.rounded.rule[j]}});
   }
   // Predictions after the rounded change, for every judged dimension with a K row.
   for (DimensionResult& r : at.dimensions) {
@@ -245,9 +269,14 @@ Result<TuneAttempt> Attempt(const MeasurementModel& model, const std::map<int, M
   }
   at.changes = CheckOffsetLimits(model, at.rounded.delta_mm, at.rounded.delta_rounded_mm, at.rounded.rule, previous);
   for (const auto& c : at.changes) {
-    Json line = {{"step", "limits"}, {"offset", c.offset->id}, {"previous_mm", OptionalNumber(c.previous_mm)},
-                 {"delta_mm", c.delta_mm}, {"baseline_mm", c.offset->baseline_mm}, {"limit_mm", c.offset->limit_mm},
-                 {"step_limit_mm", OptionalNumber(c.offset->step_limit_mm)}, {"checked", c.checked},
+    Json line = {{"step", "limits"},
+                 {"offset", c.offset->id},
+                 {"previous_mm", OptionalNumber(c.previous_mm)},
+                 {"delta_mm", c.delta_mm},
+                 {"baseline_mm", c.offset->baseline_mm},
+                 {"limit_mm", c.offset->limit_mm},
+                 {"step_limit_mm", OptionalNumber(c.offset->step_limit_mm)},
+                 {"checked", c.checked},
                  {"within_limits", c.within_limits}};
     if (c.checked) line["new_mm"] = c.new_mm;
     if (!c.violation.empty()) line["violation"] = c.violation;
@@ -261,8 +290,9 @@ std::vector<std::string> BlockReasons(const MeasurementModel& model, const TuneA
                                       bool have_previous, std::vector<std::string>* stay_ng) {
   std::vector<std::string> reasons;
   if (!have_previous) {
-    reasons.push_back("current offsets unknown: pass --offsets CURRENT.json with the values read from the controller "
-                      "at acquisition start");
+    reasons.push_back(
+        "current offsets unknown: pass --offsets CURRENT.json with the values read from the controller "
+        "at acquisition start");
   }
   if (at.block_age.stale) {
     reasons.push_back("BLOCK_STALE: the standard block was probed " + Json(at.block_age.max_gap_s).dump() +
@@ -290,7 +320,8 @@ std::vector<std::string> BlockReasons(const MeasurementModel& model, const TuneA
   if (!unacknowledged.empty()) {
     reasons.push_back("dimension(s) " + Join(unacknowledged) +
                       " will stay NG after the change (NOT_REACHABLE within the offset bounds or NG after rounding): "
-                      "writing needs --acknowledge-ng " + Join(unacknowledged, ","));
+                      "writing needs --acknowledge-ng " +
+                      Join(unacknowledged, ","));
   }
   if (at.average && at.average->alarm && !options.accept_alarm) {
     std::vector<std::string> cells;
@@ -307,22 +338,23 @@ Json DimensionRecord(const DimensionResult& r, const TuneReport& report, const M
                      const TuneOptions& options, const std::string& block_mode) {
   const ModelDimension& d = *r.dimension;
   const bool measured = r.state == "MEASURED";
-  Json j = {{"id", d.id},
-            {"name", d.name},
-            {"type", metrology::DimensionTypeName(d.definition.type)},
-            {"method", metrology::DimensionMethodName(metrology::ResolvedMethod(d.definition.type, d.definition.method))},
-            {"unit", d.angle ? "deg" : "mm"},
-            {"mode", DimensionModeName(d.mode)},
-            {"state", r.state},
-            {"measured_at", options.measured_at.empty() ? Json(nullptr) : Json(options.measured_at)},
-            {"part_code", model.part_code},
-            {"machine_serial", model.machine_serial},
-            {"session", report.plan.session},
-            {"nominal", d.tolerance.nominal},
-            {"tol_upper", d.tolerance.upper},
-            {"tol_lower", d.tolerance.lower},
-            {"points", r.point_ids.size()},
-            {"block_mode", block_mode}};
+  Json j = {
+      {"id", d.id},
+      {"name", d.name},
+      {"type", metrology::DimensionTypeName(d.definition.type)},
+      {"method", metrology::DimensionMethodName(metrology::ResolvedMethod(d.definition.type, d.definition.method))},
+      {"unit", d.angle ? "deg" : "mm"},
+      {"mode", DimensionModeName(d.mode)},
+      {"state", r.state},
+      {"measured_at", options.measured_at.empty() ? Json(nullptr) : Json(options.measured_at)},
+      {"part_code", model.part_code},
+      {"machine_serial", model.machine_serial},
+      {"session", report.plan.session},
+      {"nominal", d.tolerance.nominal},
+      {"tol_upper", d.tolerance.upper},
+      {"tol_lower", d.tolerance.lower},
+      {"points", r.point_ids.size()},
+      {"block_mode", block_mode}};
   if (measured) {
     j["actual"] = r.evaluation.value;
     j["deviation"] = r.judgement.deviation;
@@ -404,7 +436,9 @@ std::string SummaryText(const TuneReport& report, const MeasurementModel& model,
   }
   if (!any) s << "  none\n";
   s << "write plan: " << PlanStatusName(report.plan.status)
-    << (report.plan.confirmed ? ", confirmed" : (report.plan.status == PlanStatus::kSafe ? ", waiting for confirmation (--confirm)" : ""))
+    << (report.plan.confirmed
+            ? ", confirmed"
+            : (report.plan.status == PlanStatus::kSafe ? ", waiting for confirmation (--confirm)" : ""))
     << "\n";
   for (const auto& reason : report.plan.blocked_reasons) s << "  - " << reason << "\n";
   return s.str();
@@ -413,20 +447,22 @@ std::string SummaryText(const TuneReport& report, const MeasurementModel& model,
 Status PrepareOutput(const TuneOptions& options, fs::path* partial) {
   std::error_code ec;
   const fs::path out = fs::weakly_canonical(options.out, ec);
-  for (const fs::path& input : {options.model, options.points, options.block, options.recheck_block, options.current_offsets}) {
+  for (const fs::path& input :
+       {options.model, options.points, options.block, options.recheck_block, options.current_offsets}) {
     if (input.empty()) continue;
     const fs::path in = fs::weakly_canonical(input, ec);
     const auto rel = in.lexically_relative(out);
     if (!rel.empty() && *rel.begin() != "..") {
-      return Status::BadInput(Where{.field = "--out"}, "input '" + input.string() + "' lies inside the output folder '" +
-                                                           options.out.string() + "'",
-                              "choose an output folder that holds none of the inputs");
+      return Status::BadInput(
+          Where{.field = "--out"},
+          "input '" + input.string() + "' lies inside the output folder '" + options.out.string() + "'",
+          "choose an output folder that holds none of the inputs");
     }
   }
   const fs::path cwd = fs::weakly_canonical(fs::current_path(ec), ec);
   if (const auto rel = cwd.lexically_relative(out); !rel.empty() && *rel.begin() != "..") {
-    return Status::BadInput(Where{.field = "--out"}, "the output folder '" + options.out.string() +
-                                                         "' contains the current directory",
+    return Status::BadInput(Where{.field = "--out"},
+                            "the output folder '" + options.out.string() + "' contains the current directory",
                             "choose an output folder outside the current directory's path");
   }
   if (fs::exists(options.out, ec)) {
@@ -437,8 +473,9 @@ Status PrepareOutput(const TuneOptions& options, fs::path* partial) {
     auto previous = ReadJsonFile(options.out / "report.json");
     if (!previous.ok() || !previous->is_object() || previous->value("format", "") != kReportFormat) {
       return Status::BadInput(Where{.field = "--out"},
-                              "'" + options.out.string() + "' does not hold a formloop tune output (no report.json of format " +
-                                  kReportFormat + "); formloop replaces only what it wrote",
+                              "'" + options.out.string() +
+                                  "' does not hold a formloop tune output (no report.json of format " + kReportFormat +
+                                  "); formloop replaces only what it wrote",
                               "choose another folder");
     }
   }
@@ -446,7 +483,8 @@ Status PrepareOutput(const TuneOptions& options, fs::path* partial) {
   *partial += ".partial";
   if (fs::exists(*partial, ec)) {
     if (!fs::exists(*partial / kPartialMarker, ec)) {
-      return Status::BadInput(Where{.field = "--out"}, "'" + partial->string() + "' exists and was not made by formloop tune",
+      return Status::BadInput(Where{.field = "--out"},
+                              "'" + partial->string() + "' exists and was not made by formloop tune",
                               "move it away or choose another output folder");
     }
     fs::remove_all(*partial, ec);
@@ -461,15 +499,20 @@ Status PrepareOutput(const TuneOptions& options, fs::path* partial) {
 const char* StrategyName(Strategy strategy) { return strategy == Strategy::kWls ? "wls" : "average"; }
 
 bool ParseStrategy(const std::string& text, Strategy* strategy) {
-  if (text == "wls") *strategy = Strategy::kWls;
-  else if (text == "average") *strategy = Strategy::kAverage;
-  else return false;
+  if (text == "wls")
+    *strategy = Strategy::kWls;
+  else if (text == "average")
+    *strategy = Strategy::kAverage;
+  else
+    return false;
   return true;
 }
 
 Status TuneOptions::Validate() const {
-  if (model.empty()) return Status::BadInput(Where{.field = "--model"}, "no measurement model given", "pass --model M.json");
-  if (points.empty()) return Status::BadInput(Where{.field = "--points"}, "no probe points given", "pass --points P.csv");
+  if (model.empty())
+    return Status::BadInput(Where{.field = "--model"}, "no measurement model given", "pass --model M.json");
+  if (points.empty())
+    return Status::BadInput(Where{.field = "--points"}, "no probe points given", "pass --points P.csv");
   if (out.empty()) return Status::BadInput(Where{.field = "--out"}, "no output folder given", "pass --out DIR");
   if (!recheck_block.empty() && recheck_block == block) {
     return Status::BadInput(Where{.field = "--recheck-block"}, "is the same file as --block",
@@ -482,7 +525,8 @@ Json TuneReport::SummaryJson() const {
   const TuneAttempt& at = final_attempt();
   Json writes = Json::array();
   for (const auto& c : at.changes) {
-    if (c.delta_mm != 0) writes.push_back({{"offset", c.offset->id}, {"delta_mm", c.delta_mm}, {"within_limits", c.within_limits}});
+    if (c.delta_mm != 0)
+      writes.push_back({{"offset", c.offset->id}, {"delta_mm", c.delta_mm}, {"within_limits", c.within_limits}});
   }
   return {{"status", PlanStatusName(plan.status)},
           {"confirmed", plan.confirmed},
@@ -515,10 +559,9 @@ Result<TuneReport> RunTune(const TuneOptions& options) {
   TuneReport report;
   report.model = shared_model;
   report.plan.strategy = StrategyName(options.strategy);
-  report.plan.session = options.session.empty()
-                            ? (model.part_code.empty() ? std::string("part") : model.part_code) + " " +
-                                  options.points.filename().string()
-                            : options.session;
+  report.plan.session = options.session.empty() ? (model.part_code.empty() ? std::string("part") : model.part_code) +
+                                                      " " + options.points.filename().string()
+                                                : options.session;
   std::set<int> used;
   for (const auto& d : model.dimensions) {
     for (const auto& p : d.points) used.insert(p.id);
@@ -551,7 +594,8 @@ Result<TuneReport> RunTune(const TuneOptions& options) {
   // The ladder.
   bool beyond = have_previous && !AllWithinLimits(report.first.changes);
   if (beyond && !options.recheck_block.empty()) {
-    report.audit.push_back({{"step", "ladder"}, {"decision", "RECHECK"},
+    report.audit.push_back({{"step", "ladder"},
+                            {"decision", "RECHECK"},
                             {"reason", "an offset is beyond its limit; recomputing with the re-probed block"},
                             {"recheck_block", options.recheck_block.string()}});
     auto second = Attempt(model, measured, options.recheck_block, previous, options, &report.audit);
@@ -563,7 +607,8 @@ Result<TuneReport> RunTune(const TuneOptions& options) {
     report.recheck = std::move(second).value();
     beyond = !AllWithinLimits(report.recheck->changes);
   } else if (!options.recheck_block.empty()) {
-    report.audit.push_back({{"step", "ladder"}, {"note", "--recheck-block not used: every offset is within its limits"}});
+    report.audit.push_back(
+        {{"step", "ladder"}, {"note", "--recheck-block not used: every offset is within its limits"}});
   }
   const TuneAttempt& at = report.final_attempt();
   std::vector<std::string> stay_ng;
@@ -597,17 +642,23 @@ Result<TuneReport> RunTune(const TuneOptions& options) {
   }
   plan.confirmed = options.confirm && plan.status == PlanStatus::kSafe;
   if (options.accept_alarm && at.average && at.average->alarm) {
-    report.audit.push_back({{"step", "alarm"}, {"accepted_by_operator", true},
+    report.audit.push_back({{"step", "alarm"},
+                            {"accepted_by_operator", true},
                             {"note", "values beyond the allowed maximum sent on the operator's confirmation"}});
   }
-  report.audit.push_back({{"step", "status"}, {"status", PlanStatusName(plan.status)},
-                          {"blocked_reasons", plan.blocked_reasons}, {"will_stay_ng", stay_ng},
+  report.audit.push_back({{"step", "status"},
+                          {"status", PlanStatusName(plan.status)},
+                          {"blocked_reasons", plan.blocked_reasons},
+                          {"will_stay_ng", stay_ng},
                           {"acknowledged", plan.not_reachable_acknowledged}});
-  report.audit.push_back({{"step", "confirmation"}, {"requested", options.confirm}, {"confirmed", plan.confirmed},
+  report.audit.push_back({{"step", "confirmation"},
+                          {"requested", options.confirm},
+                          {"confirmed", plan.confirmed},
                           {"note", plan.confirmed ? "operator confirmed the whole set (--confirm)"
                                                   : (options.confirm ? "not confirmed: the plan is not SAFE"
                                                                      : "waiting for the operator's confirmation")}});
-  for (const auto& r : at.dimensions) report.ng_count += r.state != "IGNORED" && !(r.state == "MEASURED" && r.judgement.ok);
+  for (const auto& r : at.dimensions)
+    report.ng_count += r.state != "IGNORED" && !(r.state == "MEASURED" && r.judgement.ok);
 
   // Outputs.
   const std::string block_mode = at.corrector ? metrology::BlockModeName(at.corrector->mode()) : "NONE";
@@ -615,10 +666,14 @@ Result<TuneReport> RunTune(const TuneOptions& options) {
   for (const auto& r : at.dimensions) dims.push_back(DimensionRecord(r, report, model, options, block_mode));
   Json offsets = Json::array();
   for (const auto& c : at.changes) {
-    offsets.push_back({{"offset", c.offset->id}, {"kind", OffsetKindName(c.offset->kind)},
-                       {"delta_continuous_mm", c.delta_continuous_mm}, {"delta_mm", c.delta_mm}, {"rule", c.rule},
+    offsets.push_back({{"offset", c.offset->id},
+                       {"kind", OffsetKindName(c.offset->kind)},
+                       {"delta_continuous_mm", c.delta_continuous_mm},
+                       {"delta_mm", c.delta_mm},
+                       {"rule", c.rule},
                        {"previous_mm", OptionalNumber(c.previous_mm)},
-                       {"new_mm", c.previous_mm ? Json(c.new_mm) : Json(nullptr)}, {"within_limits", c.within_limits}});
+                       {"new_mm", c.previous_mm ? Json(c.new_mm) : Json(nullptr)},
+                       {"within_limits", c.within_limits}});
   }
   Json report_json = {{"format", kReportFormat},
                       {"version", 1},
@@ -653,7 +708,9 @@ Result<TuneReport> RunTune(const TuneOptions& options) {
   }
   fs::remove_all(options.out, ec);
   fs::rename(partial, options.out, ec);
-  if (ec) return Status::IoError("cannot rename '" + partial.string() + "' to '" + options.out.string() + "': " + ec.message());
+  if (ec)
+    return Status::IoError("cannot rename '" + partial.string() + "' to '" + options.out.string() +
+                           "': " + ec.message());
   log::Info("tune: {} dimension(s) NG; write plan {}{}", report.ng_count, PlanStatusName(plan.status),
             plan.confirmed ? " (confirmed)" : "");
   return report;

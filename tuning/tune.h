@@ -47,19 +47,19 @@ const char* StrategyName(Strategy strategy);
 bool ParseStrategy(const std::string& text, Strategy* strategy);  // "wls" | "average"
 
 struct TuneOptions {
-  std::filesystem::path model;             // required
-  std::filesystem::path points;            // required (CSV)
-  std::filesystem::path block;             // optional standard-block CSV of this session
-  std::filesystem::path recheck_block;     // optional: the block probed again after a RECHECK
-  std::filesystem::path current_offsets;   // optional: without it nothing can be written (BLOCKED)
-  std::filesystem::path out;               // required
+  std::filesystem::path model;            // required
+  std::filesystem::path points;           // required (CSV)
+  std::filesystem::path block;            // optional standard-block CSV of this session
+  std::filesystem::path recheck_block;    // optional: the block probed again after a RECHECK
+  std::filesystem::path current_offsets;  // optional: without it nothing can be written (BLOCKED)
+  std::filesystem::path out;              // required
   Strategy strategy = Strategy::kWls;
-  bool confirm = false;                    // the operator confirms the whole set of a SAFE plan
-  bool accept_alarm = false;               // average: send a value beyond the allowed maximum (logged)
-  std::vector<std::string> acknowledge_ng; // dimensions the operator accepts will stay NG
-  std::string session;                     // free text; default "<part code> <points file name>"
-  std::string measured_at;                 // ISO 8601 with time zone, copied to the report records
-  bool force = false;                      // replace an earlier tune output in `out`
+  bool confirm = false;                     // the operator confirms the whole set of a SAFE plan
+  bool accept_alarm = false;                // average: send a value beyond the allowed maximum (logged)
+  std::vector<std::string> acknowledge_ng;  // dimensions the operator accepts will stay NG
+  std::string session;                      // free text; default "<part code> <points file name>"
+  std::string measured_at;                  // ISO 8601 with time zone, copied to the report records
+  bool force = false;                       // replace an earlier tune output in `out`
   Status Validate() const;
 };
 
@@ -82,9 +82,9 @@ struct TuneAttempt {
   std::string block_file;  // empty: no block correction
   std::optional<metrology::BlockCorrector> corrector;
   metrology::BlockAge block_age;
-  std::vector<DimensionResult> dimensions;   // model order
-  OffsetProblem problem;                     // the COMPENSATE dimensions that were measured
-  std::vector<int> problem_rows;             // index into dimensions for each problem row
+  std::vector<DimensionResult> dimensions;  // model order
+  OffsetProblem problem;                    // the COMPENSATE dimensions that were measured
+  std::vector<int> problem_rows;            // index into dimensions for each problem row
   std::optional<OffsetSolution> wls;
   std::optional<AverageResult> average;
   RoundedOffsets rounded;
@@ -96,8 +96,8 @@ struct TuneReport {
   TuneAttempt first;
   std::optional<TuneAttempt> recheck;  // when the ladder re-probed the block
   WritePlan plan;
-  std::vector<nlohmann::json> audit;   // the audit lines
-  int ng_count = 0;                    // NG dimensions of the measured part
+  std::vector<nlohmann::json> audit;  // the audit lines
+  int ng_count = 0;                   // NG dimensions of the measured part
   const TuneAttempt& final_attempt() const { return recheck ? *recheck : first; }
   nlohmann::json SummaryJson() const;  // what the CLI prints on stdout
 };

@@ -73,10 +73,7 @@ nlohmann::json AverageResult::ToJson(const OffsetProblem& p) const {
     dims.push_back(j);
   }
   for (const auto& c : cells) {
-    cs.push_back({{"offset", p.offset_ids[c.offset]},
-                  {"subs", c.count},
-                  {"value_mm", c.value_mm},
-                  {"alarm", c.alarm}});
+    cs.push_back({{"offset", p.offset_ids[c.offset]}, {"subs", c.count}, {"value_mm", c.value_mm}, {"alarm", c.alarm}});
   }
   return {{"dimensions", dims}, {"cells", cs}, {"alarm", alarm}};
 }

@@ -36,17 +36,17 @@ struct AverageOptions {
 struct AverageDimension {
   std::string id;
   bool used = false;
-  std::string reason;    // why it was skipped (empty when used)
-  int offset = -1;       // the cell it fed
-  double sub_mm = 0;     // its sub-compensation
+  std::string reason;  // why it was skipped (empty when used)
+  int offset = -1;     // the cell it fed
+  double sub_mm = 0;   // its sub-compensation
 };
 
 struct AverageCell {
   int offset = -1;
   double sum_mm = 0;
   int count = 0;
-  double value_mm = 0;   // sum / count
-  bool alarm = false;    // |value| > max_mm
+  double value_mm = 0;  // sum / count
+  bool alarm = false;   // |value| > max_mm
 };
 
 struct AverageResult {

@@ -89,7 +89,8 @@ double RadialWearFromFlankWear(double vb_mm, double clearance_deg, double rake_d
 }
 
 Status WearGrowthOptions::Validate() const {
-  if (!(gamma_min < gamma_max)) return Status::BadInput(Where{.field = "gamma_min/gamma_max"}, "need gamma_min < gamma_max");
+  if (!(gamma_min < gamma_max))
+    return Status::BadInput(Where{.field = "gamma_min/gamma_max"}, "need gamma_min < gamma_max");
   if (grid < 3) return Status::BadInput(Where{.field = "grid"}, "must be >= 3");
   if (!(horizon_fraction > 0 && horizon_fraction < 1)) {
     return Status::BadInput(Where{.field = "horizon_fraction"}, "must be in (0, 1)");
@@ -119,7 +120,8 @@ Result<double> FitGrowthShape(const std::vector<WearSeries>& training, const Wea
     }
   }
   // Golden section on the bracket around the best grid point.
-  double lo = options.gamma_min + std::max(0, best - 1) * step, hi = options.gamma_min + std::min(options.grid - 1, best + 1) * step;
+  double lo = options.gamma_min + std::max(0, best - 1) * step,
+         hi = options.gamma_min + std::min(options.grid - 1, best + 1) * step;
   const double phi = (std::sqrt(5.0) - 1) / 2;
   double a = hi - phi * (hi - lo), b = lo + phi * (hi - lo);
   double fa = cost(a), fb = cost(b);

@@ -76,7 +76,7 @@ struct WearCaseEvaluation {
   int one_step_n = 0;
   double one_step_rmse_model = 0, one_step_rmse_constant = 0;  // leave one case out, mm
   int horizon_n = 0;
-  double horizon_rmse_model = 0, horizon_rmse_constant = 0;    // leave one case out, mm
+  double horizon_rmse_model = 0, horizon_rmse_constant = 0;  // leave one case out, mm
 };
 
 struct WearEvaluation {

@@ -18,10 +18,14 @@ std::string Mm(double v) { return Json(Clean(v)).dump() + " mm"; }
 
 const char* PlanStatusName(PlanStatus status) {
   switch (status) {
-    case PlanStatus::kSafe: return "SAFE";
-    case PlanStatus::kRecheck: return "RECHECK";
-    case PlanStatus::kIntervene: return "INTERVENE";
-    case PlanStatus::kBlocked: return "BLOCKED";
+    case PlanStatus::kSafe:
+      return "SAFE";
+    case PlanStatus::kRecheck:
+      return "RECHECK";
+    case PlanStatus::kIntervene:
+      return "INTERVENE";
+    case PlanStatus::kBlocked:
+      return "BLOCKED";
   }
   return "?";
 }
@@ -50,7 +54,8 @@ std::vector<OffsetChange> CheckOffsetLimits(const MeasurementModel& model, const
                       ", beyond its limit " + Mm(o.limit_mm);
       } else if (o.step_limit_mm && std::abs(c.delta_mm) > *o.step_limit_mm + kLimitSlackMm) {
         c.within_limits = false;
-        c.violation = "offset " + o.id + ": change " + Mm(c.delta_mm) + " is beyond its step limit " + Mm(*o.step_limit_mm);
+        c.violation =
+            "offset " + o.id + ": change " + Mm(c.delta_mm) + " is beyond its step limit " + Mm(*o.step_limit_mm);
       }
     }
     out.push_back(c);
@@ -118,7 +123,8 @@ Result<std::map<std::string, double>> ReadCurrentOffsets(const std::filesystem::
   std::string format;
   FL_RETURN_IF_ERROR(f.String("format", &format));
   if (format != "formloop.current_offsets") {
-    return Status::BadInput(Where{.file = source, .field = "format"}, "value '" + format + "' is not a current-offsets file",
+    return Status::BadInput(Where{.file = source, .field = "format"},
+                            "value '" + format + "' is not a current-offsets file",
                             "write \"format\": \"formloop.current_offsets\"");
   }
   long long version = 0;
@@ -130,8 +136,8 @@ Result<std::map<std::string, double>> ReadCurrentOffsets(const std::filesystem::
   std::map<std::string, double> out;
   for (const auto& [key, value] : json["values_mm"].items()) {
     if (model.OffsetIndex(key) < 0) {
-      return Status::BadInput(Where{.file = source, .field = "values_mm." + key}, "offset '" + key + "' is not in the model",
-                              "remove it or fix the id");
+      return Status::BadInput(Where{.file = source, .field = "values_mm." + key},
+                              "offset '" + key + "' is not in the model", "remove it or fix the id");
     }
     if (!value.is_number() || !std::isfinite(value.get<double>())) {
       return Status::BadInput(Where{.file = source, .field = "values_mm." + key}, "value is not a finite number",

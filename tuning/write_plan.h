@@ -44,7 +44,7 @@ struct OffsetChange {
   double new_mm = 0;                  // previous + δq (when previous is known)
   bool checked = false;               // previous known, limits evaluated
   bool within_limits = true;
-  std::string violation;              // names the offset, the value and the limit
+  std::string violation;  // names the offset, the value and the limit
 };
 
 // Evaluates the limits of every change (previous values by offset id; missing → unchecked).

@@ -37,9 +37,9 @@ TEST(TuneCli, BracketExitCodesAndOutputs) {
   EXPECT_TRUE(code == 0 || code == 1) << err;
   EXPECT_TRUE(fs::exists(dir / "avg/offsets.json"));
   // Without the current offsets nothing can be written: exit 1, the reason on stderr.
-  code = testing::RunFormloop("tune --model " + data + "model.json --points " + data + "points.csv --out " +
-                                  (dir / "blocked").string(),
-                              &out, &err);
+  code = testing::RunFormloop(
+      "tune --model " + data + "model.json --points " + data + "points.csv --out " + (dir / "blocked").string(), &out,
+      &err);
   EXPECT_EQ(code, 1);
   EXPECT_NE(err.find("current offsets unknown"), std::string::npos) << err;
   // A bad model: exit 2, the message names the dimension, nothing written.

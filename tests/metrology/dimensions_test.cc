@@ -59,7 +59,8 @@ double Value(const DimensionDefinition& d, const std::vector<RolePoints>& roles)
 }
 
 TEST(FeatureFit, GanderGolubStrebelGeometricCircle) {
-  std::ifstream in(std::string(FORMLOOP_SOURCE_DIR) + "/data/reference/circle-fit-gander/gander_golub_strebel_6pts.csv");
+  std::ifstream in(std::string(FORMLOOP_SOURCE_DIR) +
+                   "/data/reference/circle-fit-gander/gander_golub_strebel_6pts.csv");
   ASSERT_TRUE(in.good());
   std::string line;
   std::getline(in, line);  // header x,y
@@ -132,12 +133,13 @@ TEST(Dimensions, SpecFitChecks) {
 
 // §9.4: coaxiality, symmetry and true position.
 TEST(Dimensions, SpecLocationChecks) {
-  const auto co = Value(Def(DimensionType::kCoaxiality, 2), {Role("DATUM_1", Ring(0, 0, 10, -5, 6)),
-                                                             Role("DATUM_2", Ring(0, 0, 10, -25, 6)),
-                                                             Role("FEATURE_1", Ring(0.003, 0.004, 6, -15, 6, 0.3))});
+  const auto co = Value(Def(DimensionType::kCoaxiality, 2),
+                        {Role("DATUM_1", Ring(0, 0, 10, -5, 6)), Role("DATUM_2", Ring(0, 0, 10, -25, 6)),
+                         Role("FEATURE_1", Ring(0.003, 0.004, 6, -15, 6, 0.3))});
   EXPECT_NEAR(co, 0.010, 1e-9);
-  const auto sym = Value(Def(DimensionType::kSymmetry, 1), {Role("WALL_A", {P(0, 4.002, 0)}), Role("WALL_B", {P(0, -3.996, 0)}),
-                                                            Role("DATUM_A", {P(0, 20, 0)}), Role("DATUM_B", {P(0, -20, 0)})});
+  const auto sym =
+      Value(Def(DimensionType::kSymmetry, 1), {Role("WALL_A", {P(0, 4.002, 0)}), Role("WALL_B", {P(0, -3.996, 0)}),
+                                               Role("DATUM_A", {P(0, 20, 0)}), Role("DATUM_B", {P(0, -20, 0)})});
   EXPECT_NEAR(sym, 0.006, 1e-12);
   DimensionDefinition tp = Def(DimensionType::kTruePosition, 2);
   tp.nominal_position = {10, 20};
@@ -147,7 +149,8 @@ TEST(Dimensions, SpecLocationChecks) {
 // The remaining types against hand computations.
 TEST(Dimensions, EveryTypeAgainstHandComputations) {
   // Two-point length along X (seed 000's diameter): |−142.011 − (−118.009)|.
-  EXPECT_NEAR(Value(Def(DimensionType::kLength, 0), {Role("WALL_A", {P(-118.009, 0, -5)}), Role("WALL_B", {P(-142.011, 0, -5)})}),
+  EXPECT_NEAR(Value(Def(DimensionType::kLength, 0),
+                    {Role("WALL_A", {P(-118.009, 0, -5)}), Role("WALL_B", {P(-142.011, 0, -5)})}),
               24.002, 1e-12);
   // A slot from several points per wall: mean of each wall along Y.
   EXPECT_NEAR(Value(Def(DimensionType::kLength, 1), {Role("WALL_A", {P(0, 6.001, 0), P(10, 5.999, 0)}),
@@ -155,18 +158,22 @@ TEST(Dimensions, EveryTypeAgainstHandComputations) {
               11.999, 1e-12);
   // Face to face: top face z = 0 (three points), floor at z = −8.012 and −8.010 → 8.011.
   EXPECT_NEAR(Value(Def(DimensionType::kLength, 2, DimensionMethod::kFaceToFace),
-                    {Role("FACE_A", {P(0, 0, 0), P(10, 0, 0), P(0, 10, 0)}), Role("FACE_B", {P(3, 3, -8.012), P(5, 5, -8.010)})}),
+                    {Role("FACE_A", {P(0, 0, 0), P(10, 0, 0), P(0, 10, 0)}),
+                     Role("FACE_B", {P(3, 3, -8.012), P(5, 5, -8.010)})}),
               8.011, 1e-12);
   // Position of a hole centre from a datum edge along X: −49.994 − (−160.0).
   DimensionDefinition pos = Def(DimensionType::kPosition, 0, DimensionMethod::kCircle);
   pos.feature_axis = 2;
-  EXPECT_NEAR(Value(pos, {Role("FEATURE", Ring(-49.994, 30, 5, -3, 4)), Role("DATUM", {P(-160.0, 0, -10)})}), 110.006, 1e-9);
+  EXPECT_NEAR(Value(pos, {Role("FEATURE", Ring(-49.994, 30, 5, -3, 4)), Role("DATUM", {P(-160.0, 0, -10)})}), 110.006,
+              1e-9);
   // Position of a face (plane height) from the WCS origin: mean z.
-  EXPECT_NEAR(Value(Def(DimensionType::kPosition, 2), {Role("FEATURE", {P(0, 0, 5.002), P(10, 0, 5.004)})}), 5.003, 1e-12);
+  EXPECT_NEAR(Value(Def(DimensionType::kPosition, 2), {Role("FEATURE", {P(0, 0, 5.002), P(10, 0, 5.004)})}), 5.003,
+              1e-12);
   // Parallelism: datum z = 0 plane, feature points at 10, 10.003, 9.999 → 0.004.
-  EXPECT_NEAR(Value(Def(DimensionType::kParallelism, 2), {Role("DATUM", {P(0, 0, 0), P(50, 0, 0), P(0, 50, 0)}),
-                                                          Role("FEATURE", {P(0, 0, 10), P(20, 0, 10.003), P(0, 20, 9.999)})}),
-              0.004, 1e-12);
+  EXPECT_NEAR(
+      Value(Def(DimensionType::kParallelism, 2), {Role("DATUM", {P(0, 0, 0), P(50, 0, 0), P(0, 50, 0)}),
+                                                  Role("FEATURE", {P(0, 0, 10), P(20, 0, 10.003), P(0, 20, 9.999)})}),
+      0.004, 1e-12);
   // Perpendicularity of a wall x ≈ 0 leaning 0.001 per mm of height over 20 mm (z 0..20): w is +X, the
   // zone is the spread of x, 0.020.
   EXPECT_NEAR(Value(Def(DimensionType::kPerpendicularity, 2),
@@ -175,8 +182,8 @@ TEST(Dimensions, EveryTypeAgainstHandComputations) {
               0.020, 1e-12);
   // Perpendicularity of an axis: centres (0,0) at z = 0 and (0.003, 0.004) at z = 20 → 0.005.
   EXPECT_NEAR(Value(Def(DimensionType::kPerpendicularity, 2, DimensionMethod::kAxis),
-                    {Role("DATUM", {P(-30, -30, -1), P(30, -30, -1), P(0, 30, -1)}), Role("LEVEL_1", Ring(0, 0, 8, 0, 5)),
-                     Role("LEVEL_2", Ring(0.003, 0.004, 8, 20, 5))}),
+                    {Role("DATUM", {P(-30, -30, -1), P(30, -30, -1), P(0, 30, -1)}),
+                     Role("LEVEL_1", Ring(0, 0, 8, 0, 5)), Role("LEVEL_2", Ring(0.003, 0.004, 8, 20, 5))}),
               0.005, 1e-9);
   // Angle between outward normals: top face (approach −Z) and a wall at x = 0 probed from −X (approach +X,
   // outward normal −X) → 90°; a chamfer at 45° → 45° from the top face.
@@ -209,7 +216,8 @@ TEST(Dimensions, EveryTypeAgainstHandComputations) {
       cyl.push_back(P(p.x(), p.y(), p.z()));
     }
   }
-  EXPECT_NEAR(Value(Def(DimensionType::kDiameter, 2, DimensionMethod::kCylinder), {Role("FEATURE", cyl)}), 10.004, 1e-8);
+  EXPECT_NEAR(Value(Def(DimensionType::kDiameter, 2, DimensionMethod::kCylinder), {Role("FEATURE", cyl)}), 10.004,
+              1e-8);
   // The same points as a circle in the XY plane see an ellipse-ish section: not the cylinder's size.
   EXPECT_GT(std::abs(Value(Def(DimensionType::kDiameter, 2), {Role("FEATURE", cyl)}) - 10.004), 1e-6);
 }

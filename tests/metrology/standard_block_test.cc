@@ -13,7 +13,9 @@
 namespace formloop::metrology {
 namespace {
 
-CalibrationPoint Cal(int axis, double reference, double error) { return {axis, reference, reference + error, std::nullopt}; }
+CalibrationPoint Cal(int axis, double reference, double error) {
+  return {axis, reference, reference + error, std::nullopt};
+}
 
 // The two-point diameter along X between two corrected points.
 double Diameter(const BlockCorrector& c, double a1, double a2) {
@@ -94,7 +96,10 @@ TEST(StandardBlock, StaleBlockIsFlagged) {
 
 TEST(StandardBlock, CsvIsReadAndBadRowsNameLineAndField) {
   const auto dir = testing::FreshTestDir("block");
-  ASSERT_TRUE(WriteFileAtomic(dir / "ok.csv", "\xEF\xBB\xBF# block (a byte-order mark first, as Excel writes)\naxis,reference_mm,measured_mm,t\nX,-117.0,-116.991,60\nY,5,5.001,61\n").ok());
+  ASSERT_TRUE(WriteFileAtomic(dir / "ok.csv",
+                              "\xEF\xBB\xBF# block (a byte-order mark first, as Excel "
+                              "writes)\naxis,reference_mm,measured_mm,t\nX,-117.0,-116.991,60\nY,5,5.001,61\n")
+                  .ok());
   auto block = ReadStandardBlockCsv(dir / "ok.csv");
   ASSERT_TRUE(block.ok()) << block.status().ToString();
   ASSERT_EQ(block->points.size(), 2u);
@@ -108,7 +113,8 @@ TEST(StandardBlock, CsvIsReadAndBadRowsNameLineAndField) {
   ASSERT_TRUE(WriteFileAtomic(dir / "axis.csv", "axis,reference_mm,measured_mm\nW,1,1\n").ok());
   EXPECT_NE(ReadStandardBlockCsv(dir / "axis.csv").status().message().find("field 'axis'"), std::string::npos);
   ASSERT_TRUE(WriteFileAtomic(dir / "dup.csv", "axis,reference_mm,measured_mm\nX,1,1\nX,1,1.001\n").ok());
-  EXPECT_NE(ReadStandardBlockCsv(dir / "dup.csv").status().message().find("already given on line 2"), std::string::npos);
+  EXPECT_NE(ReadStandardBlockCsv(dir / "dup.csv").status().message().find("already given on line 2"),
+            std::string::npos);
   std::filesystem::remove_all(dir);
 }
 

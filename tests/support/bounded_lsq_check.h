@@ -36,9 +36,12 @@ inline KktResult KktCertificate(const Eigen::MatrixXd& a, const Eigen::VectorXd&
     const bool at_lower = std::isfinite(lb(i)) && x(i) - lb(i) <= at_bound_tol * range;
     const bool at_upper = std::isfinite(ub(i)) && ub(i) - x(i) <= at_bound_tol * range;
     double violation = 0;
-    if (at_lower && !at_upper) violation = std::max(0.0, -g(i));
-    else if (at_upper && !at_lower) violation = std::max(0.0, g(i));
-    else if (!at_lower && !at_upper) violation = std::abs(g(i));
+    if (at_lower && !at_upper)
+      violation = std::max(0.0, -g(i));
+    else if (at_upper && !at_lower)
+      violation = std::max(0.0, g(i));
+    else if (!at_lower && !at_upper)
+      violation = std::abs(g(i));
     out.worst_violation = std::max(out.worst_violation, violation);
   }
   out.ok = out.feasible && out.worst_violation <= out.eps_g;

@@ -36,10 +36,10 @@ enum class OffsetKind { kRadiusWear, kLengthWear, kWork };
 struct TuningScenario {
   tuning::OffsetProblem problem;
   std::vector<OffsetKind> kinds;
-  Eigen::VectorXd c_true_mm;      // offset error shown by the part (δ = −c corrects it)
-  Eigen::VectorXd t_true_mm;      // the non-compensable part of each dimension
+  Eigen::VectorXd c_true_mm;  // offset error shown by the part (δ = −c corrects it)
+  Eigen::VectorXd t_true_mm;  // the non-compensable part of each dimension
   double process_sigma_mm = 0.0005;
-  bool infeasible = false;        // built infeasible (see header)
+  bool infeasible = false;  // built infeasible (see header)
 };
 
 struct ScenarioOptions {
@@ -47,6 +47,11 @@ struct ScenarioOptions {
   double process_sigma_mm = 0.0005;
   bool infeasible = false;
   bool single_offset_rows = false;  // every dimension on exactly one tool-wear offset (seed-004 parts)
+  // t_true spread as a fraction of each half band (0.5: the central half, always feasible; > 1: some
+  // dimensions beyond reach, so tolerance bounds become active) and the share of offsets whose bounds are
+  // tight (±0.005 mm, so offset bounds become active). The bench uses both to exercise the bounded path.
+  double t_spread = 0.5;
+  double tight_offset_share = 0.0;
 };
 
 inline TuningScenario MakeTuningScenario(std::uint64_t seed, int n, int k, const ScenarioOptions& options = {}) {
@@ -71,7 +76,9 @@ inline TuningScenario MakeTuningScenario(std::uint64_t seed, int n, int k, const
       work_axis[j] = static_cast<int>(work.size() % 3);
       work.push_back(j);
     }
-    p.offset_ids.push_back((kind == OffsetKind::kRadiusWear ? "R" : kind == OffsetKind::kLengthWear ? "L" : "W") +
+    p.offset_ids.push_back((kind == OffsetKind::kRadiusWear   ? "R"
+                            : kind == OffsetKind::kLengthWear ? "L"
+                                                              : "W") +
                            std::to_string(j));
   }
   auto pick = [&](const std::vector<int>& from) { return from[rng.UniformIndex(from.size())]; };
@@ -82,12 +89,12 @@ inline TuningScenario MakeTuningScenario(std::uint64_t seed, int n, int k, const
     std::vector<std::pair<int, double>> row;
     // The first k dimensions visit every offset once so no column is empty.
     const int forced = i < k ? i : -1;
-    const OffsetKind want = forced >= 0 ? s.kinds[forced] : (options.single_offset_rows
-                                                                 ? s.kinds[rng.UniformIndex(k)]
-                                                                 : static_cast<OffsetKind>(rng.UniformIndex(3)));
+    const OffsetKind want = forced >= 0 ? s.kinds[forced]
+                                        : (options.single_offset_rows ? s.kinds[rng.UniformIndex(k)]
+                                                                      : static_cast<OffsetKind>(rng.UniformIndex(3)));
     if (options.single_offset_rows) {
-      const int j = forced >= 0 ? forced
-                                : (want == OffsetKind::kRadiusWear || length.empty() ? pick(radius) : pick(length));
+      const int j =
+          forced >= 0 ? forced : (want == OffsetKind::kRadiusWear || length.empty() ? pick(radius) : pick(length));
       if (s.kinds[j] == OffsetKind::kRadiusWear) {
         row.push_back({j, rng.Uniform() < 0.5 ? 2.0 : -2.0});
       } else {
@@ -172,15 +179,16 @@ inline TuningScenario MakeTuningScenario(std::uint64_t seed, int n, int k, const
   s.c_true_mm.resize(k);
   for (int j = 0; j < k; ++j) {
     const double bound = s.kinds[j] == OffsetKind::kWork ? 0.1 : 0.05;
-    p.delta_min_mm(j) = -bound;
-    p.delta_max_mm(j) = bound;
+    const bool tight = options.tight_offset_share > 0 && rng.Uniform() < options.tight_offset_share;
+    p.delta_min_mm(j) = tight ? -0.005 : -bound;
+    p.delta_max_mm(j) = tight ? 0.005 : bound;
     s.c_true_mm(j) = rng.Uniform(-0.6, 0.6) * bound;
   }
   s.t_true_mm.resize(n_total);
   for (int i = 0; i < n_total; ++i) {
     const double centre = 0.5 * (p.tol_lower_mm(i) + p.tol_upper_mm(i));
     const double half = 0.5 * (p.tol_upper_mm(i) - p.tol_lower_mm(i));
-    s.t_true_mm(i) = centre + rng.Uniform(-0.5, 0.5) * half;
+    s.t_true_mm(i) = centre + rng.Uniform(-options.t_spread, options.t_spread) * half;
   }
   if (options.infeasible) {
     const double margin = 0.010;

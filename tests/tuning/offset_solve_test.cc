@@ -195,7 +195,7 @@ TEST(OffsetSolve, RoundingStaysInsideBoundsThatAreNotMultiplesOfTheResolution) {
   auto p = Problem(Column({2}), {0.030}, {-0.02}, {0.02}, {1}, 0.0125);
   auto s = SolveOffsets(p);
   ASSERT_TRUE(s.ok());
-  EXPECT_DOUBLE_EQ(s->rounded.delta_mm(0), -0.0125);        // bound active
+  EXPECT_DOUBLE_EQ(s->rounded.delta_mm(0), -0.0125);         // bound active
   EXPECT_DOUBLE_EQ(s->rounded.delta_rounded_mm(0), -0.012);  // nearest would be −0.013, outside
   EXPECT_NE(s->rounded.rule[0].find("inside [delta_min_mm, delta_max_mm]"), std::string::npos);
 }
@@ -246,10 +246,11 @@ TEST(OffsetSolve, RandomScenariosAgainstBvlsAndSimulation) {
     }
     all_in += in;
   }
-  std::printf("%d feasible scenarios: worst |f - f_bvls|/max(1,f) = %.2e, KKT certificate %d/%d, reachable %d/%d, "
-              "every COMPENSATE dimension in tolerance on the next (simulated) part in %d/%d (%.1f %%), max iterations %d\n",
-              scenarios, worst_cost, kkt_ok, scenarios, reachable, scenarios, all_in, scenarios,
-              100.0 * all_in / scenarios, max_iterations);
+  std::printf(
+      "%d feasible scenarios: worst |f - f_bvls|/max(1,f) = %.2e, KKT certificate %d/%d, reachable %d/%d, "
+      "every COMPENSATE dimension in tolerance on the next (simulated) part in %d/%d (%.1f %%), max iterations %d\n",
+      scenarios, worst_cost, kkt_ok, scenarios, reachable, scenarios, all_in, scenarios, 100.0 * all_in / scenarios,
+      max_iterations);
   EXPECT_GE(scenarios, 200);
   EXPECT_EQ(kkt_ok, scenarios);
   EXPECT_EQ(reachable, scenarios);
@@ -322,12 +323,13 @@ TEST(OffsetSolve, StrategiesSideBySide) {
       tally(s->rounded.delta_rounded_mm, &wls);
       tally(avr->delta_rounded_mm, &avg);
     }
-    std::printf("%s parts (%d): share of dimensions in tolerance WLS %.1f %% vs average %.1f %%; parts with all in "
-                "tolerance WLS %d vs average %d; mean |d - band centre| WLS %.3f um vs average %.3f um; average skipped "
-                "%d dimension(s), %d alarm(s)\n",
-                family == 0 ? "single-offset" : "general", parts, 100.0 * wls.in / wls.dims, 100.0 * avg.in / avg.dims,
-                wls.parts_all_in, avg.parts_all_in, wls.centre_distance_um / wls.dims,
-                avg.centre_distance_um / avg.dims, skipped, alarms);
+    std::printf(
+        "%s parts (%d): share of dimensions in tolerance WLS %.1f %% vs average %.1f %%; parts with all in "
+        "tolerance WLS %d vs average %d; mean |d - band centre| WLS %.3f um vs average %.3f um; average skipped "
+        "%d dimension(s), %d alarm(s)\n",
+        family == 0 ? "single-offset" : "general", parts, 100.0 * wls.in / wls.dims, 100.0 * avg.in / avg.dims,
+        wls.parts_all_in, avg.parts_all_in, wls.centre_distance_um / wls.dims, avg.centre_distance_um / avg.dims,
+        skipped, alarms);
     EXPECT_GE(wls.parts_all_in, 0.95 * parts);
     if (family == 1) {
       EXPECT_GT(skipped, 0);  // averaging cannot use dimensions on several offsets

@@ -104,9 +104,10 @@ TEST(TrustRegionLsq, MatchesScipyFixturesAndPassesKkt) {
     polished += r->polished;
     max_iterations = std::max(max_iterations, r->iterations);
   }
-  std::printf("104 fixtures: worst |f - f_bvls|/max(1,f) = %.2e (scipy trf vs bvls: %.2e), worst |x - x_bvls| = %.2e um, "
-              "polished %d, max iterations %d\n",
-              worst_cost, worst_cost_trf, worst_x_um, polished, max_iterations);
+  std::printf(
+      "104 fixtures: worst |f - f_bvls|/max(1,f) = %.2e (scipy trf vs bvls: %.2e), worst |x - x_bvls| = %.2e um, "
+      "polished %d, max iterations %d\n",
+      worst_cost, worst_cost_trf, worst_x_um, polished, max_iterations);
 }
 
 TEST(TrustRegionLsq, IndependentBvlsAgreesWithScipyBvls) {

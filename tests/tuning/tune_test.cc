@@ -59,8 +59,10 @@ Files WriteSlot(const fs::path& dir, double block_error, double recheck_error) {
   };
   EXPECT_TRUE(WriteFileAtomic(f.block, block(block_error)).ok());
   EXPECT_TRUE(WriteFileAtomic(f.block2, block(recheck_error)).ok());
-  EXPECT_TRUE(WriteJsonFile(f.offsets, {{"format", "formloop.current_offsets"}, {"version", 1},
-                                        {"values_mm", {{"T3_radius_wear", 0.085}}}}).ok());
+  EXPECT_TRUE(WriteJsonFile(
+                  f.offsets,
+                  {{"format", "formloop.current_offsets"}, {"version", 1}, {"values_mm", {{"T3_radius_wear", 0.085}}}})
+                  .ok());
   return f;
 }
 
@@ -361,8 +363,12 @@ TEST(MeasurementModel, ValidationMessages) {
   };
   ASSERT_TRUE(ParseMeasurementModel(SlotModel(), "m.json").ok());
   expect_error([](Json& m) { m["dimensions"][0]["type"] = "FLATNESS"; }, "dimensions[S1].");
-  expect_error([](Json& m) { m["dimensions"][0] = Json::parse(R"({"id": "F1", "type": "FLATNESS", "tolerance_mm": 0.01,
-      "points": [{"id": 1, "role": "FEATURE"}, {"id": 2, "role": "FEATURE"}]})"); }, "TOLERANCE_ONLY");
+  expect_error(
+      [](Json& m) {
+        m["dimensions"][0] = Json::parse(R"({"id": "F1", "type": "FLATNESS", "tolerance_mm": 0.01,
+      "points": [{"id": 1, "role": "FEATURE"}, {"id": 2, "role": "FEATURE"}]})");
+      },
+      "TOLERANCE_ONLY");
   expect_error([](Json& m) { m["dimensions"][0]["k_row"] = {{"T9", 1}}; }, "offset 'T9' is not in the model's offsets");
   expect_error([](Json& m) { m["dimensions"][0]["points"][0]["role"] = "FEATURE"; }, "role 'FEATURE' does not belong");
   expect_error([](Json& m) { m["dimensions"][0]["points"].erase(1); }, "no point has the role WALL_B");

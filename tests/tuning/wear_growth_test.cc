@@ -77,17 +77,21 @@ std::vector<WearSeries> ReadQit(int max_cycle = 1000) {
 
 void Print(const std::string& title, const WearEvaluation& ev) {
   std::printf("%s: gamma (all) %.3f /mm\n", title.c_str(), ev.gamma_all);
-  std::printf("  %-8s %3s | fit RMSE model / const (mm) | LOCO gamma | one-step n, RMSE model / const | horizon n, RMSE model / const\n",
-              "case", "pts");
+  std::printf(
+      "  %-8s %3s | fit RMSE model / const (mm) | LOCO gamma | one-step n, RMSE model / const | horizon n, RMSE model "
+      "/ const\n",
+      "case", "pts");
   for (const auto& c : ev.cases) {
     std::printf("  %-8s %3d |      %.4f / %.4f         |   %6.3f   |  %3d  %.4f / %.4f           |  %3d  %.4f / %.4f\n",
                 c.name.c_str(), c.points, c.fit_rmse_model, c.fit_rmse_constant, c.gamma_loco, c.one_step_n,
                 c.one_step_rmse_model, c.one_step_rmse_constant, c.horizon_n, c.horizon_rmse_model,
                 c.horizon_rmse_constant);
   }
-  std::printf("  pooled: fit %.4f / %.4f; LOCO one-step %.4f / %.4f; LOCO horizon (second half from the first) %.4f / %.4f mm\n",
-              ev.fit_rmse_model, ev.fit_rmse_constant, ev.one_step_rmse_model, ev.one_step_rmse_constant,
-              ev.horizon_rmse_model, ev.horizon_rmse_constant);
+  std::printf(
+      "  pooled: fit %.4f / %.4f; LOCO one-step %.4f / %.4f; LOCO horizon (second half from the first) %.4f / %.4f "
+      "mm\n",
+      ev.fit_rmse_model, ev.fit_rmse_constant, ev.one_step_rmse_model, ev.one_step_rmse_constant, ev.horizon_rmse_model,
+      ev.horizon_rmse_constant);
 }
 
 // Series that follow dVB/dt = r·exp(γ·VB) exactly: the model predicts them exactly and recovers γ.
