@@ -307,6 +307,7 @@ Result<OffsetSolution> SolveOffsets(const OffsetProblem& p, const OffsetSolveOpt
   OffsetSolution sol;
   sol.dimension_ids = p.dimension_ids;
   sol.offset_ids = p.offset_ids;
+  sol.kept = form.kept;
   FL_ASSIGN_OR_RETURN(sol.solver, SolveBoundedLsq(form.a, form.b, form.lb, form.ub, options.lsq));
   sol.objective = sol.solver.cost;
   const Eigen::VectorXd& x = sol.solver.x;
@@ -384,6 +385,17 @@ nlohmann::json OffsetSolution::ToJson() const {
   }
   j["not_reachable"] = unreachable;
   j["ng_after_rounding"] = rounded.ng_after_rounding;
+  // The active set by name (spec §4.3: each run reports it): offsets whose change sits on a bound and
+  // dimensions that land on an edge of their (shrunk) band.
+  std::vector<std::string> offsets_at_bound, dimensions_at_band_edge;
+  for (std::size_t c = 0; c < kept.size(); ++c) {
+    if (solver.active[c] != 0) offsets_at_bound.push_back(offset_ids[kept[c]]);
+  }
+  for (std::size_t i = 0; i < dimension_ids.size(); ++i) {
+    if (solver.active[kept.size() + i] != 0) dimensions_at_band_edge.push_back(dimension_ids[i]);
+  }
+  j["offsets_at_bound"] = offsets_at_bound;
+  j["dimensions_at_band_edge"] = dimensions_at_band_edge;
   return j;
 }
 

@@ -626,6 +626,18 @@ Result<BoundedLsqReport> SolveBoundedLsq(const Eigen::SparseMatrix<double>& a_in
           const auto [beta, value] = MinimiseQuadratic1d(c1, c2, lo, hi);
           if (psi0 + value < choice.psi) choice = {s0 + beta * r_hat, psi0 + value};
         }
+        // (d) projected: the step clipped at the bounds, θ inside. When the Newton step moves a component
+        // towards a bound its gradient does not point at (so the Coleman–Li scaling does not slow it), (a)
+        // and (b) stop at that bound after a tiny fraction; clipping only that component keeps the rest.
+        {
+          VectorXd sp(n);
+          for (int j = 0; j < n; ++j) sp(j) = theta * (std::clamp(x(j) + s(j), lb(j), ub(j)) - x(j));
+          const VectorXd sp_hat = sp.cwiseQuotient(d);
+          if (sp_hat.allFinite()) {
+            const double value = psi(sp_hat, problem.HatTimes(d, c, sp_hat));
+            if (value < choice.psi) choice = {sp_hat, value};
+          }
+        }
         // (c) Cauchy along −ĝ
         const VectorXd dir = -g_hat;
         const double tau_bound = StepToBound(x, d.cwiseProduct(dir), lb, ub, nullptr);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <regex>
 #include <set>
 #include <sstream>
 
@@ -514,6 +515,13 @@ Status TuneOptions::Validate() const {
   if (points.empty())
     return Status::BadInput(Where{.field = "--points"}, "no probe points given", "pass --points P.csv");
   if (out.empty()) return Status::BadInput(Where{.field = "--out"}, "no output folder given", "pass --out DIR");
+  if (!measured_at.empty()) {
+    static const std::regex kIso8601(R"(\d{4}-\d{2}-\d{2}T\d{2}:\d{2}(:\d{2}(\.\d+)?)?(Z|[+-]\d{2}:?\d{2}))");
+    if (!std::regex_match(measured_at, kIso8601)) {
+      return Status::BadInput(Where{.field = "--measured-at"}, "value '" + measured_at + "' is not ISO 8601 with a time zone",
+                              "write e.g. 2026-11-26T12:00:00+01:00 or 2026-11-26T11:00:00Z");
+    }
+  }
   if (!recheck_block.empty() && recheck_block == block) {
     return Status::BadInput(Where{.field = "--recheck-block"}, "is the same file as --block",
                             "probe the standard block again and pass the new file");

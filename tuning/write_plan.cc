@@ -100,7 +100,11 @@ nlohmann::json WritePlan::ToJson() const {
     p["within_limits"] = c.within_limits;
     if (!c.violation.empty()) p["violation"] = c.violation;
     proposed.push_back(p);
-    if (status == PlanStatus::kSafe) writes.push_back(entry(c));
+    if (status == PlanStatus::kSafe) {
+      Json w = entry(c);
+      w["rule"] = c.rule;  // an extra field (WRITE_PLAN.md: readers ignore it)
+      writes.push_back(w);
+    }
   }
   return {{"format", "formloop.offset_write_plan"},
           {"version", 1},

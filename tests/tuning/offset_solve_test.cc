@@ -69,6 +69,7 @@ TEST(OffsetSolve, SpecExampleABounded) {
   EXPECT_DOUBLE_EQ(s->rounded.delta_mm(0), -0.010);
   EXPECT_DOUBLE_EQ(s->rounded.delta_rounded_mm(0), -0.010);
   EXPECT_EQ(s->solver.active[0], 1);  // c = +10 µm at its upper bound
+  EXPECT_EQ(s->ToJson()["offsets_at_bound"], Json::array({"O1"}));
   EXPECT_NEAR(20.0 + s->rounded.predicted_mm(0), 20.010, 1e-12);
   EXPECT_NEAR(10.0 + s->rounded.predicted_mm(1), 9.990, 1e-12);
   EXPECT_TRUE(s->rounded.predicted_ok[0] && s->rounded.predicted_ok[1]);

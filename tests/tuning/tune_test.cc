@@ -287,6 +287,11 @@ TEST_F(TuneTest, BracketExampleEndToEndAndByteIdentical) {
   o.block = kBracket / "block.csv";
   o.current_offsets = kBracket / "offsets.json";
   o.out = dir_ / "a";
+  o.measured_at = "2026-11-26 12:00";  // no time zone, no T
+  auto bad = RunTune(o);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("--measured-at"), std::string::npos);
+  o.measured_at = "2026-11-26T12:00:00+01:00";
   auto r = RunTune(o);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   EXPECT_EQ(r->plan.status, PlanStatus::kSafe);
