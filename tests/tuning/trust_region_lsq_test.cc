@@ -16,6 +16,8 @@
 #include "core/json_io.h"
 #include "core/random.h"
 #include "tests/support/bounded_lsq_check.h"
+#include "tests/support/tuning_scenarios.h"
+#include "tuning/offset_solve.h"
 #include "tuning/trust_region_lsq.h"
 
 namespace formloop::tuning {
@@ -164,6 +166,21 @@ TEST(TrustRegionLsq, RankDeficientUsesConjugateGradientsAndReachesTheOptimum) {
   EXPECT_GT(r->cg_directions, 0);
   const auto brute = testing::BruteForce(a, b, lb, ub);
   EXPECT_LE(RelativeCostError(r->cost, brute.cost), 1e-9) << r->cost << " vs " << brute.cost;
+}
+
+// The 200 × 60 bench problem: 60 bounds become active, one component is driven by the Newton step towards
+// a bound its gradient points away from. Without the clipped candidate the iteration crawled (255 steps).
+TEST(TrustRegionLsq, ManyActiveBoundsWithoutCrawling) {
+  const auto sc = testing::MakeTuningScenario(20211102 + 200, 200, 60, {.t_spread = 1.1, .tight_offset_share = 0.2});
+  auto form = BuildPenaltyForm(sc.problem);
+  ASSERT_TRUE(form.ok());
+  auto r = SolveBoundedLsq(form->a, form->b, form->lb, form->ub);
+  ASSERT_TRUE(r.ok());
+  EXPECT_LE(r->iterations, 40);
+  int active = 0;
+  for (int a : r->active) active += a != 0;
+  EXPECT_EQ(active, 60);
+  EXPECT_TRUE(testing::KktCertificate(MatrixXd(form->a), form->b, form->lb, form->ub, r->x).ok);
 }
 
 TEST(TrustRegionLsq, InfiniteBoundsAndUnconstrainedStart) {
