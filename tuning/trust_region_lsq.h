@@ -18,14 +18,8 @@
 //    otherwise the best point of the circle, from the real roots of the quartic in t = tan(θ/2) that
 //    d/dθ = 0 gives, and θ = π.
 //  - Reflection: a step that leaves the box competes with the reflected step (continue from the first
-//    bound along the direction with the hit components negated, length minimising the model), the
-//    scaled Cauchy step and (our addition) the projected step — the step clipped at the bounds — all kept
-//    θ_s = max(0.995, 1 − o) inside; the smallest model value wins. The projected candidate matters when
-//    the Newton step drives a component towards a bound its current gradient points away from: the
-//    Coleman–Li scaling does not slow that component, the truncated and reflected steps stop after a tiny
-//    fraction at that bound, and without it the iteration crawled (255 iterations on the 200 × 60 bench
-//    problem, 21 with it). Every candidate is compared on the same model ψ, so the Cauchy decrease that
-//    the convergence theory needs is kept.
+//    bound along the direction with the hit components negated, length minimising the model) and the
+//    scaled Cauchy step, all kept θ_s = max(0.995, 1 − o) inside; the smallest model value wins.
 //  - Acceptance when ared > 0; Δ ← ¼‖ŝ‖ when ratio < ¼, 2Δ when ratio > ¾ and ‖ŝ‖ ≥ 0.95Δ.
 //  - Termination: GTOL o ≤ gtol·max(1, ‖Aᵀb‖∞); FTOL ared < ftol·f with ratio > ¼; XTOL
 //    ‖s‖ < xtol·(xtol + ‖x‖); MAXIT after 200·N iterations (kMaxIter, which callers treat as a failure).
@@ -33,14 +27,21 @@
 //    multipliers of the tolerance bounds are O(1e-4..1), so 1e-10 stopped up to 7e-5 (relative) above the
 //    optimum on the SciPy fixtures (tests/tuning/trust_region_lsq_test.cc).
 //  - Active-set polish (not in the papers): the iterates stay strictly inside, so a component whose bound
-//    is active ends o/g_i away from it. At termination the components within a small fraction of their
-//    range of a bound the gradient pushes against are fixed on it and the rest solved exactly (Newton on
-//    the free set, refined twice on the true residual); up to four corrections release a fixed component
-//    whose gradient pulls it inside or fix a free one that leaves the box. The result replaces the
-//    iterate only when it is feasible, satisfies the KKT conditions (ε_g = 1e-8·max(1, ‖Aᵀb‖∞)) and does
-//    not raise f. This makes the active set exact (components sit on their bounds) and f equal to an
-//    active-set solver's to rounding (2e-15 relative on the fixtures, x within 1e-8 µm of SciPy's bvls;
-//    without the polish f is within 3e-13 but x only within 0.02 µm along weakly weighted directions).
+//    is active ends o/g_i away from it. The components within a small fraction of their range of a bound
+//    the gradient pushes against are fixed on it and the rest solved exactly (Newton on the free set,
+//    refined twice on the true residual); up to four corrections release a fixed component whose gradient
+//    pulls it inside or fix a free one that leaves the box. The result replaces the iterate only when it is
+//    feasible, satisfies the KKT conditions (free |g_i| ≤ ε_g = 1e-8·max(1, ‖Aᵀb‖∞), multipliers of the
+//    right sign within 1e-14·max(1, ‖Aᵀb‖∞)) and does not raise f; it is tried
+//    at termination (MAX_ITER included) and, during the iteration, whenever an accepted step gains less
+//    than 1e-6 of f (at most every 5 iterations), which then ends it (kActiveSet). The latter matters when
+//    the Newton step drives a component towards a bound its current gradient points away from: the
+//    Coleman–Li scaling does not slow that component, every step stops after ~1e-4 of its length at that
+//    bound and the iteration crawls (255 iterations on the 200 × 60 bench problem, where SciPy's trf stops
+//    at its 100-iteration limit 6e-6 above the optimum). The polish makes the active set exact (components
+//    sit on their bounds) and f equal to an active-set solver's to rounding (2e-15 relative on the
+//    fixtures, x within 1e-8 µm of SciPy's bvls; without it f is within 3e-13 but x only within 0.02 µm
+//    along weakly weighted directions).
 //
 // Structure. The Newton systems use the block form of Ĥ: columns of A whose row supports are pairwise
 // disjoint ("separable", found automatically, greedily from the last column) have a diagonal block in
@@ -83,7 +84,8 @@ struct BoundedLsqOptions {
   Status Validate() const;
 };
 
-enum class BoundedLsqStatus { kUnconstrained, kGtol, kFtol, kXtol, kMaxIter };
+// kActiveSet: ended by the active-set polish (header), which certifies the KKT conditions.
+enum class BoundedLsqStatus { kUnconstrained, kGtol, kFtol, kXtol, kMaxIter, kActiveSet };
 const char* BoundedLsqStatusName(BoundedLsqStatus status);
 
 struct BoundedLsqReport {
