@@ -169,7 +169,7 @@ TEST(TrustRegionLsq, RankDeficientUsesConjugateGradientsAndReachesTheOptimum) {
 }
 
 // The 200 × 60 bench problem: 60 bounds become active, one component is driven by the Newton step towards
-// a bound its gradient points away from. Without the clipped candidate the iteration crawled (255 steps).
+// a bound its gradient points away from. Without the polish tried on stalling the iteration crawled (255 steps).
 TEST(TrustRegionLsq, ManyActiveBoundsWithoutCrawling) {
   const auto sc = testing::MakeTuningScenario(20211102 + 200, 200, 60, {.t_spread = 1.1, .tight_offset_share = 0.2});
   auto form = BuildPenaltyForm(sc.problem);
