@@ -3,30 +3,14 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
-#include <sstream>
 #include <utility>
 
 #include "core/atomic_file.h"
+#include "core/csv.h"
 #include "core/point_io.h"
 
 namespace formloop::metrology {
 namespace {
-
-std::string Trim(const std::string& s) {
-  const auto b = s.find_first_not_of(" \t\r");
-  if (b == std::string::npos) return "";
-  const auto e = s.find_last_not_of(" \t\r");
-  return s.substr(b, e - b + 1);
-}
-
-std::vector<std::string> SplitComma(const std::string& line) {
-  std::vector<std::string> out;
-  std::stringstream ss(line);
-  std::string cell;
-  while (std::getline(ss, cell, ',')) out.push_back(Trim(cell));
-  if (!line.empty() && line.back() == ',') out.push_back("");
-  return out;
-}
 
 const char* kAxisNames[] = {"X", "Y", "Z"};
 
@@ -55,51 +39,30 @@ bool ParseBlockMode(const std::string& text, BlockMode* mode) {
 }
 
 Result<StandardBlock> ReadStandardBlockCsv(const std::filesystem::path& path) {
-  FL_ASSIGN_OR_RETURN(const std::string text, ReadFile(path));
+  FL_ASSIGN_OR_RETURN(std::string text, ReadFile(path));
+  if (text.rfind("\xEF\xBB\xBF", 0) == 0) text.erase(0, 3);  // UTF-8 byte-order mark (spreadsheets write one)
   StandardBlock block;
   block.source = path.string();
-  std::stringstream in(text);
-  std::string line;
-  long line_no = 0;
-  int col_axis = -1, col_ref = -1, col_meas = -1, col_t = -1;
-  bool have_header = false;
+  FL_ASSIGN_OR_RETURN(const CsvTable table, ParseCsvTable(text, block.source, /*require_rows=*/false));
+  const std::string fix = "write the header axis,reference_mm,measured_mm[,t] and one row per calibration point";
+  if (table.header_line == 0 || table.rows.empty()) {
+    return Status::BadInput(Where{.file = block.source}, "no calibration points", fix);
+  }
+  for (const std::string& name : table.header) {
+    if (name != "axis" && name != "reference_mm" && name != "measured_mm" && name != "t") {
+      return Status::BadInput(Where{.file = block.source, .line = table.header_line, .field = name}, "unknown column",
+                              "the block file has columns axis,reference_mm,measured_mm and optionally t");
+    }
+  }
+  FL_ASSIGN_OR_RETURN(const int col_axis, table.Column("axis", "axis"));
+  FL_ASSIGN_OR_RETURN(const int col_ref, table.Column("reference_mm", "reference_mm"));
+  FL_ASSIGN_OR_RETURN(const int col_meas, table.Column("measured_mm", "measured_mm"));
+  const int col_t = table.Find("t");
   std::map<std::pair<int, double>, long> seen;
-  while (std::getline(in, line)) {
-    ++line_no;
-    if (line_no == 1 && line.rfind("\xEF\xBB\xBF", 0) == 0) line.erase(0, 3);  // UTF-8 byte-order mark
-    const std::string trimmed = Trim(line);
-    if (trimmed.empty() || trimmed[0] == '#') continue;
-    const auto cells = SplitComma(trimmed);
-    if (!have_header) {
-      for (int i = 0; i < static_cast<int>(cells.size()); ++i) {
-        if (cells[i] == "axis")
-          col_axis = i;
-        else if (cells[i] == "reference_mm")
-          col_ref = i;
-        else if (cells[i] == "measured_mm")
-          col_meas = i;
-        else if (cells[i] == "t")
-          col_t = i;
-        else {
-          return Status::BadInput(Where{.file = block.source, .line = line_no, .field = cells[i]}, "unknown column",
-                                  "the block file has columns axis,reference_mm,measured_mm and optionally t");
-        }
-      }
-      if (col_axis < 0 || col_ref < 0 || col_meas < 0) {
-        return Status::BadInput(Where{.file = block.source, .line = line_no}, "header misses a column",
-                                "start the file with the header axis,reference_mm,measured_mm[,t]");
-      }
-      have_header = true;
-      continue;
-    }
-    const int needed = std::max({col_axis, col_ref, col_meas, col_t}) + 1;
-    if (static_cast<int>(cells.size()) < needed) {
-      return Status::BadInput(Where{.file = block.source, .line = line_no},
-                              "has " + std::to_string(cells.size()) + " fields, expected " + std::to_string(needed),
-                              "write one value per header column");
-    }
+  for (std::size_t row = 0; row < table.rows.size(); ++row) {
+    const long line_no = table.lines[row];
     CalibrationPoint p;
-    const std::string& axis = cells[col_axis];
+    const std::string& axis = table.rows[row][col_axis];
     if (axis == "X" || axis == "x")
       p.axis = 0;
     else if (axis == "Y" || axis == "y")
@@ -110,33 +73,22 @@ Result<StandardBlock> ReadStandardBlockCsv(const std::filesystem::path& path) {
       return Status::BadInput(Where{.file = block.source, .line = line_no, .field = "axis"},
                               "value '" + axis + "' is not an axis", "write X, Y or Z");
     }
-    auto number = [&](int col, const char* name, double* out) -> Status {
-      if (!ParseDouble(cells[col], out) || !std::isfinite(*out)) {
-        return Status::BadInput(Where{.file = block.source, .line = line_no, .field = name},
-                                "value '" + cells[col] + "' is not a finite number", "write a decimal number in mm");
-      }
-      return Status::Ok();
-    };
-    FL_RETURN_IF_ERROR(number(col_ref, "reference_mm", &p.reference_mm));
-    FL_RETURN_IF_ERROR(number(col_meas, "measured_mm", &p.measured_mm));
-    if (col_t >= 0 && !cells[col_t].empty()) {
+    FL_RETURN_IF_ERROR(table.Number(row, col_ref, &p.reference_mm));
+    FL_RETURN_IF_ERROR(table.Number(row, col_meas, &p.measured_mm));
+    if (col_t >= 0 && !table.rows[row][col_t].empty()) {
       double t = 0;
-      FL_RETURN_IF_ERROR(number(col_t, "t", &t));
+      FL_RETURN_IF_ERROR(table.Number(row, col_t, &t));
       p.time_s = t;
     }
     const auto key = std::make_pair(p.axis, p.reference_mm);
     if (auto it = seen.find(key); it != seen.end()) {
       return Status::BadInput(Where{.file = block.source, .line = line_no, .field = "reference_mm"},
-                              "calibration point " + std::string(kAxisNames[p.axis]) + " " + cells[col_ref] +
+                              "calibration point " + std::string(kAxisNames[p.axis]) + " " + table.rows[row][col_ref] +
                                   " is already given on line " + std::to_string(it->second),
                               "list each calibration point once");
     }
     seen[key] = line_no;
     block.points.push_back(p);
-  }
-  if (!have_header || block.points.empty()) {
-    return Status::BadInput(Where{.file = block.source}, "no calibration points",
-                            "write the header axis,reference_mm,measured_mm and one row per calibration point");
   }
   return block;
 }

@@ -28,14 +28,11 @@ Status ParseAxis(const std::string& source, const std::string& field, const std:
   return Status::Ok();
 }
 
-Status Vector3(const std::string& source, const std::string& field, const Json& j, Eigen::Vector3d* out) {
-  if (!j.is_array() || j.size() != 3) return Bad(source, field, "expected [x, y, z]", "write three numbers in mm");
-  for (int a = 0; a < 3; ++a) {
-    if (!j[a].is_number() || !std::isfinite(j[a].get<double>())) {
-      return Bad(source, field, "entry " + std::to_string(a) + " is not a finite number", "write three numbers");
-    }
-    (*out)(a) = j[a].get<double>();
-  }
+// [x, y, z] in mm through core's array reader (messages name the field and the entry).
+Status Vector3(const JsonFields& f, const std::string& key, Eigen::Vector3d* out) {
+  std::vector<double> v;
+  FL_RETURN_IF_ERROR(f.NumberArray(key, &v, 3));
+  *out = Eigen::Vector3d(v[0], v[1], v[2]);
   return Status::Ok();
 }
 
@@ -54,9 +51,9 @@ Status ParsePoint(const Json& j, const std::string& source, double default_u, Mo
     return Bad(source, prefix + "reference_mm", "required field is missing",
                "give the nominal surface point [x, y, z] in the process WCS");
   }
-  FL_RETURN_IF_ERROR(Vector3(source, prefix + "reference_mm", j["reference_mm"], &p->reference_mm));
+  FL_RETURN_IF_ERROR(Vector3(g, "reference_mm", &p->reference_mm));
   if (g.Has("approach")) {
-    FL_RETURN_IF_ERROR(Vector3(source, prefix + "approach", j["approach"], &p->approach));
+    FL_RETURN_IF_ERROR(Vector3(g, "approach", &p->approach));
     if (!(p->approach.norm() > 0)) {
       return Bad(source, prefix + "approach", "is the zero vector", "give the probing direction or leave it out");
     }
@@ -104,6 +101,11 @@ Status ParseOffset(const Json& j, const std::string& source, ModelOffset* o) {
                "write TOOL_RADIUS_WEAR, TOOL_LENGTH_WEAR or WORK_OFFSET");
   if (o->kind == OffsetKind::kWorkOffset) {
     FL_RETURN_IF_ERROR(f.String("wcs", &o->wcs));
+    // The work offsets `formloop link write` addresses (cnc/transport.h): G54..G59.
+    if (o->wcs.size() != 3 || o->wcs[0] != 'G' || o->wcs[1] != '5' || o->wcs[2] < '4' || o->wcs[2] > '9') {
+      return Bad(source, prefix + "wcs", "value '" + o->wcs + "' is not a work coordinate system the link can write",
+                 "write G54, G55, G56, G57, G58 or G59");
+    }
     FL_RETURN_IF_ERROR(f.String("axis", &o->axis));
     int axis = 0;
     FL_RETURN_IF_ERROR(ParseAxis(source, prefix + "axis", o->axis, &axis));
@@ -234,13 +236,13 @@ Status ParseDimension(const Json& j, const MeasurementModel& model, ModelDimensi
     }
   }
   if (t == DimensionType::kTruePosition) {
-    if (!f.Has("nominal_position_mm") || !j["nominal_position_mm"].is_array() || j["nominal_position_mm"].size() != 2 ||
-        !j["nominal_position_mm"][0].is_number() || !j["nominal_position_mm"][1].is_number()) {
-      return Bad(source, prefix + "nominal_position_mm", "missing or not [u, v]",
-                 "give the nominal position along the two axes normal to \"axis\"");
+    if (!f.Has("nominal_position_mm")) {
+      return Bad(source, prefix + "nominal_position_mm", "missing",
+                 "give the nominal position [u, v] along the two axes normal to \"axis\"");
     }
-    d->definition.nominal_position = {j["nominal_position_mm"][0].get<double>(),
-                                      j["nominal_position_mm"][1].get<double>()};
+    std::vector<double> uv;
+    FL_RETURN_IF_ERROR(f.NumberArray("nominal_position_mm", &uv, 2));
+    d->definition.nominal_position = {uv[0], uv[1]};
   } else if (f.Has("nominal_position_mm")) {
     return Bad(source, prefix + "nominal_position_mm", "only TRUE_POSITION takes a nominal position", "remove it");
   }
@@ -301,15 +303,16 @@ Status ParseDimension(const Json& j, const MeasurementModel& model, ModelDimensi
   if (f.Has("k_row")) {
     if (!j["k_row"].is_object())
       return Bad(source, prefix + "k_row", "expected an object", "write {\"offset id\": K, ...}");
-    for (const auto& [key, value] : j["k_row"].items()) {
+    const JsonFields kf(j["k_row"], source, prefix + "k_row.");
+    for (const auto& item : j["k_row"].items()) {
+      const std::string& key = item.key();
       if (model.OffsetIndex(key) < 0) {
         return Bad(source, prefix + "k_row." + key, "offset '" + key + "' is not in the model's offsets",
                    "add the offset or fix its id");
       }
-      if (!value.is_number() || !std::isfinite(value.get<double>())) {
-        return Bad(source, prefix + "k_row." + key, "coefficient is not a finite number", "write K, e.g. 2 or -1");
-      }
-      if (value.get<double>() != 0) d->k_row[key] = value.get<double>();
+      double k = 0;
+      FL_RETURN_IF_ERROR(kf.Number(key, &k));
+      if (k != 0) d->k_row[key] = k;
     }
   }
   if (zone && d->mode == DimensionMode::kCompensate) {

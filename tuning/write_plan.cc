@@ -138,16 +138,14 @@ Result<std::map<std::string, double>> ReadCurrentOffsets(const std::filesystem::
                             "give {\"<offset id>\": <value in mm>, ...} as read from the controller");
   }
   std::map<std::string, double> out;
-  for (const auto& [key, value] : json["values_mm"].items()) {
+  const JsonFields values(json["values_mm"], source, "values_mm.");
+  for (const auto& item : json["values_mm"].items()) {
+    const std::string& key = item.key();
     if (model.OffsetIndex(key) < 0) {
       return Status::BadInput(Where{.file = source, .field = "values_mm." + key},
                               "offset '" + key + "' is not in the model", "remove it or fix the id");
     }
-    if (!value.is_number() || !std::isfinite(value.get<double>())) {
-      return Status::BadInput(Where{.file = source, .field = "values_mm." + key}, "value is not a finite number",
-                              "write the offset's current value in mm");
-    }
-    out[key] = value.get<double>();
+    FL_RETURN_IF_ERROR(values.Number(key, &out[key]));
   }
   for (const auto& o : model.offsets) {
     if (!out.count(o.id)) {

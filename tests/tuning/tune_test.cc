@@ -383,6 +383,17 @@ TEST(MeasurementModel, ValidationMessages) {
   expect_error([](Json& m) { m["dimensions"][0]["points"][0]["id"] = 7; }, "point 7 is not in the model's points");
   expect_error([](Json& m) { m["offsets"][0]["delta_min_mm"] = 0.01; }, "offsets[T3_radius_wear].delta_min_mm");
   expect_error([](Json& m) { m["offsets"][0]["kind"] = "WORK_OFFSET"; }, "offsets[T3_radius_wear].wcs");
+  expect_error(
+      [](Json& m) {
+        m["offsets"][0] = {{"id", "W1"}, {"kind", "WORK_OFFSET"}, {"wcs", "G54.1P1"}, {"axis", "X"}};
+      },
+      "value 'G54.1P1' is not a work coordinate system the link can write");
+  expect_error([](Json& m) { m["dimensions"][0]["k_row"]["T3_radius_wear"] = "2"; }, "k_row.T3_radius_wear");
+  expect_error(
+      [](Json& m) {
+        m["points"][0]["reference_mm"] = {1, 2};
+      },
+      "points[id 1].reference_mm': expected 3 numbers, got 2");
   expect_error([](Json& m) { m["offsets"].push_back(m["offsets"][0]); }, "id is given twice");
   expect_error([](Json& m) { m["dimensions"][0]["nominal_deg"] = 3; }, "values are in mm");
 }

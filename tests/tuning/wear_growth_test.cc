@@ -4,15 +4,15 @@
 
 #include <cmath>
 #include <cstdio>
-#include <fstream>
 #include <map>
-#include <sstream>
 #include <string>
 #include <vector>
 
 #include <gtest/gtest.h>
 
-#include "core/point_io.h"
+#include "core/atomic_file.h"
+#include "core/csv.h"
+#include "core/number_text.h"
 #include "tuning/wear_growth.h"
 
 namespace formloop::tuning {
@@ -20,30 +20,22 @@ namespace {
 
 const std::string kReference = std::string(FORMLOOP_SOURCE_DIR) + "/data/reference/";
 
-std::vector<std::string> Cells(const std::string& line) {
-  std::vector<std::string> out;
-  std::stringstream ss(line);
-  std::string cell;
-  while (std::getline(ss, cell, ',')) {
-    while (!cell.empty() && (cell.back() == ' ' || cell.back() == '\r')) cell.pop_back();
-    out.push_back(cell);
-  }
-  return out;
-}
-
 // NASA milling: VB against time per case; rows without VB are skipped; cases with < 3 measurements left out.
 std::vector<WearSeries> ReadNasa() {
-  std::ifstream in(kReference + "nasa-milling-wear/milling_labels_with_tool_class.csv");
-  EXPECT_TRUE(in.good());
-  std::string line;
-  std::getline(in, line);  // header case,run,VB,time,DOC,feed,material,...
+  const auto table = ReadCsvTable(kReference + "nasa-milling-wear/milling_labels_with_tool_class.csv");
+  EXPECT_TRUE(table.ok()) << table.status().ToString();
+  if (!table.ok()) return {};
+  const int col_case = table->Find("case"), col_vb = table->Find("VB"), col_t = table->Find("time");
+  EXPECT_TRUE(col_case >= 0 && col_vb >= 0 && col_t >= 0);
   std::map<int, WearSeries> cases;
-  while (std::getline(in, line)) {
-    const auto c = Cells(line);
-    double vb = 0, t = 0;
-    if (c.size() < 4 || c[2].empty() || !ParseDouble(c[2], &vb) || !ParseDouble(c[3], &t)) continue;
-    WearSeries& s = cases[std::stoi(c[0])];
-    s.name = "case " + c[0];
+  for (const auto& c : table->rows) {
+    double id = 0, vb = 0, t = 0;
+    if (c[col_vb].empty() || !ParseDouble(c[col_case], &id) || !ParseDouble(c[col_vb], &vb) ||
+        !ParseDouble(c[col_t], &t)) {
+      continue;
+    }
+    WearSeries& s = cases[static_cast<int>(id)];
+    s.name = "case " + c[col_case];
     s.time.push_back(t);
     s.wear_mm.push_back(vb);
   }
@@ -54,15 +46,18 @@ std::vector<WearSeries> ReadNasa() {
   return out;
 }
 
-// QIT-CEMC: side-teeth VBmax of cutting edges 1-4 against the cycle number (columns 1, 4, 7, 10).
+// QIT-CEMC: side-teeth VBmax of cutting edges 1-4 against the cycle number (columns 1, 4, 7, 10). The file
+// has a three-row header with quoted line breaks, so it is streamed line by line (core/csv.h CsvReader) and
+// only rows whose first cell is a cycle number are kept.
 std::vector<WearSeries> ReadQit(int max_cycle = 1000) {
-  std::ifstream in(kReference + "tool-wear-qit-cemc/tool_wear.csv");
-  EXPECT_TRUE(in.good());
+  const auto text = ReadFile(kReference + "tool-wear-qit-cemc/tool_wear.csv");
+  EXPECT_TRUE(text.ok());
   std::vector<WearSeries> edges(4);
   for (int e = 0; e < 4; ++e) edges[e].name = "edge " + std::to_string(e + 1);
-  std::string line;
-  while (std::getline(in, line)) {
-    const auto c = Cells(line);
+  if (!text.ok()) return edges;
+  CsvReader reader(*text);
+  while (reader.Next()) {
+    const auto& c = reader.cells();
     double cycle = 0;
     if (c.size() < 13 || !ParseDouble(c[0], &cycle) || cycle > max_cycle) continue;  // header rows fail here
     for (int e = 0; e < 4; ++e) {
