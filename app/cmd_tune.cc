@@ -80,7 +80,8 @@ void AddTuneCommand(CLI::App& root, CommandAction* action) {
       ->required();
   cmd->add_flag("--confirm", args->confirm,
                 "the operator confirms the whole set (only a SAFE plan is marked confirmed)");
-  cmd->add_option("--acknowledge-ng", args->acknowledge, "dimension ids the operator accepts will stay NG")
+  cmd->add_option("--acknowledge-ng", args->acknowledge,
+                  "dimension ids the operator accepts will stay NG (or, TOLERANCE_ONLY, become NG by the change)")
       ->delimiter(',');
   cmd->add_flag("--accept-alarm", args->accept_alarm,
                 "average strategy: send values beyond the allowed maximum (logged)");

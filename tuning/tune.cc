@@ -312,18 +312,35 @@ std::vector<std::string> BlockReasons(const MeasurementModel& model, const TuneA
     if (r.dimension->mode != DimensionMode::kCompensate || r.state != "MEASURED") continue;
     if (r.not_reachable || (r.predicted_ok_after && !*r.predicted_ok_after)) stay_ng->push_back(r.dimension->id);
   }
-  std::vector<std::string> unacknowledged;
-  for (const auto& id : *stay_ng) {
-    if (std::find(options.acknowledge_ng.begin(), options.acknowledge_ng.end(), id) == options.acknowledge_ng.end()) {
-      unacknowledged.push_back(id);
-    }
+  // A TOLERANCE_ONLY dimension never drives the offsets, but its K row says what the change does to it: one
+  // that is OK now and NG after the change is harmed by the write and needs the same acknowledgement.
+  std::vector<std::string> made_ng;
+  for (const auto& r : at.dimensions) {
+    if (r.dimension->mode != DimensionMode::kToleranceOnly || r.state != "MEASURED" || r.dimension->k_row.empty())
+      continue;
+    if (r.judgement.ok && r.predicted_ok_after && !*r.predicted_ok_after) made_ng.push_back(r.dimension->id);
   }
-  if (!unacknowledged.empty()) {
-    reasons.push_back("dimension(s) " + Join(unacknowledged) +
+  const auto unacknowledged = [&](const std::vector<std::string>& ids) {
+    std::vector<std::string> out;
+    for (const auto& id : ids) {
+      if (std::find(options.acknowledge_ng.begin(), options.acknowledge_ng.end(), id) == options.acknowledge_ng.end())
+        out.push_back(id);
+    }
+    return out;
+  };
+  if (const auto ids = unacknowledged(*stay_ng); !ids.empty()) {
+    reasons.push_back("dimension(s) " + Join(ids) +
                       " will stay NG after the change (NOT_REACHABLE within the offset bounds or NG after rounding): "
                       "writing needs --acknowledge-ng " +
-                      Join(unacknowledged, ","));
+                      Join(ids, ","));
   }
+  if (const auto ids = unacknowledged(made_ng); !ids.empty()) {
+    reasons.push_back("TOLERANCE_ONLY dimension(s) " + Join(ids) +
+                      " are OK now and NG after the change (predicted through their K rows): writing needs "
+                      "--acknowledge-ng " +
+                      Join(ids, ","));
+  }
+  stay_ng->insert(stay_ng->end(), made_ng.begin(), made_ng.end());
   if (at.average && at.average->alarm && !options.accept_alarm) {
     std::vector<std::string> cells;
     for (const auto& c : at.average->cells) {
@@ -518,7 +535,8 @@ Status TuneOptions::Validate() const {
   if (!measured_at.empty()) {
     static const std::regex kIso8601(R"(\d{4}-\d{2}-\d{2}T\d{2}:\d{2}(:\d{2}(\.\d+)?)?(Z|[+-]\d{2}:?\d{2}))");
     if (!std::regex_match(measured_at, kIso8601)) {
-      return Status::BadInput(Where{.field = "--measured-at"}, "value '" + measured_at + "' is not ISO 8601 with a time zone",
+      return Status::BadInput(Where{.field = "--measured-at"},
+                              "value '" + measured_at + "' is not ISO 8601 with a time zone",
                               "write e.g. 2026-11-26T12:00:00+01:00 or 2026-11-26T11:00:00Z");
     }
   }

@@ -56,7 +56,7 @@ struct TuneOptions {
   Strategy strategy = Strategy::kWls;
   bool confirm = false;                     // the operator confirms the whole set of a SAFE plan
   bool accept_alarm = false;                // average: send a value beyond the allowed maximum (logged)
-  std::vector<std::string> acknowledge_ng;  // dimensions the operator accepts will stay NG
+  std::vector<std::string> acknowledge_ng;  // dimensions the operator accepts will stay (or become) NG
   std::string session;                      // free text; default "<part code> <points file name>"
   std::string measured_at;                  // ISO 8601 with time zone, copied to the report records
   bool force = false;                       // replace an earlier tune output in `out`

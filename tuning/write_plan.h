@@ -12,7 +12,8 @@
 //       its value and limit, and manual action is needed. Limits are not overridable here.
 // Other reasons block the write (BLOCKED): current offsets unknown, solver MAX_ITER, a stale block, a
 // COMPENSATE dimension not measured or invalid, dimensions that will stay NG (NOT_REACHABLE or NG after
-// rounding) without an acknowledgement naming them, an averaging ALARM without the operator's
+// rounding), or TOLERANCE_ONLY dimensions OK now that the change makes NG (through their K rows), without
+// an acknowledgement naming them, an averaging ALARM without the operator's
 // acceptance. The status is INTERVENE > RECHECK > BLOCKED > SAFE; blocked_reasons lists every reason.
 // `writes` holds the non-zero rounded changes only when the status is SAFE (otherwise []); `proposed`
 // (an extra field the reader ignores) always lists every non-zero change with its limit check.

@@ -327,6 +327,46 @@ TEST_F(TuneTest, BracketExampleEndToEndAndByteIdentical) {
   EXPECT_EQ(d1["block_mode"], "NEAREST");
 }
 
+// The bracket with seed 004's averaging: T3 moves by the mean of D1/D4/D5 (-0.009 mm), which leaves D1 NG and
+// takes the TOLERANCE_ONLY bore D2 (K = -2 on T3) from 23.997 (OK) to 24.015 (NG). Neither may be written
+// without the operator naming both.
+TEST_F(TuneTest, AChangeThatMakesAToleranceOnlyDimensionNgNeedsAnAcknowledgement) {
+  TuneOptions o;
+  o.model = kBracket / "model.json";
+  o.points = kBracket / "points.csv";
+  o.block = kBracket / "block.csv";
+  o.current_offsets = kBracket / "offsets.json";
+  o.strategy = Strategy::kAverage;
+  o.confirm = true;
+  o.out = dir_ / "average";
+  auto r = RunTune(o);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  const DimensionResult& d2 = r->first.dimensions[1];
+  ASSERT_EQ(d2.dimension->id, "D2");
+  EXPECT_TRUE(d2.judgement.ok);
+  EXPECT_NEAR(*d2.predicted_value_after, d2.evaluation.value + 0.018, 1e-9);
+  EXPECT_FALSE(*d2.predicted_ok_after);
+  EXPECT_EQ(r->plan.status, PlanStatus::kBlocked);
+  EXPECT_FALSE(r->plan.confirmed);
+  const std::string reasons = Json(r->plan.blocked_reasons).dump();
+  EXPECT_NE(reasons.find("TOLERANCE_ONLY dimension(s) D2 are OK now and NG after the change"), std::string::npos)
+      << reasons;
+  EXPECT_NE(reasons.find("dimension(s) D1 will stay NG"), std::string::npos) << reasons;
+  // Naming only D1 is not enough; naming both lets the confirmed plan through.
+  o.acknowledge_ng = {"D1"};
+  o.out = dir_ / "d1";
+  r = RunTune(o);
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->plan.status, PlanStatus::kBlocked);
+  o.acknowledge_ng = {"D1", "D2"};
+  o.out = dir_ / "both";
+  r = RunTune(o);
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->plan.status, PlanStatus::kSafe) << Json(r->plan.blocked_reasons).dump();
+  EXPECT_TRUE(r->plan.confirmed);
+  EXPECT_EQ(r->plan.not_reachable_acknowledged, (std::vector<std::string>{"D1", "D2"}));
+}
+
 TEST_F(TuneTest, OutputFolderRules) {
   TuneOptions o;
   o.model = kBracket / "model.json";
