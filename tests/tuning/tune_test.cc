@@ -30,6 +30,16 @@ std::string Slurp(const fs::path& p) {
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
 
+// The worked bracket of data/tuning/bracket with its standard block and current offsets.
+TuneOptions BracketOptions() {
+  TuneOptions o;
+  o.model = kBracket / "model.json";
+  o.points = kBracket / "points.csv";
+  o.block = kBracket / "block.csv";
+  o.current_offsets = kBracket / "offsets.json";
+  return o;
+}
+
 // A model with one slot along X (walls at ±6, K = −2 on T3's radius wear, ±0.005) and T3 current 0.085.
 Json SlotModel() {
   return Json::parse(R"({
@@ -281,11 +291,7 @@ TEST_F(TuneTest, AverageStrategyAlarmNeedsTheOperator) {
 // The worked example: seed 000's two-point diameter (−118.000 / −142.000 → 24.002 through the standard block)
 // in a bracket with a boss, a slot, a pocket depth and a hole position.
 TEST_F(TuneTest, BracketExampleEndToEndAndByteIdentical) {
-  TuneOptions o;
-  o.model = kBracket / "model.json";
-  o.points = kBracket / "points.csv";
-  o.block = kBracket / "block.csv";
-  o.current_offsets = kBracket / "offsets.json";
+  TuneOptions o = BracketOptions();
   o.out = dir_ / "a";
   o.measured_at = "2026-11-26 12:00";  // no time zone, no T
   auto bad = RunTune(o);
@@ -331,11 +337,7 @@ TEST_F(TuneTest, BracketExampleEndToEndAndByteIdentical) {
 // takes the TOLERANCE_ONLY bore D2 (K = -2 on T3) from 23.997 (OK) to 24.015 (NG). Neither may be written
 // without the operator naming both.
 TEST_F(TuneTest, AChangeThatMakesAToleranceOnlyDimensionNgNeedsAnAcknowledgement) {
-  TuneOptions o;
-  o.model = kBracket / "model.json";
-  o.points = kBracket / "points.csv";
-  o.block = kBracket / "block.csv";
-  o.current_offsets = kBracket / "offsets.json";
+  TuneOptions o = BracketOptions();
   o.strategy = Strategy::kAverage;
   o.confirm = true;
   o.out = dir_ / "average";
