@@ -23,8 +23,11 @@
 // A case file (`formloop kb show` output: "part" object with these fields, "descriptor") is accepted too.
 
 #include <iostream>
+#include <map>
 #include <memory>
+#include <optional>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -35,6 +38,7 @@
 #include "kb/library.h"
 #include "reconstruction/analytic_surface.h"
 #include "reconstruction/bspline_surface.h"
+#include "reconstruction/surface_family.h"
 #include "retrieval/retrieve.h"
 #include "retrieval/starter.h"
 
@@ -55,37 +59,34 @@ Result<retrieval::PartFeatures> QueryFeatures(const nlohmann::json& file, const 
                                               const retrieval::FeatureOptions& options) {
   const nlohmann::json& part = file.contains("part") && file["part"].is_object() ? file["part"] : file;
   FL_ASSIGN_OR_RETURN(retrieval::PartDescription desc, retrieval::PartDescriptionFromJson(part, source));
-  if (file.contains("descriptor")) {
+  const JsonFields top(file, source);
+  if (top.Has("descriptor")) {
     FL_ASSIGN_OR_RETURN(retrieval::PartFeatures f, retrieval::ClassifyPart(desc, *options.taxonomies));
-    const auto values = file["descriptor"];
-    if (!values.is_array() || values.size() != static_cast<size_t>(retrieval::kDescriptorCount)) {
-      return Status::BadInput(Where{.file = source, .field = "descriptor"},
-                              "expected " + std::to_string(retrieval::kDescriptorCount) + " numbers");
-    }
-    f.descriptors.resize(retrieval::kDescriptorCount);
-    for (int k = 0; k < retrieval::kDescriptorCount; ++k) {
-      if (!values[static_cast<size_t>(k)].is_number()) {
-        return Status::BadInput(Where{.file = source, .field = "descriptor[" + std::to_string(k) + "]"},
-                                "must be a number");
-      }
-      f.descriptors(k) = values[static_cast<size_t>(k)].get<double>();
-    }
+    std::vector<double> values;
+    FL_RETURN_IF_ERROR(top.NumberArray("descriptor", &values, static_cast<std::size_t>(retrieval::kDescriptorCount)));
+    f.descriptors = Eigen::Map<const Eigen::VectorXd>(values.data(), retrieval::kDescriptorCount);
     return f;
   }
-  const nlohmann::json surface = part.value("surface", nlohmann::json::object());
+  const JsonFields fields(part, source, &part == &file ? "" : "part.");
+  std::optional<JsonFields> surface;
+  FL_RETURN_IF_ERROR(fields.Object("surface", &surface));
   recon::BSplineSurface q;
-  if (surface.contains("kind")) {
+  if (surface && surface->Has("kind")) {
+    std::string kind;
+    long long samples = 21;
+    FL_RETURN_IF_ERROR(surface->String("kind", &kind));
+    FL_RETURN_IF_ERROR(surface->OptionalInteger("samples", &samples, 4, 400));
     std::map<std::string, double> params;
-    const nlohmann::json params_json = surface.value("params", nlohmann::json::object());
-    for (const auto& [k, v] : params_json.items()) {
-      if (!v.is_number()) return Status::BadInput(Where{.file = source, .field = "surface.params." + k}, "not a number");
-      params[k] = v.get<double>();
+    std::optional<JsonFields> params_json;
+    FL_RETURN_IF_ERROR(surface->Object("params", &params_json));
+    if (params_json) {
+      for (const auto& [k, v] : params_json->json().items()) FL_RETURN_IF_ERROR(params_json->Number(k, &params[k]));
     }
-    FL_ASSIGN_OR_RETURN(q, retrieval::BuildStarterSurface(surface["kind"].get<std::string>(), params,
-                                                          surface.value("samples", 21)));
+    FL_ASSIGN_OR_RETURN(q, recon::FitParametric(kind, params, static_cast<int>(samples)));
   } else {
-    const std::string reference = surface.contains("reference") ? surface["reference"].get<std::string>()
-                                                                : part.value("surface_reference", "");
+    std::string reference;
+    if (surface) FL_RETURN_IF_ERROR(surface->OptionalString("reference", &reference));
+    if (reference.empty()) FL_RETURN_IF_ERROR(fields.OptionalString("surface_reference", &reference));
     if (reference.empty()) {
       return Status::BadInput(Where{.file = source, .field = "surface"}, "no surface",
                               "give surface.kind + surface.params, surface.reference, or descriptor");

@@ -1,9 +1,10 @@
 #include "app/part.h"
 
 #include "core/json_io.h"
+#include "core/log.h"
 #include "core/number_text.h"
 #include "reconstruction/analytic_surface.h"
-#include "retrieval/starter.h"
+#include "reconstruction/surface_family.h"
 
 namespace formloop::app {
 namespace {
@@ -100,18 +101,15 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
   } else if (surface->Has("kind")) {
     FL_RETURN_IF_ERROR(surface->String("kind", &part.surface_kind));
     FL_RETURN_IF_ERROR(ReadInt(*surface, "samples", &part.surface_samples, 8, 400));
-    const Json params = json["surface"].value("params", Json::object());
-    if (!params.is_object()) {
-      return Status::BadInput(Where{.file = source, .field = "surface.params"}, "must be an object of numbers");
-    }
-    for (const auto& [key, value] : params.items()) {
-      if (!value.is_number()) {
-        return Status::BadInput(Where{.file = source, .field = "surface.params." + key}, "must be a number");
+    std::optional<JsonFields> params;
+    FL_RETURN_IF_ERROR(surface->Object("params", &params));
+    if (params) {
+      for (const auto& [key, value] : params->json().items()) {
+        FL_RETURN_IF_ERROR(params->Number(key, &part.surface_params[key]));
       }
-      part.surface_params[key] = value.get<double>();
     }
     // Sampled here, so parameters that give no surface are refused before a run writes anything.
-    if (auto grid = retrieval::StarterGrid(part.surface_kind, part.surface_params, part.surface_samples); !grid.ok()) {
+    if (auto grid = recon::ParametricGrid(part.surface_kind, part.surface_params, part.surface_samples); !grid.ok()) {
       return Status::BadInput(Where{.file = source, .field = "surface"}, grid.status().message());
     }
   } else {
@@ -191,9 +189,14 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
     FL_RETURN_IF_ERROR(f->OptionalNumber("max_spindle_rpm", &part.limits.max_spindle_rpm, kPositive));
     std::optional<JsonFields> e;
     FL_RETURN_IF_ERROR(f->Object("effects", &e));
-    if (e) {
-      part.effects_given = true;
-      auto& x = part.effects;
+    if (e && (e->Has("format") || e->Has("effects"))) {
+      // The effect catalogue's model JSON (simulation/model.h).
+      auto model = sim::Model::FromJson(e->json(), source);
+      if (!model.ok()) return model.status().WithContext("machine.effects");
+      part.effects = std::move(model).value();
+    } else if (e) {
+      // The fields of the first part format, still read (deprecated).
+      sim::MachineEffects x;
       FL_RETURN_IF_ERROR(e->CheckKnown({"tool_radius_error_um", "deflection_um", "thermal_amplitude_um",
                                         "thermal_tau_s", "surface_noise_um", "probe_noise_um"}));
       FL_RETURN_IF_ERROR(e->OptionalNumber("tool_radius_error_um", &x.tool_radius_error_um));
@@ -202,6 +205,12 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
       FL_RETURN_IF_ERROR(e->OptionalNumber("thermal_tau_s", &x.thermal_tau_s, kPositive));
       FL_RETURN_IF_ERROR(e->OptionalNumber("surface_noise_um", &x.surface_noise_um, kNonNegative));
       FL_RETURN_IF_ERROR(e->OptionalNumber("probe_noise_um", &x.probe_noise_um, kNonNegative));
+      FL_RETURN_IF_ERROR(x.Validate().WithContext(source + ": machine.effects"));
+      part.effects = x.ToModel();
+      log::Warn("{}: machine.effects with the fields tool_radius_error_um, deflection_um, ... is deprecated and will "
+                "not be read in a later version; give the effects as the catalogue's model JSON (simulation/model.h), "
+                "here: {}",
+                source, part.effects->ToJson().dump());
     }
     std::optional<JsonFields> p;
     FL_RETURN_IF_ERROR(f->Object("probe", &p));
@@ -259,7 +268,6 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
   auto in_file = [&](Status s) { return s.ok() ? s : Status(s.code(), source + ": " + s.message()); };
   FL_RETURN_IF_ERROR(in_file(part.toolpath.Validate()));
   FL_RETURN_IF_ERROR(in_file(part.limits.Validate()));
-  FL_RETURN_IF_ERROR(in_file(part.effects.Validate()));
   FL_RETURN_IF_ERROR(in_file(part.probe.Validate()));
   FL_RETURN_IF_ERROR(in_file(part.true_probe.Validate()));
   FL_RETURN_IF_ERROR(in_file(part.analysis.Validate()));
@@ -340,14 +348,7 @@ nlohmann::json PartSpec::ToJson() const {
     out["probing"]["profile"] = metrology::ProbeProfileToJson(probe);
   }
   if (true_probe_profile_given) out["machine"]["probe"] = {{"profile", metrology::ProbeProfileToJson(true_probe)}};
-  if (effects_given) {
-    out["machine"]["effects"] = {{"tool_radius_error_um", effects.tool_radius_error_um},
-                                 {"deflection_um", effects.deflection_um},
-                                 {"thermal_amplitude_um", effects.thermal_amplitude_um},
-                                 {"thermal_tau_s", effects.thermal_tau_s},
-                                 {"surface_noise_um", effects.surface_noise_um},
-                                 {"probe_noise_um", effects.probe_noise_um}};
-  }
+  if (effects) out["machine"]["effects"] = effects->ToJson();
   return out;
 }
 

@@ -17,7 +17,8 @@
 //   "tool": {"number": 1, "radius_mm": 3.0, "flutes": 2},
 //   "tools": [{"number": 2, "radius_mm": 1.5}, ...],   // magazine for the simulation-correction step
 //   "toolpath": {"scallop_um": 3, "chord_tolerance_um": 1, "feed_mm_per_min": 1500, ...},
-//   "machine": {"name": "vm-1", "class": "3-axis", "travel_min_mm": [..], "travel_max_mm": [..], "max_feed_mm_per_min": .., "effects": {..}},
+//   "machine": {"name": "vm-1", "class": "3-axis", "travel_min_mm": [..], "travel_max_mm": [..], "max_feed_mm_per_min": ..,
+//               "effects": {"format": "formloop-model", "version": 1, "effects": [..]}},   // simulation/model.h
 //   "probing": {"grid": [20, 20], "inset_fraction": 0.05, "edge_margin_mm": 2, "ball_radius_mm": 1.0, ...,
 //               "profile": "probe.json"},        // a probe profile from `formloop calibrate sphere` (or inline)
 //   "analysis": {"neighbours": 8, "max_control_net": 8, "coverage_factor": 2},
@@ -41,6 +42,7 @@
 #include "nc-gen/probe_program.h"
 #include "nc-gen/toolpath.h"
 #include "reconstruction/bspline_surface.h"
+#include "simulation/model.h"
 #include "simulation/virtual_machine.h"
 
 namespace formloop::app {
@@ -48,7 +50,7 @@ namespace formloop::app {
 struct PartSpec {
   std::string name = "part";
   std::string surface_reference;        // name of an analytic reference surface, or ...
-  std::string surface_kind;             // ... a parametric kind of retrieval/starter.h with its parameters
+  std::string surface_kind;             // ... a parametric kind (reconstruction/surface_family.h) with its parameters
   std::map<std::string, double> surface_params;
   int surface_samples = 41;             // grid samples per direction of a parametric kind's fit
   std::optional<SurfaceFile> surface_file;  // ... or CAD faces or a scan (app/surface_source.h)
@@ -60,7 +62,6 @@ struct PartSpec {
   std::string machine_name = "virtual-3axis";  // key of learned models in the case library
   int flutes = 2;                       // of the ball-end tools (feed per tooth)
   std::vector<nc::BallEndTool> tools;   // the magazine the planner may choose from (default: the part's tool)
-  bool effects_given = false;           // machine.effects present: the part carries its own virtual machine
   std::string material = "unspecified";
   double tolerance_mm = 0.010;
   unsigned long long seed = 1;
@@ -70,7 +71,11 @@ struct PartSpec {
   nc::ToolpathOptions toolpath;
   nc::MachineLimits limits;
   std::string dialect = "linuxcnc";     // controller dialect of the NC and probing programs (machine.dialect)
-  sim::MachineEffects effects;          // what the virtual machine does that the plan does not know
+  // machine.effects: what the virtual machine does that the plan does not know, as the effect catalogue's
+  // model JSON (simulation/model.h); absent: `--machine virtual` takes the machine's profile. The old
+  // fields (tool_radius_error_um, deflection_um, thermal_amplitude_um, thermal_tau_s, surface_noise_um,
+  // probe_noise_um) are still read, turned into the model, with a deprecation note in the log.
+  std::optional<sim::Model> effects;
   metrology::ProbeModel true_probe;     // the probe the virtual machine really has
   int probe_nu = 20, probe_nv = 20;
   double probe_inset_fraction = 0.05;

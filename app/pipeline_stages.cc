@@ -14,11 +14,10 @@
 #include "nc-gen/moves.h"
 #include "nc-gen/toolpath_io.h"
 #include "planning/precompensation.h"
-#include "reconstruction/analytic_surface.h"
 #include "reconstruction/cad_io.h"
 #include "reconstruction/trim.h"
+#include "reconstruction/surface_family.h"
 #include "retrieval/retrieve.h"
-#include "retrieval/starter.h"
 #include "simulation/virtual_machine.h"
 
 namespace formloop::app::stages {
@@ -50,12 +49,12 @@ Result<Machine> ResolveMachine(const PartSpec& part, const RunOptions& options, 
     return m;
   }
   const std::string spec = options.machine.empty() ? "virtual" : options.machine;
-  if (spec == "virtual" && !part.effects_given) {
+  if (spec == "virtual" && !part.effects) {
     // The part's machine by name: its profile in data/machines/.
     return ResolveMachine(part, RunOptions{.machine = "virtual:" + part.machine_name}, data_dir, folder);
   }
   if (spec == "virtual") {
-    m.model = part.effects.ToModel();
+    m.model = *part.effects;
     FL_RETURN_IF_ERROR(folder.WriteJson(
         fs::path("inputs") / "machine_profile.json",
         MachineProfile{m.name, "the part file's machine.effects", m.model, m.probe}.ToJson()));
@@ -101,10 +100,21 @@ Result<Inputs> ResolveInputs(const PartSpec& given, const RunOptions& options, c
 }
 
 Result<Surface> BuildSurface(const PartSpec& part, std::uint64_t seed, const RunFolderWriter& folder) {
-  Surface s;
+  const bool parametric = !part.surface_kind.empty();
+  const recon::FamilySurfaceOptions options{
+      .kind = parametric ? recon::SurfaceFamilyKind::kParametric : recon::SurfaceFamilyKind::kReference,
+      .name = parametric ? part.surface_kind : part.surface_reference,
+      .params = part.surface_params,
+      .samples_u = part.fit_samples_u,
+      .samples_v = part.fit_samples_v,
+      .samples = part.surface_samples,
+      .fit = part.fit,
+      .check_points = part.fit_check_points,
+      .seed = seed};
   FL_RETURN_IF_ERROR(folder.MakeFolder("surface"));
   const fs::path samples_path = folder.Path(fs::path("surface") / "samples.csv");
   if (part.surface_file) {
+    Surface s;
     // CAD faces or a scan (app/surface_source.h); samples of Q inside its trim.
     FL_ASSIGN_OR_RETURN(SurfaceFromFile built, BuildSurfaceFromFile(*part.surface_file, part.tolerance_mm));
     s.q = std::move(built.q);
@@ -117,50 +127,21 @@ Result<Surface> BuildSurface(const PartSpec& part, std::uint64_t seed, const Run
     }
     FL_RETURN_IF_ERROR(WritePoints(samples_path, samples));
     s.fit_check_max_mm = built.fit_check_max_mm;
-  } else if (part.surface_kind.empty()) {
-    FL_ASSIGN_OR_RETURN(std::unique_ptr<recon::AnalyticSurface> reference,
-                        recon::MakeReferenceSurface(part.surface_reference));
-    FL_RETURN_IF_ERROR(
-        WritePoints(samples_path, recon::SampleGridPoints(*reference, part.fit_samples_u, part.fit_samples_v)));
-    FL_ASSIGN_OR_RETURN(s.q, recon::FitAnalytic(*reference, part.fit_samples_u, part.fit_samples_v, part.fit,
-                                                part.fit_check_points, seed, &s.report));
-    s.description = {{"reference", reference->name()}, {"description", reference->description()}};
-  } else {
-    FL_ASSIGN_OR_RETURN(const retrieval::StarterHeight height,
-                        retrieval::StarterHeightOf(part.surface_kind, part.surface_params));
-    FL_ASSIGN_OR_RETURN(const recon::GridSamples g,
-                        retrieval::StarterGrid(part.surface_kind, part.surface_params, part.surface_samples));
-    PointSet samples;
-    samples.points = g.points;
-    FL_RETURN_IF_ERROR(WritePoints(samples_path, samples));
-    FL_ASSIGN_OR_RETURN(s.q, recon::FitGrid(g, part.fit, &s.report));
-    Rng rng(seed);
-    double sum2 = 0;
-    for (int k = 0; k < part.fit_check_points; ++k) {
-      const double u = g.domain.u_min + g.domain.u_span() * rng.Uniform();
-      const double v = g.domain.v_min + g.domain.v_span() * rng.Uniform();
-      const Eigen::Vector3d p = s.q.Point(u, v);
-      const double e = std::abs(p.z() - height.z(p.x(), p.y()));
-      sum2 += e * e;
-      if (e > s.report.check_max_mm) {
-        s.report.check_max_mm = e;
-        s.report.check_max_at = p;
-      }
-    }
-    s.report.n_check = part.fit_check_points;
-    s.report.check_rms_mm = part.fit_check_points > 0 ? std::sqrt(sum2 / part.fit_check_points) : 0.0;
-    s.description = {{"kind", part.surface_kind},
-                     {"params", part.surface_params},
-                     {"check", "vertical distance to z = f(x, y) at random points"}};
+    s.description["fit"] = s.report.ToJson();
+    s.description["bspline"] = {{"u_degree", s.q.u_degree()},
+                                {"v_degree", s.q.v_degree()},
+                                {"u_poles", s.q.u_poles()},
+                                {"v_poles", s.q.v_poles()}};
+    FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("surface") / "surface.json", s.description));
+    FL_RETURN_IF_ERROR(recon::WriteStep(folder.Path(fs::path("surface") / "Q.step"), s.q, part.name));
+    return s;
   }
-  if (!part.surface_file) s.fit_check_max_mm = s.report.check_max_mm;
-  s.description["fit"] = s.report.ToJson();
-  s.description["bspline"] = {{"u_degree", s.q.u_degree()},
-                              {"v_degree", s.q.v_degree()},
-                              {"u_poles", s.q.u_poles()},
-                              {"v_poles", s.q.v_poles()}};
-  FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("surface") / "surface.json", s.description));
-  FL_RETURN_IF_ERROR(recon::WriteStep(folder.Path(fs::path("surface") / "Q.step"), s.q, part.name));
+  FL_ASSIGN_OR_RETURN(recon::FamilySurface built, recon::BuildFamilySurface(options));
+  FL_RETURN_IF_ERROR(WritePoints(samples_path, built.samples));
+  FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("surface") / "surface.json", built.description));
+  FL_RETURN_IF_ERROR(recon::WriteStep(folder.Path(fs::path("surface") / "Q.step"), built.q, part.name));
+  Surface s{std::move(built.q), built.report, std::move(built.description)};
+  s.fit_check_max_mm = s.report.check_max_mm;
   return s;
 }
 

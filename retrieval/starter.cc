@@ -12,6 +12,7 @@
 
 #include "core/json_io.h"
 #include "core/number_text.h"
+#include "reconstruction/surface_family.h"
 
 namespace formloop::retrieval {
 namespace {
@@ -43,18 +44,6 @@ Status ReadRanges(const JsonFields& f, const std::string& key, std::map<std::str
 }
 
 double Draw(Rng& rng, const StarterRange& r) { return r.lo + (r.hi - r.lo) * rng.Uniform(); }
-
-double Param(const std::map<std::string, double>& p, const std::string& name) {
-  auto it = p.find(name);
-  return it == p.end() ? std::numeric_limits<double>::quiet_NaN() : it->second;
-}
-
-double Franke(double x, double y) {
-  return 0.75 * std::exp(-(std::pow(9 * x - 2, 2) + std::pow(9 * y - 2, 2)) / 4) +
-         0.75 * std::exp(-std::pow(9 * x + 1, 2) / 49 - (9 * y + 1) / 10) +
-         0.5 * std::exp(-(std::pow(9 * x - 7, 2) + std::pow(9 * y - 3, 2)) / 4) -
-         0.2 * std::exp(-std::pow(9 * x - 4, 2) - std::pow(9 * y - 7, 2));
-}
 
 // Rough material properties for the simulation knowledge (E GPa, hardness HV, specific cutting force N/mm²).
 json MaterialProperties(const std::string& material) {
@@ -145,96 +134,6 @@ const StarterFamily* StarterSpec::Find(const std::string& family) const {
     if (f.name == family) return &f;
   }
   return nullptr;
-}
-
-Result<StarterHeight> StarterHeightOf(const std::string& kind, const std::map<std::string, double>& p) {
-  const Where where{.field = "surface." + kind};
-  double sx = 0, sy = 0;
-  std::function<double(double, double)> f;
-  if (kind == "sphere_cap") {
-    const double s = Param(p, "size_mm"), r = Param(p, "radius_ratio") * s;
-    sx = sy = s;
-    f = [r](double x, double y) { return std::sqrt(r * r - x * x - y * y); };
-  } else if (kind == "ellipsoid_cap") {
-    const double s = Param(p, "size_mm"), aspect = Param(p, "aspect");
-    const double a = 0.75 * s, b = 0.75 * aspect * s, c = Param(p, "height_ratio") * s;
-    sx = s;
-    sy = aspect * s;
-    f = [a, b, c](double x, double y) { return c * std::sqrt(1 - (x / a) * (x / a) - (y / b) * (y / b)); };
-  } else if (kind == "paraboloid") {
-    const double s = Param(p, "size_mm"), r = Param(p, "radius_ratio") * s, t = Param(p, "tilt");
-    sx = sy = s;
-    f = [r, t](double x, double y) { return (x * x + y * y) / (2 * r) + t * x; };
-  } else if (kind == "gaussian_pocket") {
-    const double s = Param(p, "size_mm"), d = Param(p, "depth_ratio") * s, w = Param(p, "width_ratio") * s;
-    sx = sy = s;
-    f = [d, w](double x, double y) { return -d * std::exp(-(x * x + y * y) / (w * w)); };
-  } else if (kind == "saddle") {
-    const double s = Param(p, "size_mm"), cx = Param(p, "curvature_x"), cy = cx * Param(p, "curvature_ratio");
-    sx = sy = s;
-    f = [cx, cy](double x, double y) { return 0.5 * (cx * x * x - cy * y * y); };
-  } else if (kind == "egg_box") {
-    const double s = Param(p, "size_mm"), a = Param(p, "amplitude_ratio") * s, l = Param(p, "wavelength_ratio") * s;
-    sx = sy = s;
-    f = [a, l](double x, double y) {
-      return a * std::sin(2 * std::numbers::pi * x / l) * std::sin(2 * std::numbers::pi * y / l);
-    };
-  } else if (kind == "franke") {
-    const double s = Param(p, "size_mm"), a = Param(p, "amplitude_ratio") * s;
-    sx = sy = s;
-    f = [s, a](double x, double y) { return a * Franke(x / s + 0.5, y / s + 0.5); };
-  } else if (kind == "cylinder") {
-    const double s = Param(p, "size_mm"), r = Param(p, "radius_ratio") * s;
-    sx = s;
-    sy = Param(p, "length_ratio") * s;
-    f = [r](double x, double) { return std::sqrt(r * r - x * x); };
-  } else if (kind == "twisted_ruled") {
-    const double c = Param(p, "chord_mm"), span = Param(p, "span_ratio") * c;
-    const double twist = Param(p, "twist_deg") * std::numbers::pi / 180;
-    sx = c;
-    sy = span;
-    f = [span, twist](double x, double y) { return x * std::tan(twist * (y / span)); };
-  } else {
-    return Status::BadInput(where, "unknown surface kind",
-                            "use sphere_cap, ellipsoid_cap, paraboloid, gaussian_pocket, saddle, egg_box, franke, "
-                            "cylinder or twisted_ruled");
-  }
-  if (!(sx > 0) || !(sy > 0) || !std::isfinite(sx) || !std::isfinite(sy)) {
-    return Status::BadInput(where, "missing or non-positive size parameter");
-  }
-  return StarterHeight{std::move(f), {-sx / 2, sx / 2, -sy / 2, sy / 2}};
-}
-
-Result<recon::GridSamples> StarterGrid(const std::string& kind, const std::map<std::string, double>& p, int samples) {
-  const Where where{.field = "surface." + kind};
-  if (samples < 2) return Status::BadInput(where, "needs at least 2 samples per direction");
-  FL_ASSIGN_OR_RETURN(const StarterHeight height, StarterHeightOf(kind, p));
-  const double sx = height.domain.u_span(), sy = height.domain.v_span();
-  recon::GridSamples g;
-  g.nu = g.nv = samples;
-  g.domain = height.domain;
-  g.points.reserve(static_cast<size_t>(samples * samples));
-  for (int j = 0; j < samples; ++j) {
-    for (int i = 0; i < samples; ++i) {
-      const double x = g.domain.u_min + sx * i / (samples - 1), y = g.domain.v_min + sy * j / (samples - 1);
-      const double z = height.z(x, y);
-      if (!std::isfinite(z)) {
-        return Status::BadInput(where, "the parameters give no surface at (" + Round(x, 4) + ", " + Round(y, 4) +
-                                           ") (e.g. a radius smaller than the footprint)");
-      }
-      g.points.emplace_back(x, y, z);
-    }
-  }
-  return g;
-}
-
-Result<recon::BSplineSurface> BuildStarterSurface(const std::string& kind, const std::map<std::string, double>& p,
-                                                  int samples) {
-  FL_ASSIGN_OR_RETURN(const recon::GridSamples g, StarterGrid(kind, p, samples));
-  recon::GridFitOptions options;
-  options.tolerance_mm = 1e-3;
-  recon::FitReport report;
-  return recon::FitGrid(g, options, &report);
 }
 
 std::vector<StarterPart> DrawStarterParts(const StarterSpec& spec) {
@@ -347,7 +246,7 @@ Result<PartDescription> PartDescriptionFromJson(const nlohmann::json& j, const s
 }
 
 Result<kb::CaseRecord> MakeStarterCase(const StarterPart& part, int fit_samples, const FeatureOptions& options) {
-  FL_ASSIGN_OR_RETURN(recon::BSplineSurface surface, BuildStarterSurface(part.kind, part.params, fit_samples));
+  FL_ASSIGN_OR_RETURN(recon::BSplineSurface surface, recon::FitParametric(part.kind, part.params, fit_samples));
   FL_ASSIGN_OR_RETURN(PartFeatures features, ExtractFeatures(part.description, surface, options));
   kb::CaseRecord r;
   r.uid = part.uid;

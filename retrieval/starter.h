@@ -9,17 +9,7 @@
 // knowledge) is drawn from the family's ranges. Everything comes from one Rng stream seeded by the file's
 // "seed", family by family, case by case, so the same file gives byte-identical cases.
 //
-// Surface kinds (graph surfaces over a rectangle centred at the origin; lengths in mm; s = size_mm):
-//   sphere_cap       size_mm, radius_ratio           z = sqrt(R² − x² − y²), R = radius_ratio · s, square s × s
-//   ellipsoid_cap    size_mm, aspect, height_ratio   z = c·sqrt(1 − (x/a)² − (y/b)²), s × aspect·s,
-//                                                    a = 0.75 s, b = 0.75 aspect s, c = height_ratio · s
-//   paraboloid       size_mm, radius_ratio, tilt     z = (x² + y²)/(2R) + tilt·x, R = radius_ratio · s (concave)
-//   gaussian_pocket  size_mm, depth_ratio, width_ratio  z = −D·exp(−(x² + y²)/w²), D, w = ratios · s
-//   saddle           size_mm, curvature_x, curvature_ratio  z = (c_x x² − c_x·ratio·y²)/2
-//   egg_box          size_mm, amplitude_ratio, wavelength_ratio  z = A sin(2πx/λ) sin(2πy/λ)
-//   franke           size_mm, amplitude_ratio        z = A·franke(x/s + ½, y/s + ½) (Franke 1979)
-//   cylinder         size_mm, length_ratio, radius_ratio  z = sqrt(R² − x²), s across, length_ratio·s long
-//   twisted_ruled    chord_mm, span_ratio, twist_deg z = x·tan(twist·(y/span)) (a ruled, twisted blade)
+// Surface kinds: the parametric kinds of the one surface-family registry (reconstruction/surface_family.h).
 
 #include <filesystem>
 #include <functional>
@@ -75,22 +65,6 @@ struct StarterPart {
   nlohmann::json simulation = nlohmann::json::object();
   nlohmann::json manufacturing = nlohmann::json::object();
 };
-
-// The height function z = f(x, y) of a kind with its parameters and its rectangle (x = u, y = v).
-struct StarterHeight {
-  std::function<double(double, double)> z;
-  recon::ParamDomain domain;
-};
-Result<StarterHeight> StarterHeightOf(const std::string& kind, const std::map<std::string, double>& params);
-
-// samples × samples grid points of a kind with its parameters over its rectangle; BadInput naming
-// "surface.<kind>" where the parameters give no surface (e.g. a radius below the footprint).
-Result<recon::GridSamples> StarterGrid(const std::string& kind, const std::map<std::string, double>& params,
-                                       int samples);
-
-// The surface of a kind with its parameters, fitted from samples × samples grid points.
-Result<recon::BSplineSurface> BuildStarterSurface(const std::string& kind, const std::map<std::string, double>& params,
-                                                  int samples);
 
 // Draws every part of the spec (families in file order, cases_per_family each): uid "<family>-NNN".
 std::vector<StarterPart> DrawStarterParts(const StarterSpec& spec);

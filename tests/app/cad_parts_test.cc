@@ -31,6 +31,7 @@
 #include "reconstruction/bspline_surface.h"
 #include "reconstruction/cad_io.h"
 #include "reconstruction/occt_support.h"
+#include "reconstruction/surface_family.h"
 #include "reconstruction/trim.h"
 #include "retrieval/starter.h"
 #include "tests/support/cad_fixtures.h"
@@ -378,7 +379,7 @@ TEST_F(CadPartsTest, APublicPartRunsAndAStarterShapeAsCadRetrievesItsFamily) {
   // A dome of the starter library's "dome" family (sphere_cap, size 90 mm, radius ratio 1.4), exported as a
   // STEP face and described like the family's parts, but with no shape family given.
   const std::map<std::string, double> params{{"size_mm", 90}, {"radius_ratio", 1.4}};
-  const auto grid = retrieval::StarterGrid("sphere_cap", params, 41);
+  const auto grid = recon::ParametricGrid("sphere_cap", params, 41);
   ASSERT_TRUE(grid.ok()) << grid.status().ToString();
   recon::FitReport report;
   const auto q = recon::FitGrid(*grid, recon::GridFitOptions{}, &report);

@@ -195,6 +195,31 @@ TEST_F(RunTest, RunAndAnalyseGiveTheSamePerPointTable) {
   EXPECT_EQ(html.find("not available"), std::string::npos);     // every picture of loop 0 is drawn
 }
 
+// machine.effects: the effect catalogue's model JSON, and the old fields (deprecated) read as the same
+// model; the resolved part writes the model.
+TEST_F(RunTest, MachineEffectsAreTheCatalogueModelAndTheOldFieldsStillRead) {
+  auto json = ReadJsonFile(kDemo);
+  ASSERT_TRUE(json.ok());
+  const auto as_model = ParsePart(*json, "demo.json");
+  ASSERT_TRUE(as_model.ok()) << as_model.status().ToString();
+  ASSERT_TRUE(as_model->effects.has_value());
+  Json old = *json;
+  old["machine"]["effects"] = {{"tool_radius_error_um", 8}, {"deflection_um", 20}, {"thermal_amplitude_um", 6},
+                               {"thermal_tau_s", 900}, {"surface_noise_um", 1.0}, {"probe_noise_um", 0.5}};
+  const auto as_fields = ParsePart(old, "old.json");
+  ASSERT_TRUE(as_fields.ok()) << as_fields.status().ToString();
+  ASSERT_TRUE(as_fields->effects.has_value());
+  EXPECT_EQ(as_fields->effects->ToJson(), as_model->effects->ToJson());
+  EXPECT_EQ(as_fields->ToJson()["machine"]["effects"]["format"], "formloop-model");
+  old["machine"]["effects"]["deflection_um"] = "twenty";
+  EXPECT_FALSE(ParsePart(old, "old.json").ok());
+  Json typo = *json;
+  typo["machine"]["effects"]["effects"][0]["name"] = "tool_radiuss";
+  const auto bad = ParsePart(typo, "typo.json");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("unknown effect 'tool_radiuss'"), std::string::npos) << bad.status().message();
+}
+
 TEST_F(RunTest, BadPartsAreRefusedWithTheFieldAndNothingIsWritten) {
   auto json = ReadJsonFile(kDemo).value();
   struct Case {

@@ -11,7 +11,7 @@
 #include <gtest/gtest.h>
 
 #include "metrology/probe.h"
-#include "retrieval/starter.h"
+#include "reconstruction/surface_family.h"
 
 namespace formloop::planning {
 namespace {
@@ -76,8 +76,7 @@ TEST(SimCorrectionSurrogate, NoGougeFreeToolGivesNoPlan) {
 // A 40 mm Gaussian pocket: 10 mm deep, 8 mm wide; at the bottom the concave radius is w²/(2d) = 3.2 mm.
 const recon::BSplineSurface& Pocket() {
   static const recon::BSplineSurface q =
-      retrieval::BuildStarterSurface("gaussian_pocket", {{"size_mm", 40}, {"depth_ratio", 0.25}, {"width_ratio", 0.2}},
-                                     41)
+      recon::FitParametric("gaussian_pocket", {{"size_mm", 40}, {"depth_ratio", 0.25}, {"width_ratio", 0.2}}, 41)
           .value();
   return q;
 }

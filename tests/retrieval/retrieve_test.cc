@@ -24,6 +24,7 @@
 #include <gtest/gtest.h>
 
 #include "core/json_io.h"
+#include "reconstruction/surface_family.h"
 #include "retrieval/retrieve.h"
 #include "retrieval/starter.h"
 
@@ -75,7 +76,7 @@ const Fixture& Shared() {
     // 252-base sets: the 81 % once measured on 63 bases was a lucky draw.
     Rng rng(4242);
     auto features_of = [&](const StarterPart& p) {
-      auto surface = BuildStarterSurface(p.kind, p.params, fx->spec.fit_samples);
+      auto surface = recon::FitParametric(p.kind, p.params, fx->spec.fit_samples);
       EXPECT_TRUE(surface.ok()) << p.uid << ": " << surface.status().ToString();
       auto feat = ExtractFeatures(p.description, *surface, fx->options);
       EXPECT_TRUE(feat.ok()) << p.uid << ": " << feat.status().ToString();

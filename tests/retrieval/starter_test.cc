@@ -73,9 +73,12 @@ TEST(Starter, PerturbationScalesEveryParameter) {
 
 TEST(Starter, BadSourcesAreRefused) {
   EXPECT_FALSE(StarterSpec::FromJson(nlohmann::json::object(), "x").ok());
-  EXPECT_FALSE(BuildStarterSurface("no_such_kind", {{"size_mm", 10}}, 10).ok());
-  // A sphere radius smaller than the footprint has no surface at the corners.
-  EXPECT_FALSE(BuildStarterSurface("sphere_cap", {{"size_mm", 100}, {"radius_ratio", 0.5}}, 10).ok());
+  // A family file whose families lack a field is refused naming it.
+  const auto missing = StarterSpec::FromJson(
+      {{"format", "formloop-starter-families"}, {"seed", 1}, {"cases_per_family", 2}, {"families", {{{"name", "x"}}}}},
+      "f.json");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.status().message().find("families[0].shape"), std::string::npos) << missing.status().message();
   EXPECT_FALSE(StarterSpec::Load(kData / "starter" / "missing.json").ok());
 }
 
