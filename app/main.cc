@@ -2,10 +2,12 @@
 // front door (docs/ARCHITECTURE.md). Exit codes: 0 ok, 1 the job's own failure, 2 bad input/usage.
 
 #include <iostream>
+#include <string>
 
 #include "app/command.h"
 #include "core/log.h"
 #include "core/progress.h"
+#include "core/version.h"
 
 int main(int argc, char** argv) {
   using namespace formloop;
@@ -17,7 +19,7 @@ int main(int argc, char** argv) {
       "formloop");
   app.require_subcommand(1);
   app.fallthrough();  // global options (--quiet, --log-level) may also follow the subcommand
-  app.set_version_flag("--version", "formloop 0.1.0");
+  app.set_version_flag("--version", std::string("formloop ") + Version());
   std::string level = "info";
   app.add_option("--log-level", level, "stderr log level: trace, debug, info, warn, error, off")
       ->capture_default_str();

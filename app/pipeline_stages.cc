@@ -9,6 +9,7 @@
 #include "core/log.h"
 #include "core/point_io.h"
 #include "core/random.h"
+#include "core/version.h"
 #include "metrology/probe_log_analysis.h"
 #include "nc-gen/cutter_locations.h"
 #include "nc-gen/moves.h"
@@ -24,7 +25,7 @@ namespace formloop::app::stages {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-const char* const kVersion = "0.2.0";
+const char* const kVersion = Version();
 
 namespace {
 

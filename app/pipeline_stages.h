@@ -30,7 +30,7 @@
 
 namespace formloop::app::stages {
 
-// formloop's version as programs and summary.json name it.
+// formloop's version as programs and summary.json name it: core/version.h (CMake's project version).
 extern const char* const kVersion;
 
 // The machine a part is cut on: a virtual machine with its true effects, or a real one's probe logs.

@@ -33,13 +33,16 @@ struct Kind {
 
 const std::vector<Kind>& Kinds() {
   static const std::vector<Kind> kKinds = {
-      {"sphere_cap", {"size_mm", "radius_ratio"}, "z = sqrt(R^2 - x^2 - y^2), R = radius_ratio s, s x s",
+      {"sphere_cap",
+       {"size_mm", "radius_ratio"},
+       "z = sqrt(R^2 - x^2 - y^2), R = radius_ratio s, s x s",
        [](const std::map<std::string, double>& p, double* sx, double* sy) -> std::function<double(double, double)> {
          const double s = Param(p, "size_mm"), r = Param(p, "radius_ratio") * s;
          *sx = *sy = s;
          return [r](double x, double y) { return std::sqrt(r * r - x * x - y * y); };
        }},
-      {"ellipsoid_cap", {"size_mm", "aspect", "height_ratio"},
+      {"ellipsoid_cap",
+       {"size_mm", "aspect", "height_ratio"},
        "z = c sqrt(1 - (x/a)^2 - (y/b)^2), s x aspect s, a = 0.75 s, b = 0.75 aspect s, c = height_ratio s",
        [](const std::map<std::string, double>& p, double* sx, double* sy) -> std::function<double(double, double)> {
          const double s = Param(p, "size_mm"), aspect = Param(p, "aspect");
@@ -48,41 +51,51 @@ const std::vector<Kind>& Kinds() {
          *sy = aspect * s;
          return [a, b, c](double x, double y) { return c * std::sqrt(1 - (x / a) * (x / a) - (y / b) * (y / b)); };
        }},
-      {"paraboloid", {"size_mm", "radius_ratio", "tilt"}, "z = (x^2 + y^2)/(2R) + tilt x, R = radius_ratio s",
+      {"paraboloid",
+       {"size_mm", "radius_ratio", "tilt"},
+       "z = (x^2 + y^2)/(2R) + tilt x, R = radius_ratio s",
        [](const std::map<std::string, double>& p, double* sx, double* sy) -> std::function<double(double, double)> {
          const double s = Param(p, "size_mm"), r = Param(p, "radius_ratio") * s, t = Param(p, "tilt");
          *sx = *sy = s;
          return [r, t](double x, double y) { return (x * x + y * y) / (2 * r) + t * x; };
        }},
-      {"gaussian_pocket", {"size_mm", "depth_ratio", "width_ratio"},
+      {"gaussian_pocket",
+       {"size_mm", "depth_ratio", "width_ratio"},
        "z = -D exp(-(x^2 + y^2)/w^2), D = depth_ratio s, w = width_ratio s",
        [](const std::map<std::string, double>& p, double* sx, double* sy) -> std::function<double(double, double)> {
          const double s = Param(p, "size_mm"), d = Param(p, "depth_ratio") * s, w = Param(p, "width_ratio") * s;
          *sx = *sy = s;
          return [d, w](double x, double y) { return -d * std::exp(-(x * x + y * y) / (w * w)); };
        }},
-      {"saddle", {"size_mm", "curvature_x", "curvature_ratio"}, "z = (c_x x^2 - c_x ratio y^2)/2",
+      {"saddle",
+       {"size_mm", "curvature_x", "curvature_ratio"},
+       "z = (c_x x^2 - c_x ratio y^2)/2",
        [](const std::map<std::string, double>& p, double* sx, double* sy) -> std::function<double(double, double)> {
          const double s = Param(p, "size_mm"), cx = Param(p, "curvature_x"), cy = cx * Param(p, "curvature_ratio");
          *sx = *sy = s;
          return [cx, cy](double x, double y) { return 0.5 * (cx * x * x - cy * y * y); };
        }},
-      {"egg_box", {"size_mm", "amplitude_ratio", "wavelength_ratio"},
+      {"egg_box",
+       {"size_mm", "amplitude_ratio", "wavelength_ratio"},
        "z = A sin(2 pi x/l) sin(2 pi y/l), A = amplitude_ratio s, l = wavelength_ratio s",
        [](const std::map<std::string, double>& p, double* sx, double* sy) -> std::function<double(double, double)> {
-         const double s = Param(p, "size_mm"), a = Param(p, "amplitude_ratio") * s, l = Param(p, "wavelength_ratio") * s;
+         const double s = Param(p, "size_mm"), a = Param(p, "amplitude_ratio") * s,
+                      l = Param(p, "wavelength_ratio") * s;
          *sx = *sy = s;
          return [a, l](double x, double y) {
            return a * std::sin(2 * std::numbers::pi * x / l) * std::sin(2 * std::numbers::pi * y / l);
          };
        }},
-      {"franke", {"size_mm", "amplitude_ratio"}, "z = A franke(x/s + 1/2, y/s + 1/2), A = amplitude_ratio s",
+      {"franke",
+       {"size_mm", "amplitude_ratio"},
+       "z = A franke(x/s + 1/2, y/s + 1/2), A = amplitude_ratio s",
        [](const std::map<std::string, double>& p, double* sx, double* sy) -> std::function<double(double, double)> {
          const double s = Param(p, "size_mm"), a = Param(p, "amplitude_ratio") * s;
          *sx = *sy = s;
          return [s, a](double x, double y) { return a * Franke(x / s + 0.5, y / s + 0.5); };
        }},
-      {"cylinder", {"size_mm", "length_ratio", "radius_ratio"},
+      {"cylinder",
+       {"size_mm", "length_ratio", "radius_ratio"},
        "z = sqrt(R^2 - x^2), s across, length_ratio s long, R = radius_ratio s",
        [](const std::map<std::string, double>& p, double* sx, double* sy) -> std::function<double(double, double)> {
          const double s = Param(p, "size_mm"), r = Param(p, "radius_ratio") * s;
@@ -90,7 +103,9 @@ const std::vector<Kind>& Kinds() {
          *sy = Param(p, "length_ratio") * s;
          return [r](double x, double) { return std::sqrt(r * r - x * x); };
        }},
-      {"twisted_ruled", {"chord_mm", "span_ratio", "twist_deg"}, "z = x tan(twist (y/span)), span = span_ratio chord",
+      {"twisted_ruled",
+       {"chord_mm", "span_ratio", "twist_deg"},
+       "z = x tan(twist (y/span)), span = span_ratio chord",
        [](const std::map<std::string, double>& p, double* sx, double* sy) -> std::function<double(double, double)> {
          const double c = Param(p, "chord_mm"), span = Param(p, "span_ratio") * c;
          const double twist = Param(p, "twist_deg") * std::numbers::pi / 180;

@@ -62,12 +62,10 @@ Result<HeightSurface> ParametricSurface(const std::string& kind, const std::map<
 
 // samples × samples grid points of a parametric kind over its rectangle; BadInput naming
 // "surface.<kind>" where the parameters give no surface (e.g. a radius below the footprint).
-Result<GridSamples> ParametricGrid(const std::string& kind, const std::map<std::string, double>& params,
-                                   int samples);
+Result<GridSamples> ParametricGrid(const std::string& kind, const std::map<std::string, double>& params, int samples);
 
 // The kind fitted from samples × samples grid points (FitGrid, tolerance 1 µm).
-Result<BSplineSurface> FitParametric(const std::string& kind, const std::map<std::string, double>& params,
-                                     int samples);
+Result<BSplineSurface> FitParametric(const std::string& kind, const std::map<std::string, double>& params, int samples);
 
 // The ideal surface Q of a part from its family, fitted as a B-spline and checked against the defining
 // function at check_points random points not used in the fit (seeded): a reference surface through

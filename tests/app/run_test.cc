@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -19,6 +20,7 @@
 #include "core/atomic_file.h"
 #include "core/json_io.h"
 #include "core/log.h"
+#include "core/version.h"
 #include "tests/support/run_binary.h"
 #include "tests/support/test_dir.h"
 
@@ -54,6 +56,13 @@ TEST_F(RunTest, DemoRunsEveryStageAndCompensatesIntoTolerance) {
     EXPECT_TRUE(fs::exists(options.out / file)) << file;
   }
   EXPECT_FALSE(fs::exists(dir_ / "demo.partial"));
+  // One version string (CMake's project version): the summary and the programs name it.
+  const auto written = ReadJsonFile(options.out / "summary.json");
+  ASSERT_TRUE(written.ok());
+  EXPECT_EQ((*written)["formloop_version"], Version());
+  std::ifstream program(options.out / "toolpath" / "program.ngc");
+  const std::string program_text((std::istreambuf_iterator<char>(program)), std::istreambuf_iterator<char>());
+  EXPECT_NE(program_text.find(std::string("formloop ") + Version() + " part "), std::string::npos);
   // The injected error is systematic and out of tolerance; one mirror compensation brings it in.
   ASSERT_EQ(summary->loops.size(), 2u);
   const LoopSummary& first = summary->loops[0];
@@ -279,6 +288,8 @@ TEST_F(RunTest, BinaryHelpExitCodesAndCleanStdout) {
   std::string out;
   EXPECT_EQ(RunBinary("--help", &out), 0);
   for (const char* sub : {"run", "regress", "surfaces", "kb"}) EXPECT_NE(out.find(sub), std::string::npos) << sub;
+  EXPECT_EQ(RunBinary("--version", &out), 0);
+  EXPECT_EQ(out, std::string("formloop ") + Version() + "\n");
   EXPECT_EQ(RunBinary("run --help", &out), 0);
   EXPECT_NE(out.find("--out"), std::string::npos);
   EXPECT_EQ(RunBinary("run " + (dir_ / "missing.json").string(), &out), 2);
