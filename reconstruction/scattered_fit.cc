@@ -1,3 +1,10 @@
+// Why one file of ~1,300 lines: what is left here is one algorithm. The penalised least-squares system
+// (TensorLsq, ~400 lines: assembly, trend, local weights, solve, GCV trace) and the choice of λ on it are one
+// class with its state, used only by the parameter correction and FitScattered below, and the ~20 measured
+// constants at the top are shared by all of them. The layout of a fit (parameter frame, knots, coverage) is
+// in scattered_layout.cc. Moving TensorLsq out would put the class in a header of its own: the next seam
+// if this file grows (not done in issue 18).
+
 #include "reconstruction/scattered_fit.h"
 
 #include <pcl/kdtree/kdtree_flann.h>
@@ -23,10 +30,19 @@
 
 #include "core/random.h"
 #include "reconstruction/point_checks.h"
+#include "reconstruction/scattered_layout.h"
 
 namespace formloop::recon {
 
+using scattered_internal::DataKnots;
+using scattered_internal::EdgePlan;
+using scattered_internal::Frame;
+using scattered_internal::Gap;
+using scattered_internal::kEndSpanWidth;
+using scattered_internal::LargestGap;
 using scattered_internal::Ldlt;
+using scattered_internal::PcaFrame;
+using scattered_internal::RedistributedKnots;
 using scattered_internal::SparseMatrix;
 
 namespace {
@@ -46,8 +62,6 @@ constexpr double kLogLambdaMax = 6;
 // projected boundary of a curved patch is curved, so without a margin the boundary of the sampled
 // surface would project onto Q's edge and be clamped. See DataKnots for the margin's span.
 constexpr double kMarginSpacings = 2;
-// Width of the end spans inside the data, relative to the other spans (see DataKnots).
-constexpr double kEndSpanWidth = 2;
 // Dense coverage (DataKnots: uniform knots over the data, no margin) when the largest hole in
 // the initial parameter box (LargestGap, a corner in practice) is at most this many widths of a
 // uniform span of the net over the data. Wide end spans and the margin pay for themselves
@@ -82,12 +96,6 @@ constexpr double kMinPenaltyWeight = 0.01;
 // A gap in the points wider than this many point spacings is reported (Poisson-scattered points
 // leave interior gaps of up to ~1.7 spacings for 10^3..10^5 points; corners are worse).
 constexpr double kGapSpacings = 2;
-// Knot redistribution (RedistributedKnots): lines sampled across, and the density floor relative to
-// the mean. Measured on the benchmark (franke, 100,000 points, 24 × 24, 1 µm noise): orthogonal RMS
-// 1.153 µm with uniform knots, 1.053 µm redistributed without a floor, 1.055 µm with 0.3; a second
-// redistribution gained nothing (1.054 µm).
-constexpr int kRedistributionSamples = 64;
-constexpr double kRedistributionFloor = 0.3;
 // Parameter correction stops when the orthogonal RMS falls by less than this (relative).
 constexpr double kCorrectionStall = 1e-3;
 // kTolerance stops correcting when the orthogonal RMS is this close to the target (relative).
@@ -735,95 +743,6 @@ LambdaChoice ChooseLambda(TensorLsq& lsq, const ScatteredFitOptions& options, do
   return choice;
 }
 
-// ---------------------------------------------------------------------------------------------
-// Geometry of the point set.
-
-struct Frame {
-  Vector3d origin = Vector3d::Zero();
-  Vector3d u_axis = Vector3d::UnitX(), v_axis = Vector3d::UnitY(), normal = Vector3d::UnitZ();
-};
-
-double Cross2(const Eigen::Vector2d& o, const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
-  return (a.x() - o.x()) * (b.y() - o.y()) - (a.y() - o.y()) * (b.x() - o.x());
-}
-
-// Convex hull (Andrew's monotone chain), counter-clockwise, without repeated end point.
-std::vector<Eigen::Vector2d> ConvexHull(std::vector<Eigen::Vector2d> pts) {
-  std::sort(pts.begin(), pts.end(), [](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
-    return a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
-  });
-  std::vector<Eigen::Vector2d> hull(2 * pts.size());
-  std::size_t k = 0;
-  for (std::size_t i = 0; i < pts.size(); ++i) {
-    while (k >= 2 && Cross2(hull[k - 2], hull[k - 1], pts[i]) <= 0) --k;
-    hull[k++] = pts[i];
-  }
-  for (std::size_t i = pts.size() - 1, t = k + 1; i > 0; --i) {
-    while (k >= t && Cross2(hull[k - 2], hull[k - 1], pts[i - 1]) <= 0) --k;
-    hull[k++] = pts[i - 1];
-  }
-  hull.resize(k > 1 ? k - 1 : k);
-  return hull;
-}
-
-// Direction (unit, in the plane) of one side of the minimum-area rectangle enclosing pts: one side
-// of that rectangle lies on a hull edge (Freeman & Shapira 1975), so every edge is tried.
-Eigen::Vector2d MinAreaRectangleDirection(const std::vector<Eigen::Vector2d>& pts) {
-  const std::vector<Eigen::Vector2d> hull = ConvexHull(pts);
-  Eigen::Vector2d best_dir(1, 0);
-  double best_area = std::numeric_limits<double>::infinity();
-  for (std::size_t e = 0; e < hull.size(); ++e) {
-    const Eigen::Vector2d edge = hull[(e + 1) % hull.size()] - hull[e];
-    if (!(edge.norm() > 0)) continue;
-    const Eigen::Vector2d d = edge.normalized(), nrm(-d.y(), d.x());
-    double a0 = std::numeric_limits<double>::infinity(), a1 = -a0, b0 = a0, b1 = -a0;
-    for (const Eigen::Vector2d& h : hull) {
-      a0 = std::min(a0, h.dot(d));
-      a1 = std::max(a1, h.dot(d));
-      b0 = std::min(b0, h.dot(nrm));
-      b1 = std::max(b1, h.dot(nrm));
-    }
-    const double area = (a1 - a0) * (b1 - b0);
-    if (area < best_area * (1 - 1e-12)) {
-      best_area = area;
-      best_dir = d;
-    }
-  }
-  return best_dir;
-}
-
-// Frame of the parameter plane (see the header): PCA plane, rotated to the minimum-area rectangle,
-// u along its longer side, signs fixed so that the result does not depend on the eigen-solver.
-Frame PcaFrame(const std::vector<Vector3d>& points, const Vector3d& mean, const Eigen::Matrix3d& axes) {
-  const Vector3d e1 = axes.col(0), e2 = axes.col(1);
-  std::vector<Eigen::Vector2d> projected;
-  projected.reserve(points.size());
-  for (const Vector3d& p : points) projected.emplace_back((p - mean).dot(e1), (p - mean).dot(e2));
-  const Eigen::Vector2d d = MinAreaRectangleDirection(projected);
-  Vector3d a = d.x() * e1 + d.y() * e2;
-  Vector3d b = -d.y() * e1 + d.x() * e2;
-  double ext_a0 = std::numeric_limits<double>::infinity(), ext_a1 = -ext_a0, ext_b0 = ext_a0, ext_b1 = -ext_a0;
-  for (const Vector3d& p : points) {
-    ext_a0 = std::min(ext_a0, (p - mean).dot(a));
-    ext_a1 = std::max(ext_a1, (p - mean).dot(a));
-    ext_b0 = std::min(ext_b0, (p - mean).dot(b));
-    ext_b1 = std::max(ext_b1, (p - mean).dot(b));
-  }
-  if (ext_b1 - ext_b0 > (ext_a1 - ext_a0) * (1 + 1e-9)) std::swap(a, b);
-  // u axis: its largest component positive (u = x for a patch spread along x).
-  Eigen::Index largest = 0;
-  a.cwiseAbs().maxCoeff(&largest);
-  if (a(largest) < 0) a = -a;
-  Frame frame;
-  frame.origin = mean;
-  frame.u_axis = a.normalized();
-  frame.normal = frame.u_axis.cross(b).normalized();
-  // Normal towards +z (tool and probe side): flip v, which keeps u.
-  if (frame.normal.z() < 0) frame.normal = -frame.normal;
-  frame.v_axis = frame.normal.cross(frame.u_axis).normalized();
-  return frame;
-}
-
 Handle(Geom_BSplineSurface)
     MakeGeom(const KnotVector& ku, const KnotVector& kv, const Eigen::MatrixXd& poles, const Vector3d& origin) {
   const int nu = ku.n_poles(), nv = kv.n_poles();
@@ -857,165 +776,6 @@ nlohmann::json DistinctKnotsJson(const KnotVector& k) {
   std::vector<int> m;
   k.Distinct(&t, &m);
   return t;
-}
-
-// How the knots treat the ends of the data interval (see DataKnots; chosen in FitScattered from
-// the points' coverage).
-struct EdgePlan {
-  bool margin_span = false;          // the end spans reach beyond the data by a margin
-  double end_width = kEndSpanWidth;  // width of the end spans inside the data, relative to the others
-  double rim = 0;                    // dense: uniform knots, Q's domain extends this far beyond the data
-};
-
-// Knots for n poles of degree p over the data interval [a, b].
-//
-// Sparse coverage (the default; always with a base surface). Inside [a, b] the spans are uniform
-// except the two end spans, which are kEndSpanWidth times as wide: the piece at an edge, and above
-// all at a corner, sees data from one side only and carries coefficients that only points near the
-// edge determine; scattered points often leave a corner hole a few spacings wide, and a
-// standard-width corner span then extrapolates a free coefficient (measured with 5,000 points on
-// the reference surfaces: 2 to 36 µm of error at the corner, against < 3 µm with double width).
-//
-// With a margin (PCA parameters, whose box comes from the points), Q's domain reaches
-// max(min_margin, h) beyond each end of [a, b] (h = interior span width), and the end spans reach
-// with it: there is no knot at a or b, so beyond the data Q is the polynomial continuation of the
-// end piece that the data fit. The margin lets the boundary of the sampled surface, which the
-// points miss by up to a spacing (more where a curved patch's boundary projects onto a curve),
-// project inside Q rather than onto its clamped edge, and moves the thin-plate energy's boundary
-// (and its natural boundary conditions, see TensorLsq::Solve) off the data. Until 2026-11 the
-// margin was a span of its own (a knot at a and b, one pole more at each end) decided by the
-// energy alone; the continuation extrapolates better into a corner hole. Measured with 5,000
-// noise-free points (the test ScatteredFitReference, degree 5): worst error over the whole domain
-// egg_box 1.35 -> 1.11 µm, franke 0.52 -> 0.50 µm; degree 6: egg_box 0.13 µm both ways, franke 1.50
-// -> 0.96 µm. n poles give n − p spans.
-//
-// Dense coverage (PCA parameters, every hole small against a span: see kDenseGapSpans): uniform
-// spans over [a − rim, b + rim], rim = min_margin. Every span, the corner ones included, is then
-// well filled, so neither wide end spans nor a margin is needed, and all n poles resolve the
-// shape over the data (as a grid approximator's net does); the rim, a small fraction of the end
-// span, still lets the sampled surface's boundary project inside Q.
-Result<KnotVector> DataKnots(int p, int n, double a, double b, const EdgePlan& plan, double min_margin) {
-  if (!plan.margin_span && plan.rim > 0) return KnotVector::Uniform(p, n, a - plan.rim, b + plan.rim);
-  const int spans = n - p;
-  std::vector<double> interior;
-  double h = (b - a) / spans;
-  if (spans >= 3) {
-    h = (b - a) / (spans - 2 + 2 * plan.end_width);
-    for (int k = 1; k < spans; ++k) interior.push_back(a + h * (plan.end_width + (k - 1)));
-  } else {
-    for (int k = 1; k < spans; ++k) interior.push_back(a + h * k);
-  }
-  if (!plan.margin_span) return KnotVector::WithInteriorKnots(p, a, b, std::move(interior));
-  const double mu = std::max(min_margin, h);
-  return KnotVector::WithInteriorKnots(p, a - mu, b + mu, std::move(interior));
-}
-
-// Knots for the same number of spans in one direction of q, placed where q needs them (dense
-// coverage only, see FitScattered): de Boor's NEWNOT (A Practical Guide to Splines, ch. XII) on a
-// tensor product. On a degree-p piece the p-th derivative along the direction is constant; its
-// jumps across the knots, divided by the distance of the span midpoints, estimate |D^(p+1) S|
-// (RMS over kRedistributionSamples lines across), and spans are laid so that each holds an equal
-// share of ∫ |D^(p+1) S|^(1/(p+1)): that equidistributes the approximation error, which on a span
-// of width h goes as h^(p+1) |D^(p+1) S|. kRedistributionFloor × the mean density is added so that
-// a flat stretch (noise-only jumps) keeps spans at most ~1/floor times the uniform width.
-Result<KnotVector> RedistributedKnots(const BSplineSurface& q, const KnotVector& k, const KnotVector& other,
-                                      bool along_u) {
-  std::vector<double> t;
-  std::vector<int> mult;
-  k.Distinct(&t, &mult);
-  const int spans = static_cast<int>(t.size()) - 1;
-  if (spans < 3) return k;
-  const int p = k.degree();
-  const Handle(Geom_BSplineSurface)& g = q.geom();
-  // p-th derivative at the middle of each span, on lines across.
-  std::vector<Vector3d> dp(static_cast<std::size_t>(spans) * kRedistributionSamples);
-  for (int s = 0; s < spans; ++s) {
-    const double mid = 0.5 * (t[static_cast<std::size_t>(s)] + t[static_cast<std::size_t>(s) + 1]);
-    for (int j = 0; j < kRedistributionSamples; ++j) {
-      const double w = other.lo() + (other.hi() - other.lo()) * (j + 0.5) / kRedistributionSamples;
-      const gp_Vec d = along_u ? g->DN(mid, w, p, 0) : g->DN(w, mid, 0, p);
-      dp[static_cast<std::size_t>(s * kRedistributionSamples + j)] = Vector3d(d.X(), d.Y(), d.Z());
-    }
-  }
-  // |D^(p+1)| at each interior knot, then a density per span (mean of its knots' values).
-  std::vector<double> jump(static_cast<std::size_t>(spans - 1));
-  for (int s = 0; s + 1 < spans; ++s) {
-    double sum2 = 0;
-    for (int j = 0; j < kRedistributionSamples; ++j) {
-      sum2 += (dp[static_cast<std::size_t>((s + 1) * kRedistributionSamples + j)] -
-               dp[static_cast<std::size_t>(s * kRedistributionSamples + j)])
-                  .squaredNorm();
-    }
-    const double midpoint_distance = 0.5 * (t[static_cast<std::size_t>(s) + 2] - t[static_cast<std::size_t>(s)]);
-    jump[static_cast<std::size_t>(s)] = std::sqrt(sum2 / kRedistributionSamples) / midpoint_distance;
-  }
-  std::vector<double> mass(static_cast<std::size_t>(spans));  // ∫ density over each span
-  double total = 0;
-  for (int s = 0; s < spans; ++s) {
-    const double left = s > 0 ? jump[static_cast<std::size_t>(s) - 1] : jump[static_cast<std::size_t>(s)];
-    const double right = s + 1 < spans ? jump[static_cast<std::size_t>(s)] : left;
-    const double width = t[static_cast<std::size_t>(s) + 1] - t[static_cast<std::size_t>(s)];
-    mass[static_cast<std::size_t>(s)] = std::pow(0.5 * (left + right), 1.0 / (p + 1)) * width;
-    total += mass[static_cast<std::size_t>(s)];
-  }
-  if (!(total > 0) || !std::isfinite(total)) return k;
-  const double floor_density = kRedistributionFloor * total / (t.back() - t.front());
-  total = 0;
-  for (int s = 0; s < spans; ++s) {
-    mass[static_cast<std::size_t>(s)] +=
-        floor_density * (t[static_cast<std::size_t>(s) + 1] - t[static_cast<std::size_t>(s)]);
-    total += mass[static_cast<std::size_t>(s)];
-  }
-  std::vector<double> interior;
-  double before = 0;  // mass of the spans left of s
-  int s = 0;
-  for (int q_index = 1; q_index < spans; ++q_index) {
-    const double target = total * q_index / spans;
-    while (before + mass[static_cast<std::size_t>(s)] < target && s + 1 < spans) {
-      before += mass[static_cast<std::size_t>(s)];
-      ++s;
-    }
-    const double t0 = t[static_cast<std::size_t>(s)], t1 = t[static_cast<std::size_t>(s) + 1];
-    interior.push_back(t0 + std::clamp((target - before) / mass[static_cast<std::size_t>(s)], 0.0, 1.0) * (t1 - t0));
-  }
-  return KnotVector::WithInteriorKnots(p, t.front(), t.back(), std::move(interior));
-}
-
-// The largest empty disc of the parameter points inside `box`: the largest distance from a node of
-// a grid with the point spacing as step to its nearest point (parameter units, mm), and where.
-// Beyond about two spacings from every point Q is extrapolated (typically at a corner of the
-// patch), and the residuals at the points say nothing about it.
-struct Gap {
-  double radius_mm = 0;
-  double u = 0, v = 0;
-};
-
-Gap LargestGap(const std::vector<double>& u, const std::vector<double>& v, const ParamDomain& box, double spacing) {
-  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
-  cloud->reserve(u.size());
-  const double cu = 0.5 * (box.u_min + box.u_max), cv = 0.5 * (box.v_min + box.v_max);  // float precision
-  for (std::size_t i = 0; i < u.size(); ++i) {
-    cloud->push_back(pcl::PointXYZ(static_cast<float>(u[i] - cu), static_cast<float>(v[i] - cv), 0.0f));
-  }
-  pcl::KdTreeFLANN<pcl::PointXYZ> tree;
-  tree.setInputCloud(cloud);
-  constexpr int kMaxNodes = 400;  // per direction
-  const int nu = std::clamp(static_cast<int>(std::ceil(box.u_span() / spacing)) + 1, 2, kMaxNodes);
-  const int nv = std::clamp(static_cast<int>(std::ceil(box.v_span() / spacing)) + 1, 2, kMaxNodes);
-  std::vector<int> nearest(1);
-  std::vector<float> d2(1);
-  Gap gap;
-  for (int j = 0; j < nv; ++j) {
-    for (int i = 0; i < nu; ++i) {
-      const double gu = box.u_min + box.u_span() * i / (nu - 1), gv = box.v_min + box.v_span() * j / (nv - 1);
-      tree.nearestKSearch(pcl::PointXYZ(static_cast<float>(gu - cu), static_cast<float>(gv - cv), 0.0f), 1, nearest,
-                          d2);
-      const std::size_t k = static_cast<std::size_t>(nearest[0]);
-      const double r = std::hypot(u[k] - gu, v[k] - gv);
-      if (r > gap.radius_mm) gap = Gap{r, gu, gv};
-    }
-  }
-  return gap;
 }
 
 // One fit with parameter correction, for fixed knots.

@@ -17,7 +17,7 @@
 // explain is flattened (measured with 5 µm noise: 11 µm of edge bias on the saddle without it,
 // none with it). For noise-free data GCV drives λ → 0 and the trend has no effect.
 //
-// Knots (scattered_fit.cc, DataKnots), chosen by coverage: the largest hole the initial parameters
+// Knots (scattered_layout.cc, DataKnots), chosen by coverage: the largest hole the initial parameters
 // leave in their box (in practice at a corner), in widths of a uniform span of the net.
 // - Sparse (hole > 0.4 spans, e.g. the automatic net's ~8 points a pole; always with a base
 //   surface): uniform over the points' parameter box except the two end spans, which are twice as
