@@ -48,6 +48,10 @@ void AddDiagnoseCommand(CLI::App& root, CommandAction* action) {
   cmd->add_option("--case", args->case_uid, "uid of the case the part belongs to");
   cmd->add_option("--machine", args->machine, "machine name for the learned model's key (machine/tool/material)")
       ->default_val("unspecified");
+  cmd->add_option("--effects", args->effects,
+                  "screen only these catalogue effects (e.g. setup_offset,setup_rotation when only the set-up is in "
+                  "question); default: all")
+      ->delimiter(',');
   cmd->callback([args, action] {
     *action = [args]() -> Status {
       FL_ASSIGN_OR_RETURN(const nlohmann::json out, RunDiagnose(*args));

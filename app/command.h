@@ -57,5 +57,7 @@ void AddLinkCommand(CLI::App& root, CommandAction* action);
 void AddOptimiseCommand(CLI::App& root, CommandAction* action);
 // `tune` (app/cmd_tune.cc).
 void AddTuneCommand(CLI::App& root, CommandAction* action);
+// `machine linuxcnc config|run|probe` (app/cmd_machine.cc).
+void AddMachineCommand(CLI::App& root, CommandAction* action);
 
 }  // namespace formloop::app

@@ -42,6 +42,7 @@ int main(int argc, char** argv) {
   app::AddLinkCommand(app, &action);
   app::AddOptimiseCommand(app, &action);
   app::AddTuneCommand(app, &action);
+  app::AddMachineCommand(app, &action);
 
   try {
     app.parse(argc, argv);

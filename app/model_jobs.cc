@@ -147,6 +147,8 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
     FL_ASSIGN_OR_RETURN(baseline, sim::ReadModel(args.baseline));
   }
   sim::DiagnoseOptions options;
+  options.candidates = args.effects;
+  FL_RETURN_IF_ERROR(options.Validate());
   sim::Diagnosis diagnosis;
   nlohmann::json second_part = nullptr;
   PointSet residuals;

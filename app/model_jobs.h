@@ -35,6 +35,7 @@ struct DiagnoseArgs {
   std::string library;        // optional case library: store the extended model in case `case_uid`
   std::string case_uid;       // ... as its learned model for this machine/tool/material (replacing one with that key)
   std::string machine = "unspecified";  // the machine the part was cut on (the key's machine)
+  std::vector<std::string> effects;     // screen only these catalogue effects (empty: all)
 };
 // Returns diagnosis.json's content; the summary goes to the log (stderr).
 Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args);

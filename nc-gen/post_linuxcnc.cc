@@ -55,6 +55,7 @@ class LinuxCncPost : public PostDialect {
   }
 
   // G38.2 probing toward the search end; the results are logged between (PROBEOPEN file) and (PROBECLOSE).
+  // Two touches, the LOG file and the time input: nc-gen/probe_program.h.
   Result<std::string> FormatProbing(const metrology::ProbingPlan& plan,
                                     const ProbeProgramOptions& options) const override {
     const auto stations = ProbeStations(plan, options);
@@ -63,21 +64,41 @@ class LinuxCncPost : public PostDialect {
     auto xyz = [dec](const Eigen::Vector3d& p) {
       return "X" + FormatFixed(p.x(), dec) + " Y" + FormatFixed(p.y(), dec) + " Z" + FormatFixed(p.z(), dec);
     };
+    const bool two_touches = options.touch_feed_mm_per_min > 0;
+    const bool logged = !options.linuxcnc_log_file.empty();
+    const bool timed = options.linuxcnc_time_input >= 0;
     std::ostringstream out;
     out << "%\n(" << CommentText(options.post.title) << ")\n";
     out << "(" << ProbeHeader(options, plan.points.size()) << ")\n";
     out << "G21 G90 G17 G94 G40 G49 G80\n";
     out << "G0 Z" << FormatFixed(options.safe_z_mm, dec) << "\n";
     out << "(PROBEOPEN " << CommentText(options.results_file) << ")\n";
+    if (logged) {
+      out << "(LOGOPEN," << CommentText(options.linuxcnc_log_file) << ")\n";
+      out << "(LOG,formloop probe log 1: point id x y z tripped ax ay az" << (timed ? " t_s" : "") << ")\n";
+    }
     for (const ProbeStation& s : *stations) {
       out << "(point " << s.id << ")\n";
       out << "G0 X" << FormatFixed(s.start.x(), dec) << " Y" << FormatFixed(s.start.y(), dec) << "\n";
       out << "G0 Z" << FormatFixed(s.start.z(), dec) << "\n";
       out << "G38.2 " << xyz(s.target) << " F" << FormatFixed(options.probe_feed_mm_per_min, 0) << "\n";
+      if (two_touches) {
+        const Eigen::Vector3d back = options.backoff_mm * s.normal;
+        out << "G91 G0 " << xyz(back) << "\nG90\n";
+        out << "G38.2 " << xyz(s.target) << " F" << FormatExact(options.touch_feed_mm_per_min) << "\n";
+      }
+      if (timed) out << "M66 E" << options.linuxcnc_time_input << " L0\n";
+      if (logged) {
+        const Eigen::Vector3d a = -s.normal;
+        out << "(LOG,point " << s.id << " #5061 #5062 #5063 #5070 " << FormatFixed(a.x(), 9) << " "
+            << FormatFixed(a.y(), 9) << " " << FormatFixed(a.z(), 9) << (timed ? " #5399" : "") << ")\n";
+      }
       out << "G0 " << xyz(s.start) << "\n";
       out << "G0 Z" << FormatFixed(options.safe_z_mm, dec) << "\n";
     }
-    out << "(PROBECLOSE)\nM30\n%\n";
+    out << "(PROBECLOSE)\n";
+    if (logged) out << "(LOGCLOSE)\n";
+    out << "M30\n%\n";
     return out.str();
   }
 };

@@ -32,6 +32,10 @@ Result<std::vector<ProbeStation>> ProbeStations(const metrology::ProbingPlan& pl
     FL_RETURN_IF_ERROR(CheckTravel(options.post.limits, s.above, what));
     FL_RETURN_IF_ERROR(CheckTravel(options.post.limits, s.start, what));
     FL_RETURN_IF_ERROR(CheckTravel(options.post.limits, s.target, what));
+    // Two touches: the back-off from a contact at the start point is the highest point reached.
+    if (options.touch_feed_mm_per_min > 0) {
+      FL_RETURN_IF_ERROR(CheckTravel(options.post.limits, s.start + options.backoff_mm * s.normal, what));
+    }
     stations.push_back(s);
   }
   return stations;
@@ -53,6 +57,23 @@ Status ProbeProgramOptions::Validate() const {
   if (!(clearance_mm > 0)) return Status::BadInput(Where{.field = "probe.clearance_mm"}, "must be > 0");
   if (!(search_mm > 0)) return Status::BadInput(Where{.field = "probe.search_mm"}, "must be > 0");
   if (!(probe_feed_mm_per_min > 0)) return Status::BadInput(Where{.field = "probe.feed_mm_per_min"}, "must be > 0");
+  if (touch_feed_mm_per_min < 0 || touch_feed_mm_per_min > probe_feed_mm_per_min) {
+    return Status::BadInput(Where{.field = "probe.touch_feed_mm_per_min"},
+                            "must be 0 (one touch) or in (0, probe feed], got " + FormatExact(touch_feed_mm_per_min),
+                            "the second touch is the slow, measuring one");
+  }
+  if (touch_feed_mm_per_min > 0 && !(backoff_mm > 0 && backoff_mm < clearance_mm)) {
+    return Status::BadInput(Where{.field = "probe.backoff_mm"},
+                            "must be in (0, clearance) with two touches, got " + FormatExact(backoff_mm));
+  }
+  if (linuxcnc_log_file.find_first_of(",()") != std::string::npos) {
+    return Status::BadInput(Where{.field = "probe.linuxcnc_log_file"},
+                            "'" + linuxcnc_log_file + "' has a comma or a parenthesis, which end a LinuxCNC comment",
+                            "choose a plain file name");
+  }
+  if (linuxcnc_time_input > 63) {
+    return Status::BadInput(Where{.field = "probe.linuxcnc_time_input"}, "LinuxCNC has analog inputs 0..63");
+  }
   return post.limits.Validate();
 }
 

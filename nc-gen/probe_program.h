@@ -9,7 +9,16 @@
 // written, the probe feed and every position (above, clearance, search end) of every point are checked
 // against MachineLimits; a refusal names the probe point id and no program is returned.
 //
-//   "linuxcnc"   G38.2 probing, results logged between (PROBEOPEN file) and (PROBECLOSE).
+//   "linuxcnc"   G38.2 probing, results logged between (PROBEOPEN file) and (PROBECLOSE). With touch_feed_mm_per_min > 0 each point is probed twice: the
+//                G38.2 at probe_feed_mm_per_min finds the surface, a rapid backs off backoff_mm along +n
+//                and a second G38.2 at the slow touch feed measures it (LinuxCNC records the position of
+//                the first servo period after the trigger, so the error is up to feed × period). With a
+//                linuxcnc_log_file, (LOGOPEN,file) receives one line per point after its last touch:
+//                  point <id> <x> <y> <z> <tripped> <ax> <ay> <az> [<t_s>]
+//                (#5061..#5063 the ball centre in the work frame, #5070 = 1 when the probe tripped, a the
+//                unit approach direction −n, t_s the analog input linuxcnc_time_input read by M66 .. L0
+//                just after the touch), after a first line "formloop probe log 1: point id x y z tripped
+//                ax ay az [t_s]". cnc/linuxcnc_probe_log.h reads it into a probe log.
 //   "fanuc"      G31 skip function; after each probe the skip position #5061..#5063 (workpiece frame) is
 //                copied into common variables #[base+3k], #[base+3k+1], #[base+3k+2] for the k-th point
 //                (k from 0 in plan order). The range must lie in #100..#199 or #500..#999.
@@ -36,6 +45,11 @@ struct ProbeProgramOptions {
   double probe_feed_mm_per_min = 200;
   double safe_z_mm = 50;              // rapids between points
   std::string results_file = "probe_results.txt";  // LinuxCNC (PROBEOPEN)
+  // LinuxCNC: > 0 probes each point twice, the second time at this feed (header comment); 0 = once.
+  double touch_feed_mm_per_min = 0;
+  double backoff_mm = 0.2;                 // LinuxCNC, two touches: back off this far along +n between them
+  std::string linuxcnc_log_file;           // LinuxCNC: (LOGOPEN) file with one line per point; empty = none
+  int linuxcnc_time_input = -1;            // LinuxCNC: analog input logged as t_s (M66 E.. L0); -1 = none
   int fanuc_result_base = 500;   // Fanuc: first macro variable of the result range (#500)
   int sinumerik_r_base = 10;     // Sinumerik: first R parameter of the result range (R10)
   // Sinumerik: the last R parameter the control has (MD28050 MM_NUM_R_PARAM − 1; 99 by default).
