@@ -28,7 +28,7 @@ PACKAGES=(
   libfuzzylite-dev  # the fuzzy feed controller's Mamdani inference (planning/fuzzy_feed.h)
   libnlopt-dev      # tests only: an independent optimum (COBYLA) for the cutting-parameter GA
   chromium          # headless browser: the report test checks every picture of report.html loads
-  linuxcnc-uspace   # reference tool: its rs274 interpreter checks our LinuxCNC programs in the tests
+  linuxcnc-uspace   # rs274 checks our LinuxCNC programs; the controller itself runs them (tests/linuxcnc)
 )
 
 log() { printf '[setup] %s\n' "$*" >&2; }
