@@ -1,4 +1,5 @@
-// `formloop run PART.json|FOLDER ... [--kb KB] [--machine virtual[:PROFILE] | --measured LOG.csv ...] --out DIR`:
+// `formloop run PART.json|FOLDER ... [--kb KB] [--machine virtual[:PROFILE] | linuxcnc:CONFIG | --measured LOG.csv ...]
+// --out DIR`:
 // the per-part pipeline (app/pipeline.h), for one part or a batch.
 //
 // One part: DIR is its run folder (default runs/<part name>); summary.json is printed on stdout.
@@ -166,7 +167,8 @@ void AddRunCommand(CLI::App& root, CommandAction* action) {
   cmd->add_option("--out,-o", args->out, "run folder (one part; default runs/<part>) or batch folder (default runs/batch)");
   cmd->add_option("--kb", args->kb, "case library (formloop kb init --starter); without it the default plan is used, flagged");
   cmd->add_option("--machine", args->machine,
-                  "virtual (the part's machine.effects) or virtual:PROFILE (data/machines/PROFILE.json or a path)");
+                  "virtual (the part's machine.effects), virtual:PROFILE (data/machines/PROFILE.json or a path) or "
+                  "linuxcnc:CONFIG (a `formloop machine linuxcnc config` folder: LinuxCNC runs the probing program)");
   cmd->add_option("--measured", args->measured, "measured probe log(s) of a real machine, one per cycle, in order");
   cmd->add_flag("--force", args->force, "replace existing run folders");
   cmd->add_flag("--strict", args->strict, "exit with code 1 when a part ends out of tolerance");

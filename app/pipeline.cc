@@ -61,7 +61,9 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
   summary->precompensation_scale = cut.precompensation_scale;
 
   // Cycles: machine (or take the measured log), analyse, diagnose (cycle 0), compensate.
-  const int max_loops = in.machine.virtual_machine ? part.max_loops : static_cast<int>(in.machine.measured.size());
+  const int max_loops = in.machine.virtual_machine    ? part.max_loops
+                        : !in.machine.linuxcnc.empty() ? 1  // its part does not change (stages::Machine)
+                                                       : static_cast<int>(in.machine.measured.size());
   std::optional<sim::Diagnosis> diagnosis;
   stages::CompensatedField& field = cut.field;
   stages::Program current = std::move(cut.program);

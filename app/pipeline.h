@@ -34,7 +34,7 @@ struct RunOptions {
   bool force = false;                   // replace an existing run folder
   std::string part_source;              // path of the part file, recorded in the summary
   std::string kb;                       // case library; empty: no retrieval (default plan, flagged)
-  std::string machine;                  // "virtual" (the part's machine.effects) or "virtual:NAME|PATH.json"
+  std::string machine;                  // "virtual" (the part's machine.effects), "virtual:NAME|PATH.json" or "linuxcnc:CONFIG"
   std::vector<std::string> measured;    // measured probe logs, one per cycle, instead of the virtual machine
   bool retain = true;                   // store the outcome in the case library (needs kb)
   bool learn = true;                    // pre-compensate with the case's learned model

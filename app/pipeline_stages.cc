@@ -1,10 +1,12 @@
 #include "app/pipeline_stages.h"
 
 #include <cmath>
+#include <cstdlib>
 #include <memory>
 
 #include "app/case_knowledge.h"
 #include "app/machine_profile.h"
+#include "cnc/linuxcnc_probing.h"
 #include "core/atomic_file.h"
 #include "core/log.h"
 #include "core/point_io.h"
@@ -61,9 +63,39 @@ Result<Machine> ResolveMachine(const PartSpec& part, const RunOptions& options, 
         MachineProfile{m.name, "the part file's machine.effects", m.model, m.probe}.ToJson()));
     return m;
   }
+  if (spec.rfind("linuxcnc:", 0) == 0) {
+    FL_ASSIGN_OR_RETURN(const cnc::LinuxCncConfig config, cnc::ReadLinuxCncConfig(spec.substr(9)));
+    if (part.dialect != "linuxcnc") {
+      return Status::BadInput(Where{.field = "machine.dialect"},
+                              "is '" + part.dialect + "', but --machine " + spec + " is a LinuxCNC controller",
+                              "set machine.dialect to linuxcnc");
+    }
+    const std::string radius = config.Get("FORMLOOP", "PROBE_BALL_RADIUS_MM");
+    char* end = nullptr;
+    const double radius_mm = std::strtod(radius.c_str(), &end);
+    if (radius.empty() || *end != '\0' || std::abs(radius_mm - part.probe.ball_radius_mm) > 1e-9) {
+      return Status::BadInput(Where{.field = "probing.ball_radius_mm"},
+                              FormatExact(part.probe.ball_radius_mm) + " mm, but the probe surface of " +
+                                  config.ini.string() + " is built for a " + (radius.empty() ? "missing" : radius) +
+                                  " mm ball",
+                              "write the configuration with --ball-radius-mm " + FormatExact(part.probe.ball_radius_mm));
+    }
+    if (config.Get("FORMLOOP", "PROBE_SURFACE") != part.surface_reference) {
+      log::Warn("[machine] LinuxCNC's probe surface is '{}', the part's surface '{}': the deviations will show the "
+                "difference",
+                config.Get("FORMLOOP", "PROBE_SURFACE"), part.SurfaceName());
+    }
+    m.virtual_machine = false;
+    m.name = config.Get("EMC", "MACHINE");
+    m.linuxcnc = config.ini.string();
+    FL_RETURN_IF_ERROR(folder.WriteJson(
+        fs::path("inputs") / "machine_linuxcnc.json",
+        {{"ini", m.linuxcnc}, {"machine", m.name}, {"formloop", config.sections.at("FORMLOOP")}}));
+    return m;
+  }
   if (spec.rfind("virtual:", 0) != 0) {
     return Status::BadInput(Where{.field = "--machine"}, "unknown machine '" + spec + "'",
-                            "use virtual, virtual:PROFILE or --measured LOG.csv");
+                            "use virtual, virtual:PROFILE, linuxcnc:CONFIG or --measured LOG.csv");
   }
   FL_ASSIGN_OR_RETURN(MachineProfile profile, ReadMachineProfile(spec.substr(8), data_dir));
   m.name = profile.name;
@@ -312,6 +344,24 @@ Result<Machined> MachineCycle(const Inputs& in, const Program& program, double t
                                                                     {"program", program.path.string()},
                                                                     {"cutter_locations", out.cutter_locations.size()},
                                                                     {"points", machined.log.records.size()}}));
+  } else if (!machine.linuxcnc.empty()) {
+    log::Info("[machine] loop {}: LinuxCNC '{}' probes the part (its probe surface; the cutting program is not run)",
+              loop, machine.name);
+    FL_ASSIGN_OR_RETURN(const cnc::LinuxCncConfig config, cnc::ReadLinuxCncConfig(machine.linuxcnc));
+    FL_ASSIGN_OR_RETURN(
+        const cnc::LinuxCncProbing probed,
+        cnc::ProbePlanOnLinuxCnc(config, plan, cnc::LinuxCncProbingOptions{}, folder.Path(loop_dir / "linuxcnc")));
+    FL_RETURN_IF_ERROR(metrology::WriteProbeLog(folder.Path(loop_dir / "probe_log.csv"), probed.log));
+    out.cut = false;
+    FL_RETURN_IF_ERROR(folder.WriteJson(
+        loop_dir / "machine.json",
+        {{"machine", machine.name},
+         {"linuxcnc", machine.linuxcnc},
+         {"program", (loop_dir / "linuxcnc" / "probe.ngc").string()},
+         {"cut", "not run: the simulated part is the configuration's probe surface, " +
+                     config.Get("FORMLOOP", "PROBE_SURFACE")},
+         {"points", probed.log.records.size()},
+         {"controller_seconds", probed.run.total_s}}));
   } else {
     const std::string& measured = machine.measured[static_cast<std::size_t>(loop)];
     FL_ASSIGN_OR_RETURN(std::string text, ReadFile(measured));
@@ -404,9 +454,15 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
   input.measured = &machined.log;
   input.probe = part.probe;
   const sim::Model baseline = choice.learned ? *choice.learned : sim::Model{};
-  FL_ASSIGN_OR_RETURN(sim::Diagnosis d, sim::Diagnose(input, baseline, sim::DiagnoseOptions{}));
+  sim::Diagnosis d;
+  if (machined.cut) {
+    FL_ASSIGN_OR_RETURN(d, sim::Diagnose(input, baseline, sim::DiagnoseOptions{}));
+  } else {
+    FL_ASSIGN_OR_RETURN(d, sim::DiagnosePlanOnly(plan, machined.log, part.probe, baseline, sim::DiagnoseOptions{}));
+  }
   const fs::path dir = RunFolderWriter::LoopDir(0) / "diagnosis";
   json dj = d.ToJson();
+  if (!machined.cut) dj["data"] = "probe data of a part the program did not cut: the tool-path effects are not screened";
   dj["baseline"] = choice.learned ? "learned model of case " + case_uid : "no effects (no learned model)";
   FL_RETURN_IF_ERROR(folder.WriteJson(dir / "diagnosis.json", dj));
   FL_RETURN_IF_ERROR(sim::WriteModel(folder.Path(dir / "model.json"), d.extended));
@@ -473,7 +529,9 @@ Result<std::optional<kb::CaseRecord>> PrepareRetain(const PartSpec& part, const 
   if (retrieved.own) in.existing = &*retrieved.own;
   // A part cut on the virtual machine can be run again (the leave-one-out of app/route_calibration.h); a
   // measured one cannot.
-  if (options.measured.empty()) in.rerun = {{"part", part.ToJson()}, {"machine", options.machine}};
+  if (options.measured.empty() && options.machine.rfind("linuxcnc:", 0) != 0) {
+    in.rerun = {{"part", part.ToJson()}, {"machine", options.machine}};
+  }
   FL_ASSIGN_OR_RETURN(kb::CaseRecord record, MakeRetainedCase(in));
   FL_RETURN_IF_ERROR(folder.WriteJson("retain.json", {{"library", options.kb},
                                                       {"action", retrieved.own ? "update" : "add"},

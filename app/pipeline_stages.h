@@ -33,13 +33,17 @@ namespace formloop::app::stages {
 // formloop's version as programs and summary.json name it: core/version.h (CMake's project version).
 extern const char* const kVersion;
 
-// The machine a part is cut on: a virtual machine with its true effects, or a real one's probe logs.
+// The machine a part is cut on: a virtual machine with its true effects, a real one's probe logs, or a
+// LinuxCNC controller running formloop's probing program on its simulated part (cnc/linuxcnc_probing.h).
 struct Machine {
   bool virtual_machine = true;
   std::string name;
   sim::Model model;                   // the profile's true effects (virtual)
   metrology::ProbeModel probe;        // the probe the machine really has (virtual)
   std::vector<std::string> measured;  // copies of the measured logs in inputs/measured (real machine)
+  // LinuxCNC: its formloop.ini. One cycle: the simulated part is the configuration's probe surface, which
+  // a compensated program cannot change, so the cutting program is not run and there is no second cycle.
+  std::string linuxcnc;
 };
 
 // 1. Inputs: the machine resolved, the resolved part (machine_name = the machine really used) and the
@@ -114,11 +118,15 @@ Result<FirstCut> Precompensate(const PartSpec& part, const recon::BSplineSurface
                                const Programs& programs, const std::string& case_uid, std::uint64_t seed,
                                const RunFolderWriter& folder);
 
-// 7a. One cycle's machining: the virtual machine cuts `program` and probes, or the cycle's measured log
-// is taken (loop-K/probe_log.csv, machine.json). Returns the log as read back, as a real machine's would be.
+// 7a. One cycle's machining: the virtual machine cuts `program` and probes, or LinuxCNC runs formloop's
+// probing program on the plan (loop-K/linuxcnc/), or the cycle's measured log is taken (loop-K/probe_log.csv,
+// machine.json). Returns the log as read back, as a real machine's would be.
 struct Machined {
   metrology::ProbeLog log;
   std::vector<sim::CutterLocation> cutter_locations;  // of the program cut
+  // False when the program was not cut (LinuxCNC: the part is its probe surface); the diagnosis then
+  // screens only the effects that need no tool path (sim::DiagnosePlanOnly).
+  bool cut = true;
 };
 Result<Machined> MachineCycle(const Inputs& in, const Program& program, double tool_radius_mm,
                           const metrology::ProbingPlan& plan, int loop, const RunFolderWriter& folder);

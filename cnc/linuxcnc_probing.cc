@@ -74,6 +74,14 @@ Result<nc::MachineLimits> LimitsOf(const LinuxCncConfig& config) {
 Result<LinuxCncProbing> ProbeOnLinuxCnc(const LinuxCncConfig& config, const recon::BSplineSurface& q,
                                         const LinuxCncProbingOptions& options, const fs::path& out) {
   FL_RETURN_IF_ERROR(options.Validate());
+  FL_ASSIGN_OR_RETURN(const metrology::ProbingPlan plan,
+                      metrology::PlanProbingGrid(q, options.nu, options.nv, options.inset_fraction));
+  return ProbePlanOnLinuxCnc(config, plan, options, out);
+}
+
+Result<LinuxCncProbing> ProbePlanOnLinuxCnc(const LinuxCncConfig& config, const metrology::ProbingPlan& plan,
+                                            const LinuxCncProbingOptions& options, const fs::path& out) {
+  FL_RETURN_IF_ERROR(options.Validate());
   std::error_code ec;
   if (fs::exists(out, ec) && !fs::is_empty(out, ec)) {
     return Status::BadInput(Where{.file = out.string()}, "exists and is not empty", "give a new output folder");
@@ -87,7 +95,7 @@ Result<LinuxCncProbing> ProbeOnLinuxCnc(const LinuxCncConfig& config, const reco
   const double measuring_feed = options.program.touch_feed_mm_per_min > 0 ? options.program.touch_feed_mm_per_min
                                                                           : options.program.probe_feed_mm_per_min;
   result.probe.pretravel_mm = 0.5 * measuring_feed / 60 * servo_period_ns * 1e-9;
-  FL_ASSIGN_OR_RETURN(result.plan, metrology::PlanProbingGrid(q, options.nu, options.nv, options.inset_fraction));
+  result.plan = plan;
   nc::ProbeProgramOptions program = options.program;
   program.ball_radius_mm = result.probe.ball_radius_mm;
   FL_ASSIGN_OR_RETURN(program.post.limits, LimitsOf(config));

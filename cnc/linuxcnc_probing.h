@@ -51,6 +51,9 @@ struct LinuxCncProbing {
 
 Result<LinuxCncProbing> ProbeOnLinuxCnc(const LinuxCncConfig& config, const recon::BSplineSurface& q,
                                         const LinuxCncProbingOptions& options, const std::filesystem::path& out);
+// The same for a plan made elsewhere (`formloop run`'s); options.nu, nv and inset_fraction are not used.
+Result<LinuxCncProbing> ProbePlanOnLinuxCnc(const LinuxCncConfig& config, const metrology::ProbingPlan& plan,
+                                            const LinuxCncProbingOptions& options, const std::filesystem::path& out);
 
 // The machine limits of a formloop configuration (travel from [AXIS_*], feed from MAX_LINEAR_VELOCITY).
 Result<nc::MachineLimits> LimitsOf(const LinuxCncConfig& config);

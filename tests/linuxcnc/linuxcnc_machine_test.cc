@@ -248,6 +248,48 @@ TEST_F(LinuxCncMachineTest, TinyCuttingProgramFromNcGenRunsToItsEnd) {
               report["seconds"]["total"].get<double>());
 }
 
+// `formloop run --machine linuxcnc:CONFIG`: the pipeline's machining-and-probing step on the controller. Its
+// part is the configuration's probe surface, so the probing program runs, the cutting program does not, and
+// there is one cycle; the diagnosis screens only what needs no tool path.
+TEST_F(LinuxCncMachineTest, FormloopRunProbesThePartOnTheController) {
+  Config("machine", "");
+  auto part = ReadJsonFile(fs::path(FORMLOOP_SOURCE_DIR) / "data" / "parts" / "demo-saddle.json");
+  ASSERT_TRUE(part.ok());
+  (*part)["name"] = "linuxcnc-saddle";
+  (*part)["probing"]["grid"] = {5, 5};
+  (*part)["machine"]["dialect"] = "linuxcnc";
+  (*part)["machine"].erase("effects");
+  ASSERT_TRUE(WriteJsonFile(dir_ / "part.json", *part).ok());
+  std::string err;
+  ASSERT_EQ(Formloop("run " + Path("part.json") + " --machine linuxcnc:" + Path("machine") + " --out " + Path("run"),
+                     nullptr, &err),
+            0)
+      << err;
+  const auto summary = ReadJsonFile(dir_ / "run" / "summary.json");
+  ASSERT_TRUE(summary.ok());
+  ASSERT_EQ((*summary)["loops"].size(), 1u);
+  const json& loop = (*summary)["loops"][0];
+  std::printf("[linuxcnc] formloop run on LinuxCNC: 25 points, form error %.3f um (tolerance 10 um), %s\n",
+              loop["form_error_um"].get<double>(), loop["decision"].get<std::string>().c_str());
+  EXPECT_EQ((*summary)["within_tolerance"], true);
+  EXPECT_LT(loop["form_error_um"].get<double>(), 1.0);
+  const auto machine = ReadJsonFile(dir_ / "run" / "loop-0" / "machine.json");
+  ASSERT_TRUE(machine.ok());
+  EXPECT_EQ((*machine)["points"], 25);
+  EXPECT_NE((*machine)["linuxcnc"].get<std::string>().find("formloop.ini"), std::string::npos);
+  EXPECT_TRUE(fs::exists(dir_ / "run" / "loop-0" / "linuxcnc" / "controller" / "probe_points.txt"));
+  const auto diagnosis = ReadJsonFile(dir_ / "run" / "loop-0" / "diagnosis" / "diagnosis.json");
+  ASSERT_TRUE(diagnosis.ok());
+  EXPECT_TRUE((*diagnosis).contains("data")) << "says the tool path was not screened";
+  // A mismatched probe ball is refused before anything runs.
+  (*part)["probing"]["ball_radius_mm"] = 2.0;
+  ASSERT_TRUE(WriteJsonFile(dir_ / "part2.json", *part).ok());
+  EXPECT_EQ(Formloop("run " + Path("part2.json") + " --machine linuxcnc:" + Path("machine") + " --out " + Path("run2"),
+                     nullptr, &err),
+            2);
+  EXPECT_NE(err.find("--ball-radius-mm 2"), std::string::npos) << err;
+}
+
 // A stand-in process named like a LinuxCNC part (a copy of sleep called "milltask"), with or without a
 // formloop session marker in its environment.
 pid_t StartImpostor(const fs::path& dir, const std::string& marker) {
