@@ -318,27 +318,11 @@ Status WriteProbeLogOf(const CollectArgs& a, const std::vector<Session>& session
     if (s.status == SessionStatus::kComplete) last = &s;
   }
   if (last == nullptr) return Status::Failed("link collect: no COMPLETE session, no probe log written");
-  metrology::ProbeLog log;
   std::vector<int> skipped;
-  for (const auto& p : last->points) {
-    if (p.id < 1 || p.id > static_cast<int>(plan.plan.points.size())) {
-      return Status::BadInput(Where{.file = a.plan}, "point " + std::to_string(p.id) + " is not in the plan");
-    }
-    if (!p.decoded.ok()) {
-      skipped.push_back(p.id);
-      continue;
-    }
-    const auto& planned = plan.plan.points[p.id - 1];
-    const auto ref = ReferenceOf(planned, a.ball_radius_mm);
-    metrology::ProbeRecord r;
-    r.id = p.id;
-    for (int k = 0; k < 3; ++k) r.centre[k] = ref[k] + p.decoded.v[k] * kValueUnitMm;
-    r.approach = plan.approaches.empty() ? Eigen::Vector3d(-planned.normal) : plan.approaches[p.id - 1];
-    r.t_s = p.t_s;
-    log.records.push_back(r);
-  }
+  auto log = ProbeLogOfSession(*last, plan.plan, plan.approaches, a.ball_radius_mm, &skipped);
+  if (!log.ok()) return Status::BadInput(Where{.file = a.plan}, log.status().message());
   if (!skipped.empty()) log::Warn("link collect: {} out-of-range points left out of the probe log", skipped.size());
-  return metrology::WriteProbeLog(a.probe_log, log);
+  return metrology::WriteProbeLog(a.probe_log, *log);
 }
 
 Status CollectCommand(const CollectArgs& a) {

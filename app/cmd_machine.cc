@@ -1,7 +1,7 @@
 // `formloop machine linuxcnc ...`: formloop's programs on a real controller, LinuxCNC, running a
 // simulated mill headless (cnc/linuxcnc_*.h).
 //
-//   formloop machine linuxcnc config --out DIR [--surface NAME] [--no-probe] [--ball-radius-mm R]
+//   formloop machine linuxcnc config --out DIR [--surface NAME] [--no-probe] [--no-link] [--ball-radius-mm R]
 //       [--shift-um X,Y,Z] [--rotation-urad X,Y,Z | --tilt-deg X,Y,Z] [--travel MM] [--travel-z MM]
 //       [--max-velocity MM_PER_S] [--max-acceleration MM_PER_S2] [--name TEXT]
 //     writes the configuration (INI, HAL, display program, tool table, probe_surface.json) and prints
@@ -10,6 +10,11 @@
 //   formloop machine linuxcnc run --config INI|DIR --program P.ngc --out SESSION [--timeout-s S]
 //     starts LinuxCNC headless, runs the program, shuts the controller down and prints what happened.
 //     Exit 1 with "P.ngc:LINE: LinuxCNC (stage): message" when the program fails.
+//
+//   formloop machine linuxcnc measure --config INI|DIR --surface Q.step [--grid NUxNV] [--inset F] --out DIR
+//     the handshake of the link (spec/tuning-and-link.md §7) over HAL: formloop's machine-side program runs
+//     on the controller while the collector takes every point through the variable block
+//     (cnc/linuxcnc_link.h); prints what arrived, checked against the controller's record of each trip.
 //
 //   formloop machine linuxcnc probe --config INI|DIR --surface Q.step [--face I] [--grid NUxNV]
 //       [--inset F] [--probe-feed F] [--touch-feed F] [--backoff-mm B] [--clearance-mm C]
@@ -26,10 +31,12 @@
 
 #include "app/command.h"
 #include "cnc/linuxcnc_config.h"
+#include "cnc/linuxcnc_link.h"
 #include "cnc/linuxcnc_probing.h"
 #include "cnc/linuxcnc_run.h"
 #include "core/log.h"
 #include "metrology/deviations.h"
+#include "metrology/probe.h"
 #include "reconstruction/cad_io.h"
 
 namespace formloop::app {
@@ -61,7 +68,7 @@ Result<Eigen::Vector3d> ParseTriple(const std::string& text, const std::string& 
 
 struct ConfigArgs {
   cnc::LinuxCncMachineOptions machine;
-  bool no_probe = false;
+  bool no_probe = false, no_link = false;
   std::string shift_um, rotation_urad, tilt_deg;
   double travel = 300, travel_z = 200;
   std::string out;
@@ -70,6 +77,7 @@ struct ConfigArgs {
 Status WriteConfig(const ConfigArgs& args) {
   cnc::LinuxCncMachineOptions o = args.machine;
   o.probe = !args.no_probe;
+  o.link = !args.no_link;
   o.travel_min_mm = {-args.travel, -args.travel, -args.travel_z};
   o.travel_max_mm = {args.travel, args.travel, args.travel_z};
   if (!args.shift_um.empty()) {
@@ -142,6 +150,32 @@ Status Probe(const ProbeArgs& args) {
   return Status::Ok();
 }
 
+struct MeasureArgs {
+  std::string config, surface, grid = "5x5", out;
+  double inset_fraction = 0.1;
+  cnc::LinuxCncMeasureOptions measure;
+};
+
+Status Measure(const MeasureArgs& args) {
+  int nu = 0, nv = 0;
+  FL_RETURN_IF_ERROR(ParseLayout(args.grid, "--grid", &nu, &nv));
+  FL_ASSIGN_OR_RETURN(const cnc::LinuxCncConfig config, cnc::ReadLinuxCncConfig(args.config));
+  FL_ASSIGN_OR_RETURN(const recon::CadFace face, recon::ReadCadFace(args.surface, recon::CadFaceSelector{}));
+  FL_ASSIGN_OR_RETURN(const metrology::ProbingPlan plan,
+                      metrology::PlanProbingGrid(face.surface, nu, nv, args.inset_fraction));
+  FL_ASSIGN_OR_RETURN(const cnc::LinuxCncMeasurement m, cnc::MeasureOnLinuxCnc(config, plan, args.measure, args.out));
+  std::cout << m.ToJson().dump(2) << "\n";
+  if (!m.run.ok) return m.run.ToStatus();
+  if (!m.ok()) {
+    return Status::Failed("machine linuxcnc measure: " + std::to_string(m.points_received) + " of " +
+                          std::to_string(m.points_planned) + " points arrived (" + std::to_string(m.distinct_ids) +
+                          " distinct), " + std::to_string(m.checked_against_trips) +
+                          " agree with the controller's trips" +
+                          (m.collector.ok ? std::string() : "; collector: " + m.collector.fatal));
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
 void AddMachineCommand(CLI::App& root, CommandAction* action) {
@@ -164,6 +198,8 @@ void AddMachineCommand(CLI::App& root, CommandAction* action) {
   config->add_option("--surface", m.surface.surface, "the probe surface: a reference surface that is a quadric")
       ->capture_default_str();
   config->add_flag("--no-probe", config_args->no_probe, "no probe surface (motion.probe-input stays low)");
+  config->add_flag("--no-link", config_args->no_link,
+                   "no handshake link component (analog ports 0..3 stay plain motion I/O)");
   config->add_option("--ball-radius-mm", m.surface.ball_radius_mm, "stylus ball radius the surface is built for, mm")
       ->capture_default_str();
   config->add_option("--shift-um", config_args->shift_um, "the workpiece's shift from its programmed place, um: X,Y,Z");
@@ -188,6 +224,23 @@ void AddMachineCommand(CLI::App& root, CommandAction* action) {
       ->required();
   run->add_option("--timeout-s", run_args->run.timeout_s, "the program's time limit, s")->capture_default_str();
   run->callback([action, run_args] { *action = [run_args] { return RunProgram(*run_args); }; });
+
+  auto measure_args = std::make_shared<MeasureArgs>();
+  CLI::App* measure = linuxcnc->add_subcommand(
+      "measure",
+      "The link's handshake over HAL: formloop's machine-side measuring program runs on the controller "
+      "while the collector takes each point through the variable block; checked against the "
+      "controller's own record of every probe trip.");
+  measure->add_option("--config", measure_args->config, "formloop.ini or its folder")->required();
+  measure->add_option("--surface", measure_args->surface, "Q as a STEP or IGES file")->required();
+  measure->add_option("--grid", measure_args->grid, "points NUxNV equidistant in parameter space")
+      ->capture_default_str();
+  measure->add_option("--inset", measure_args->inset_fraction, "keep this fraction of the domain free at each edge")
+      ->capture_default_str();
+  measure->add_option("--timeout-s", measure_args->measure.run.timeout_s, "the program's time limit, s")
+      ->capture_default_str();
+  measure->add_option("--out", measure_args->out, "output folder (new)")->required();
+  measure->callback([action, measure_args] { *action = [measure_args] { return Measure(*measure_args); }; });
 
   auto probe_args = std::make_shared<ProbeArgs>();
   CLI::App* probe = linuxcnc->add_subcommand(

@@ -20,6 +20,7 @@ constexpr const char* kMarker = "formloop LinuxCNC configuration";
 
 constexpr const char* kHalFile = "formloop.hal";
 constexpr const char* kDisplayFile = "formloop_display.py";
+constexpr const char* kLinkFile = "formloop_link.py";
 constexpr const char* kToolTable = "tool.tbl";
 constexpr const char* kVarFile = "formloop.var";
 constexpr const char* kSurfaceFile = "probe_surface.json";
@@ -64,6 +65,8 @@ std::string Ini(const LinuxCncMachineOptions& o, const std::vector<std::string>&
   std::string joined;
   for (const std::string& f : files) joined += (joined.empty() ? "" : " ") + f;
   s << "# what a run copies into its session folder\nFILES = " << joined << "\n";
+  s << "SERVO_CLOCK_INPUT = " << kLinuxCncServoClockInput << "\n";
+  s << "LINK_PORTS = " << (o.link ? kLinuxCncLinkPorts : 0) << "\n";
   if (probe) {
     s << "PROBE_SURFACE = " << probe->surface << "\nPROBE_BALL_RADIUS_MM = " << Num(probe->ball_radius_mm)
       << "\nPROBE_SHIFT_UM = " << Num(probe->pose.shift_um.x()) << " " << Num(probe->pose.shift_um.y()) << " "
@@ -79,7 +82,8 @@ std::string Hal(const LinuxCncMachineOptions& o, const std::optional<ProbeSurfac
   std::ostringstream s;
   s << "# " << kMarker << ": HAL for " << o.name << "\n\n";
   s << "loadrt [KINS]KINEMATICS\n"
-    << "loadrt [EMCMOT]EMCMOT servo_period_nsec=[EMCMOT]SERVO_PERIOD num_joints=[KINS]JOINTS\n"
+    << "loadrt [EMCMOT]EMCMOT servo_period_nsec=[EMCMOT]SERVO_PERIOD num_joints=[KINS]JOINTS num_aio="
+    << kLinuxCncAnalogPorts << "\n"
     << "addf motion-command-handler servo-thread\naddf motion-controller servo-thread\n\n";
   s << "# joints: commanded position looped back as the feedback; pos-x/y/z are the machine positions\n";
   for (int j = 0; j < 3; ++j) {
@@ -91,9 +95,22 @@ std::string Hal(const LinuxCncMachineOptions& o, const std::optional<ProbeSurfac
     << "net estop-loop iocontrol.0.user-enable-out => iocontrol.0.emc-enable-in\n"
     << "net tool-prep-loop iocontrol.0.tool-prepare => iocontrol.0.tool-prepared\n"
     << "net tool-change-loop iocontrol.0.tool-change => iocontrol.0.tool-changed\n\n";
-  s << "# servo clock: seconds since start on motion.analog-in-00 (probing programs log it with M66 E0 L0)\n"
+  const std::string clock = (kLinuxCncServoClockInput < 10 ? "0" : "") + std::to_string(kLinuxCncServoClockInput);
+  s << "# servo clock: seconds since start on motion.analog-in-" << clock << " (probing programs log it with M66 E"
+    << kLinuxCncServoClockInput << " L0)\n"
     << "loadrt integ names=servo-clock\naddf servo-clock servo-thread\nsetp servo-clock.in 1\n"
-    << "net servo-seconds servo-clock.out => motion.analog-in-00\n\n";
+    << "net servo-seconds servo-clock.out => motion.analog-in-" << clock << "\n\n";
+  if (o.link) {
+    s << "# the handshake's variable block (C, D, Q, A) on analog ports 0.." << kLinuxCncLinkPorts - 1
+      << ": one shared variable per port\n"
+      << "loadusr -Wn formloop-link ./" << kLinkFile << " " << kLinuxCncLinkPorts << " 0 1\n";
+    for (int k = 0; k < kLinuxCncLinkPorts; ++k) {
+      const std::string port = (k < 10 ? "0" : "") + std::to_string(k);
+      s << "net link-machine-" << k << " motion.analog-out-" << port << " => formloop-link.machine-" << k << "\n"
+        << "net link-block-" << k << " formloop-link.block-" << k << " => motion.analog-in-" << port << "\n";
+    }
+    s << "\n";
+  }
   if (!probe) {
     s << "# no probe surface: motion.probe-input stays low\n";
     return s.str();
@@ -172,6 +189,7 @@ Result<LinuxCncConfigReport> WriteLinuxCncConfig(const fs::path& dir, const Linu
   }
   LinuxCncConfigReport report;
   report.files = {kLinuxCncIniName, kHalFile, kDisplayFile, kToolTable};
+  if (options.link) report.files.emplace_back(kLinkFile);
   if (probe) {
     report.files.emplace_back(kSurfaceFile);
     report.probe = probe->report;
@@ -181,6 +199,7 @@ Result<LinuxCncConfigReport> WriteLinuxCncConfig(const fs::path& dir, const Linu
       {kHalFile, Hal(options, probe)},
       {kDisplayFile, internal::kLinuxCncDisplayScript},
       {kToolTable, ToolTable(options)}};
+  if (options.link) contents.emplace_back(kLinkFile, internal::kLinuxCncLinkComponent);
   if (probe) {
     json surface = probe->report.ToJson();
     surface["format"] = std::string(kMarker) + ": probe surface";
@@ -190,9 +209,12 @@ Result<LinuxCncConfigReport> WriteLinuxCncConfig(const fs::path& dir, const Linu
   FL_RETURN_IF_ERROR(MakeDirectories(dir));
   for (const auto& [name, text] : contents) FL_RETURN_IF_ERROR(WriteFileAtomic(dir / name, text));
   std::error_code ec;
-  fs::permissions(dir / kDisplayFile, fs::perms::owner_exec | fs::perms::group_exec | fs::perms::others_exec,
-                  fs::perm_options::add, ec);
-  if (ec) return Status::IoError("cannot make " + (dir / kDisplayFile).string() + " executable: " + ec.message());
+  for (const char* program : {kDisplayFile, kLinkFile}) {
+    if (!fs::exists(dir / program)) continue;
+    fs::permissions(dir / program, fs::perms::owner_exec | fs::perms::group_exec | fs::perms::others_exec,
+                    fs::perm_options::add, ec);
+    if (ec) return Status::IoError("cannot make " + (dir / program).string() + " executable: " + ec.message());
+  }
   report.ini = dir / kLinuxCncIniName;
   return report;
 }

@@ -8,18 +8,23 @@
 // acceleration limit for every axis, servo period 1 ms, iocontrol's estop and tool-change loop-backs.
 // The DISPLAY is formloop's own program on LinuxCNC's Python module (cnc/linuxcnc_display.py).
 //
-// HAL, in servo-thread order after motion:
-//   - a servo clock on motion.analog-in-00 (integ of 1: seconds since the controller started), which
-//     formloop's probing program logs as each touch's time (M66 E0 L0, #5399);
+// HAL, in servo-thread order after motion (motmod with num_aio = 16 analog ports each way):
+//   - a servo clock on motion.analog-in-15 (integ of 1: seconds since the controller started), which
+//     formloop's probing program logs as each touch's time (M66 E15 L0, #5399; [FORMLOOP]
+//     SERVO_CLOCK_INPUT);
+//   - with `link`, the handshake's variable block on analog ports 0..3 (C, D, Q, A): the link component
+//     formloop_link.py (cnc/linuxcnc_link.h) joins motion.analog-out-k and motion.analog-in-k into one
+//     shared variable and serves the collector;
 //   - the probe surface (cnc/linuxcnc_probe_surface.h) on joint.N.pos-cmd, a comparator that is true
 //     when the ball is in contact, and an and2 that passes it to motion.probe-input only while the
 //     spindle is off: a touch probe does not cut, and a cutting program moving through the simulated
 //     part would otherwise trip "probe tripped during non-probe move".
 //
 // Files in the folder (all written atomically; a file of the same name that formloop did not write is
-// never replaced, see WriteLinuxCncConfig): formloop.ini, formloop.hal, formloop_display.py, tool.tbl,
-// formloop.var (the interpreter's parameters, empty) and probe_surface.json (what the probe surface
-// is and how exactly the net trips: ProbeSurfaceReport).
+// never replaced, see WriteLinuxCncConfig): formloop.ini, formloop.hal, formloop_display.py,
+// formloop_link.py (with `link`), tool.tbl and probe_surface.json (what the probe surface is and how
+// exactly the net trips: ProbeSurfaceReport). LinuxCNC writes its parameters (formloop.var) in the
+// session folder of each run.
 
 #include <Eigen/Core>
 #include <filesystem>
@@ -43,6 +48,7 @@ struct LinuxCncMachineOptions {
   double max_acceleration_mm_per_s2 = 2000;  // every axis
   long servo_period_ns = 1000000;            // the trigger error is up to feed × this
   bool probe = true;                         // false: no probe surface, motion.probe-input stays low
+  bool link = true;                          // the handshake block on analog ports 0..3 (header comment)
   ProbeSurfaceOptions surface;
   int tools = 20;  // tool table entries T1..Tn (geometry is not simulated)
   Status Validate() const;
@@ -57,6 +63,11 @@ struct LinuxCncConfigReport {
 
 // The name of the INI file in a configuration folder.
 inline constexpr const char* kLinuxCncIniName = "formloop.ini";
+// The analog ports of the configuration: the servo clock's input and the link's block (PACKED: C, D,
+// Q, A from port 0, the dialect's default base of cnc/machine_program.h).
+inline constexpr int kLinuxCncAnalogPorts = 16;
+inline constexpr int kLinuxCncServoClockInput = 15;
+inline constexpr int kLinuxCncLinkPorts = 4;
 
 // Writes the configuration into `dir` (created if needed). A file that exists there and does not start
 // with formloop's marker line is left alone and the whole call is refused (BadInput naming it), so a

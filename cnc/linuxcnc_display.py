@@ -87,6 +87,14 @@ def preview(program, scratch_dir):
     return line, gcode.strerror(code), block
 
 
+def intended_abort(program, text):
+    """True when `text` is one of the program's own (abort, TEXT) alarms: the preview reaches one when the
+    program waits on inputs (M66) that only the running controller gives it."""
+    with open(program, encoding="utf-8", errors="replace") as f:
+        alarms = set(re.findall(r"\(\s*abort\s*,([^)]*)\)", f.read(), flags=re.IGNORECASE))
+    return text.strip() in {a.strip() for a in alarms}
+
+
 class Machine:
     def __init__(self, result):
         self.stat = linuxcnc.stat()
@@ -208,7 +216,11 @@ def main():
         machine.stat.poll()
         failure = preview(program, os.path.join(os.path.dirname(result_path), "preview"))
         result["seconds"]["preview"] = round(time.monotonic() - t0, 3)
-        if failure:
+        if failure and intended_abort(program, failure[1]):
+            result["messages"].append("preview: reading stopped at line %d, the program's own alarm (%s), which "
+                                      "depends on inputs only the running controller gives" % (failure[0],
+                                                                                             failure[1].strip()))
+        elif failure:
             line, text, block = failure
             result["errors"].append({"stage": "preview", "line": line, "text": text, "block": block})
             return 1

@@ -43,7 +43,7 @@ nc::ProbeProgramOptions LinuxCncProbingOptions::DefaultProgram() {
   p.safe_z_mm = std::numeric_limits<double>::quiet_NaN();
   p.results_file = kResultsFile;
   p.linuxcnc_log_file = kPointsFile;
-  p.linuxcnc_time_input = 0;  // the configuration's servo clock
+  p.linuxcnc_time_input = -1;  // set from the configuration's servo clock when it has one
   return p;
 }
 
@@ -99,6 +99,10 @@ Result<LinuxCncProbing> ProbePlanOnLinuxCnc(const LinuxCncConfig& config, const 
   nc::ProbeProgramOptions program = options.program;
   program.ball_radius_mm = result.probe.ball_radius_mm;
   FL_ASSIGN_OR_RETURN(program.post.limits, LimitsOf(config));
+  if (program.linuxcnc_time_input < 0 && !config.Get("FORMLOOP", "SERVO_CLOCK_INPUT").empty()) {
+    FL_ASSIGN_OR_RETURN(const double clock, IniNumber(config, "FORMLOOP", "SERVO_CLOCK_INPUT"));
+    program.linuxcnc_time_input = static_cast<int>(clock);
+  }
   if (program.post.title.empty()) program.post.title = "formloop probing on LinuxCNC, " + config.Get("EMC", "MACHINE");
   if (std::isnan(program.safe_z_mm)) {
     double top = -std::numeric_limits<double>::infinity();

@@ -33,8 +33,8 @@ struct LinuxCncProbingOptions {
   double inset_fraction = 0.1;  // of each span left free at the domain's edges
   // The program. Defaults: approach at F600 from 2 mm above the surface, back off 0.1 mm, measure at F6
   // (trigger error below 0.1 µm with a 1 ms servo period), search 1 mm beyond the surface. A NaN
-  // safe_z_mm is 5 mm above the highest start point; the ball radius and the travel and feed limits come
-  // from the configuration.
+  // safe_z_mm is 5 mm above the highest start point; the ball radius, the travel and feed limits and the
+  // servo clock's input (linuxcnc_time_input -1) come from the configuration.
   nc::ProbeProgramOptions program = DefaultProgram();
   LinuxCncRunOptions run;
   static nc::ProbeProgramOptions DefaultProgram();

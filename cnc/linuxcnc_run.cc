@@ -207,6 +207,18 @@ std::string Tail(const fs::path& file, std::size_t lines) {
   return out;
 }
 
+// `name` on PATH (or as given when it holds a '/').
+Result<std::string> FindProgram(const std::string& name) {
+  if (name.find('/') != std::string::npos) return name;
+  const char* path = std::getenv("PATH");
+  std::istringstream dirs(path != nullptr ? path : "/usr/bin:/bin");
+  for (std::string dir; std::getline(dirs, dir, ':');) {
+    const fs::path candidate = fs::path(dir.empty() ? "." : dir) / name;
+    if (::access(candidate.c_str(), X_OK) == 0) return candidate.string();
+  }
+  return Status::NotFound("'" + name + "' is not on PATH: LinuxCNC is not installed (Debian package linuxcnc-uspace)");
+}
+
 Status ReadResult(const fs::path& path, LinuxCncRunReport* report) {
   FL_ASSIGN_OR_RETURN(const json r, ReadJsonFile(path));
   if (r.value("format", "") != "formloop linuxcnc result") {
@@ -337,6 +349,7 @@ Result<LinuxCncRunReport> RunOnLinuxCnc(const LinuxCncConfig& config, const fs::
                                           "FORMLOOP_PROGRAM",
                                           "FORMLOOP_RESULT",
                                           "FORMLOOP_TIMEOUT_S",
+                                          "FORMLOOP_LINK_SOCKET",
                                           kSessionVariable};
   for (char** e = environ; *e != nullptr; ++e) {
     const std::string entry(*e);
@@ -349,10 +362,14 @@ Result<LinuxCncRunReport> RunOnLinuxCnc(const LinuxCncConfig& config, const fs::
   env.push_back("FORMLOOP_RESULT=" + (session / "result.json").string());
   env.push_back("FORMLOOP_TIMEOUT_S=" + FormatExact(options.timeout_s));
   env.push_back(std::string(kSessionVariable) + "=" + session.string());
+  if (!options.link_socket.empty()) env.push_back("FORMLOOP_LINK_SOCKET=" + options.link_socket.string());
   std::vector<char*> envp;
   for (std::string& e : env) envp.push_back(e.data());
   envp.push_back(nullptr);
-  std::string launcher = options.launcher, flag = "-r", ini = (session / kLinuxCncIniName).string();
+  // The launcher's path is found before fork(): the child of a process with threads (a collector may run
+  // beside) only calls what is safe there.
+  FL_ASSIGN_OR_RETURN(std::string launcher, FindProgram(options.launcher));
+  std::string flag = "-r", ini = (session / kLinuxCncIniName).string();
   char* argv[] = {launcher.data(), flag.data(), ini.data(), nullptr};
   const std::string log_path = (session / "controller.log").string();
 
@@ -368,7 +385,7 @@ Result<LinuxCncRunReport> RunOnLinuxCnc(const LinuxCncConfig& config, const fs::
     ::dup2(in, 0);
     ::dup2(out, 1);
     ::dup2(out, 2);
-    ::execvpe(argv[0], argv, envp.data());
+    ::execve(argv[0], argv, envp.data());
     static const char kMessage[] = "formloop: cannot start the LinuxCNC launcher (is linuxcnc-uspace installed?)\n";
     (void)!::write(2, kMessage, sizeof(kMessage) - 1);
     ::_exit(127);

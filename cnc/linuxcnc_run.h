@@ -42,6 +42,8 @@ struct LinuxCncRunOptions {
   double timeout_s = 600;     // the program's time limit; the display program aborts it beyond
   double lock_wait_s = 1800;  // how long to wait for another formloop run to free the controller
   std::string launcher = "linuxcnc";
+  // The link component's socket (FORMLOOP_LINK_SOCKET; cnc/linuxcnc_link.h); empty: the link serves none.
+  std::filesystem::path link_socket;
   Status Validate() const;
 };
 

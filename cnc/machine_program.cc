@@ -478,6 +478,8 @@ Result<MachineProgram> WriteMachineProgram(const metrology::ProbingPlan& plan, c
   WaitLoop(e, e.Cmp(e.S(kC), "NE", arm), o.arm_timeout_s, o.dwell_s);
   e.If(e.Cmp(e.S(kC), "NE", arm), e.Cmp(e.S(kC), "EQ", arm), [&] { e.Alarm(kAlarmOffline, "COLLECTOR OFFLINE"); });
   e.Move(true, {0, 0, o.probe.safe_z_mm}, true);
+  const bool trips = o.log_trips && d == Dialect::kLinuxCnc;
+  if (trips) e.Line("(PROBEOPEN " + nc::CommentText(o.probe.results_file) + ")");
   for (std::size_t k = 0; k < n; ++k) {
     const ProbePath& p = paths[k];
     e.Comment("POINT " + std::to_string(k + 1));
@@ -501,6 +503,7 @@ Result<MachineProgram> WriteMachineProgram(const metrology::ProbingPlan& plan, c
     e.Move(true, p.clearance);
     e.Move(true, p.above, true);
   }
+  if (trips) e.Line("(PROBECLOSE)");
   // M4, M5.
   e.WriteBlock(0, e.Int(static_cast<long long>(EncodeControl(FinishedWord(static_cast<int>(n))))));
   e.ReadBlock(0, kC);
@@ -529,6 +532,33 @@ Result<MachineProgram> WriteMachineProgram(const metrology::ProbingPlan& plan, c
     program.files.push_back({"FL_SEND.SPF", e.Text()});
   }
   return program;
+}
+
+Result<metrology::ProbeLog> ProbeLogOfSession(const Session& session, const metrology::ProbingPlan& plan,
+                                              const std::vector<Eigen::Vector3d>& approaches, double ball_radius_mm,
+                                              std::vector<int>* skipped) {
+  metrology::ProbeLog log;
+  for (const auto& p : session.points) {
+    if (p.id < 1 || p.id > static_cast<int>(plan.points.size())) {
+      return Status::BadInput("point " + std::to_string(p.id) + " is not in the plan (" +
+                              std::to_string(plan.points.size()) + " points)");
+    }
+    if (!p.decoded.ok()) {
+      if (skipped != nullptr) skipped->push_back(p.id);
+      continue;
+    }
+    const auto& planned = plan.points[static_cast<std::size_t>(p.id - 1)];
+    const auto ref = ReferenceOf(planned, ball_radius_mm);
+    metrology::ProbeRecord r;
+    r.id = p.id;
+    for (std::size_t k = 0; k < 3; ++k) {
+      r.centre[static_cast<Eigen::Index>(k)] = ref[k] + p.decoded.v[k] * kValueUnitMm;
+    }
+    r.approach = approaches.empty() ? Eigen::Vector3d(-planned.normal) : approaches[static_cast<std::size_t>(p.id - 1)];
+    r.t_s = p.t_s;
+    log.records.push_back(r);
+  }
+  return log;
 }
 
 }  // namespace formloop::cnc

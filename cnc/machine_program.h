@@ -37,6 +37,7 @@
 #include <vector>
 
 #include "cnc/handshake.h"
+#include "cnc/journal.h"
 #include "cnc/macro_code.h"
 #include "core/status.h"
 #include "metrology/probe.h"
@@ -56,6 +57,9 @@ struct MachineProgramOptions {
   // written with probe.post.decimals (Fanuc IS-B: at most 3).
   nc::ProbeProgramOptions probe;
   int program_number = 1000;  // Fanuc: main O1000, send subprogram O1001
+  // LinuxCNC: the controller's own record of every probe trip, (PROBEOPEN probe.results_file) around
+  // the points, to check what the collector received against (cnc/linuxcnc_link.h).
+  bool log_trips = false;
   Status Validate() const;
   int ResolvedBase() const;
   BlockLayout Block() const { return BlockLayout{layout, ResolvedBase()}; }
@@ -81,6 +85,14 @@ struct MachineProgram {
 // Checks the plan (1..2000 points with ids 1..N in order, every position within the machine limits,
 // the probe feed within the feed limit) and writes the program. Nothing is returned on a refusal.
 Result<MachineProgram> WriteMachineProgram(const metrology::ProbingPlan& plan, const MachineProgramOptions& options);
+
+// The points of a collected session as a probe log: centre = ReferenceOf(point) + v·kValueUnitMm, the
+// approach from `approaches` (plan order) or −n when it is empty, the collector's time. Points with an
+// axis out of range (OVERFLOW, RANGE_ERROR) are left out and listed in *skipped; an id that is not in
+// the plan is an error.
+Result<metrology::ProbeLog> ProbeLogOfSession(const Session& session, const metrology::ProbingPlan& plan,
+                                              const std::vector<Eigen::Vector3d>& approaches, double ball_radius_mm,
+                                              std::vector<int>* skipped);
 
 // The file name a dialect's main program is written to ("measure.nc", "measure.ngc", "FL_MEASURE.MPF").
 std::string MainProgramFileName(Dialect dialect);

@@ -37,7 +37,8 @@ TEST_F(LinuxCncFilesTest, ConfigurationHasEveryFileAndReadsBack) {
   o.travel_max_mm.z() = 60;
   const auto report = WriteLinuxCncConfig(dir_ / "cfg", o);
   ASSERT_TRUE(report.ok()) << report.status().message();
-  for (const char* f : {"formloop.ini", "formloop.hal", "formloop_display.py", "tool.tbl", "probe_surface.json"}) {
+  for (const char* f :
+       {"formloop.ini", "formloop.hal", "formloop_display.py", "formloop_link.py", "tool.tbl", "probe_surface.json"}) {
     EXPECT_TRUE(fs::exists(dir_ / "cfg" / f)) << f;
   }
   EXPECT_NE(fs::status(dir_ / "cfg" / "formloop_display.py").permissions() & fs::perms::owner_exec, fs::perms::none);
@@ -49,10 +50,14 @@ TEST_F(LinuxCncFilesTest, ConfigurationHasEveryFileAndReadsBack) {
   EXPECT_EQ(config->Get("JOINT_0", "HOME_SEARCH_VEL"), "0") << "homing without switches";
   EXPECT_EQ(config->Get("FORMLOOP", "PROBE_SURFACE"), "plane");
   EXPECT_EQ(config->Get("FORMLOOP", "PROBE_SHIFT_UM"), "1 2 3");
-  EXPECT_EQ(config->files.size(), 5u);
+  EXPECT_EQ(config->files.size(), 6u);
+  EXPECT_EQ(config->Get("FORMLOOP", "LINK_PORTS"), "4");
+  EXPECT_EQ(config->Get("FORMLOOP", "SERVO_CLOCK_INPUT"), "15");
   const std::string hal = ReadFile(dir_ / "cfg" / "formloop.hal").value();
   for (const char* must : {"net probe-tripped probe-live.out => motion.probe-input", "spindle.0.on",
-                           "motion.analog-in-00", "joint.2.pos-cmd", "loadrt sum2 names=psurf-s0,psurf-s1"}) {
+                           "net servo-seconds servo-clock.out => motion.analog-in-15", "joint.2.pos-cmd",
+                           "loadrt sum2 names=psurf-s0,psurf-s1", "loadusr -Wn formloop-link ./formloop_link.py 4 0 1",
+                           "net link-block-3 formloop-link.block-3 => motion.analog-in-03", "num_aio=16"}) {
     EXPECT_NE(hal.find(must), std::string::npos) << must;
   }
   // Written again over its own files: fine.

@@ -18,6 +18,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <numbers>
+#include <sstream>
 #include <string>
 
 #include "cnc/linuxcnc_run.h"
@@ -288,6 +289,54 @@ TEST_F(LinuxCncMachineTest, FormloopRunProbesThePartOnTheController) {
                      nullptr, &err),
             2);
   EXPECT_NE(err.find("--ball-radius-mm 2"), std::string::npos) << err;
+}
+
+// What must show, 2: the seed-000 handshake over HAL. formloop's machine-side program (numbered parameters,
+// M68 writes and M66 reads of the variable block on LinuxCNC's analog ports) probes 25 points on the
+// controller while formloop's collector takes each one through the link component; every point arrives
+// exactly once, in order, and equal to the controller's own record of the trip (PROBEOPEN) to the data
+// word's 0.1 µm.
+TEST_F(LinuxCncMachineTest, HandshakeOverHalTransfersEveryPointOfA25PointMeasurementOnce) {
+  ASSERT_EQ(Formloop("fit analytic:saddle --out " + Path("Q.step")), 0);
+  Config("machine", "");
+  json m;
+  ASSERT_EQ(Formloop("machine linuxcnc measure --config " + Path("machine") + " --surface " + Path("Q.step") +
+                         " --grid 5x5 --out " + Path("measure"),
+                     &m),
+            0);
+  ASSERT_TRUE(m.is_object());
+  std::printf(
+      "[linuxcnc] handshake over HAL: %d of %d points, %d distinct, %d checked against the trips (largest "
+      "difference %.3f um); collector %d reads, %d writes, %d duplicates, %d lost writes made again; program "
+      "%.1f s\n",
+      m["points_received"].get<int>(), m["points_planned"].get<int>(), m["distinct_ids"].get<int>(),
+      m["checked_against_trips"].get<int>(), m["max_difference_um"].get<double>(),
+      m["collector"]["counters"]["reads"].get<int>(), m["collector"]["counters"]["writes"].get<int>(),
+      m["collector"]["counters"]["duplicates"].get<int>(),
+      m["collector"]["counters"]["lost_writes_repeated"].get<int>(), m["run"]["seconds"]["run"].get<double>());
+  EXPECT_EQ(m["ok"], true);
+  EXPECT_EQ(m["points_received"], 25);
+  EXPECT_EQ(m["distinct_ids"], 25);
+  EXPECT_EQ(m["checked_against_trips"], 25);
+  EXPECT_LE(m["max_difference_um"].get<double>(), 0.051);
+  EXPECT_EQ(m["collector"]["counters"]["duplicates"], 0);
+  ASSERT_EQ(m["collector"]["sessions"].size(), 1u);
+  EXPECT_EQ(m["collector"]["sessions"][0]["status"], "COMPLETE");
+  // The journal's ids are 1..25 in order, each once.
+  const std::string collection = ReadFile(dir_ / "measure" / "collection.csv").value();
+  std::istringstream rows(collection);
+  std::string header, row;
+  std::getline(rows, header);
+  int expected_id = 1;
+  while (std::getline(rows, row)) {
+    std::vector<std::string> cells;
+    std::stringstream cs(row);
+    for (std::string c; std::getline(cs, c, ',');) cells.push_back(c);
+    ASSERT_GE(cells.size(), 4u) << row;
+    EXPECT_EQ(std::stoi(cells[3]), expected_id++) << row;
+  }
+  EXPECT_EQ(expected_id, 26);
+  EXPECT_TRUE(fs::exists(dir_ / "measure" / "probe_log.csv"));
 }
 
 // A stand-in process named like a LinuxCNC part (a copy of sleep called "milltask"), with or without a
