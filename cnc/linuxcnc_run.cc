@@ -298,6 +298,24 @@ std::vector<int> LinuxCncProcesses() {
   return out;
 }
 
+bool LinuxCncLeftNothing(double wait_s, std::string* what_is_left) {
+  RunLock lock;
+  double waited = 0;
+  if (const Status s = lock.Acquire(wait_s, &waited); !s.ok()) {
+    *what_is_left = s.message();
+    return false;
+  }
+  std::string left;
+  for (const ProcessInfo& p : Processes(false)) {
+    if (Alive(p) && IsLinuxCncName(p.comm))
+      left += (left.empty() ? "" : ", ") + p.comm + " (pid " + std::to_string(p.pid) + ")";
+  }
+  std::error_code ec;
+  if (fs::exists(kLinuxCncLock, ec)) left += (left.empty() ? "" : ", ") + std::string(kLinuxCncLock);
+  *what_is_left = left;
+  return left.empty();
+}
+
 Result<LinuxCncRunReport> RunOnLinuxCnc(const LinuxCncConfig& config, const fs::path& program,
                                         const fs::path& session_in, const LinuxCncRunOptions& options) {
   FL_RETURN_IF_ERROR(options.Validate());

@@ -83,4 +83,9 @@ std::vector<int> FormloopControllerProcesses(const std::filesystem::path& sessio
 // the linuxcnc launcher), whoever started them.
 std::vector<int> LinuxCncProcesses();
 
+// After runs: is the machine's controller side clean? Takes the run lock (waiting up to `wait_s` for
+// other formloop runs, which may be busy with their own controller), then no LinuxCNC process may be
+// alive and LinuxCNC's lock file must be gone. *what_is_left says otherwise.
+bool LinuxCncLeftNothing(double wait_s, std::string* what_is_left);
+
 }  // namespace formloop::cnc
