@@ -83,7 +83,7 @@ std::string Hal(const LinuxCncMachineOptions& o, const std::optional<ProbeSurfac
   s << "# " << kMarker << ": HAL for " << o.name << "\n\n";
   s << "loadrt [KINS]KINEMATICS\n"
     << "loadrt [EMCMOT]EMCMOT servo_period_nsec=[EMCMOT]SERVO_PERIOD num_joints=[KINS]JOINTS num_aio="
-    << kLinuxCncAnalogPorts << "\n"
+    << kLinuxCncAnalogPorts << " num_dio=" << kLinuxCncAnalogPorts << "\n"
     << "addf motion-command-handler servo-thread\naddf motion-controller servo-thread\n\n";
   s << "# joints: commanded position looped back as the feedback; pos-x/y/z are the machine positions\n";
   for (int j = 0; j < 3; ++j) {
@@ -102,11 +102,14 @@ std::string Hal(const LinuxCncMachineOptions& o, const std::optional<ProbeSurfac
     << "net servo-seconds servo-clock.out => motion.analog-in-" << clock << "\n\n";
   if (o.link) {
     s << "# the handshake's variable block (C, D, Q, A) on analog ports 0.." << kLinuxCncLinkPorts - 1
-      << ": one shared variable per port\n"
-      << "loadusr -Wn formloop-link ./" << kLinkFile << " " << kLinuxCncLinkPorts << " 0 1\n";
+      << ": one shared variable per port;\n# the program commits each write by toggling digital output k, "
+         "which it reads back on digital input k\n"
+      << "loadusr -Wn formloop-link ./" << kLinkFile << " " << kLinuxCncLinkPorts << "\n";
     for (int k = 0; k < kLinuxCncLinkPorts; ++k) {
       const std::string port = (k < 10 ? "0" : "") + std::to_string(k);
       s << "net link-machine-" << k << " motion.analog-out-" << port << " => formloop-link.machine-" << k << "\n"
+        << "net link-commit-" << k << " motion.digital-out-" << port << " => formloop-link.commit-" << k
+        << " motion.digital-in-" << port << "\n"
         << "net link-block-" << k << " formloop-link.block-" << k << " => motion.analog-in-" << port << "\n";
     }
     s << "\n";

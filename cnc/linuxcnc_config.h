@@ -8,13 +8,15 @@
 // acceleration limit for every axis, servo period 1 ms, iocontrol's estop and tool-change loop-backs.
 // The DISPLAY is formloop's own program on LinuxCNC's Python module (cnc/linuxcnc_display.py).
 //
-// HAL, in servo-thread order after motion (motmod with num_aio = 16 analog ports each way):
+// HAL, in servo-thread order after motion (motmod with num_aio = num_dio = 16 analog and digital ports
+// each way):
 //   - a servo clock on motion.analog-in-15 (integ of 1: seconds since the controller started), which
 //     formloop's probing program logs as each touch's time (M66 E15 L0, #5399; [FORMLOOP]
 //     SERVO_CLOCK_INPUT);
 //   - with `link`, the handshake's variable block on analog ports 0..3 (C, D, Q, A): the link component
 //     formloop_link.py (cnc/linuxcnc_link.h) joins motion.analog-out-k and motion.analog-in-k into one
-//     shared variable and serves the collector;
+//     shared variable and serves the collector; motion.digital-out-k, the program's commit of each
+//     write, goes to the component and back to motion.digital-in-k;
 //   - the probe surface (cnc/linuxcnc_probe_surface.h) on joint.N.pos-cmd, a comparator that is true
 //     when the ball is in contact, and an and2 that passes it to motion.probe-input only while the
 //     spindle is off: a touch probe does not cut, and a cutting program moving through the simulated

@@ -4,15 +4,16 @@
 // (cnc/collector.h) runs beside it, and the variable block lives in HAL.
 //
 // The block. Address k is analog port k: the program writes it with M68 E<k> Q<value>
-// (motion.analog-out-k) and reads it with M66 E<k> L0 (motion.analog-in-k → #5399). The configuration's
-// link component (cnc/linuxcnc_link.py, loaded by formloop.hal) keeps one register per port, the last value
-// written by either side, drives motion.analog-in-k with it and answers the collector on a Unix socket, so
-// the block behaves as shared variables. HAL floats are doubles: the 36-bit PACKED data word travels
-// exact. HAL carries levels, not events, so the component sees a machine write as a change of the output;
-// the control word changing to POINT_READY also takes the data words (the machine writes them first, rule
-// R2), so equal data for consecutive points arrive. What stays open: the machine writing the very control
-// word it wrote last after the collector has written it (a program restarted right after sending point 1,
-// before the acknowledgement) is not seen; a toggled digital output (M64/M65) per send would close that.
+// (motion.analog-out-k) and commits the write by toggling motion.digital-out-k (M64/M65 P<k>, its level
+// read back on motion.digital-in-k with M66 P<k> L0); it reads address k with M66 E<k> L0
+// (motion.analog-in-k → #5399). The configuration's link component (cnc/linuxcnc_link.py, loaded by
+// formloop.hal) keeps one register per port, the last value written by either side, drives
+// motion.analog-in-k with it and answers the collector on a Unix socket, so the block behaves as shared
+// variables. HAL floats are doubles: the 36-bit PACKED data word travels exact. HAL carries levels, not
+// events: the commit bit makes each machine write an event, so a write of the value written last (equal
+// data of consecutive points, a program restarted after sending point 1 that sends POINT_READY(1) again
+// after the collector acknowledged it) arrives as any other. The component holds no protocol: the
+// words are the collector's to interpret, through the link's one implementation (cnc/collector.h).
 //
 // LinuxCncLinkTransport is the collector's MacroTransport to that socket (addresses = ports; no offset
 // table: ReadOffset/WriteOffset are refused). MeasureOnLinuxCnc runs a whole measurement: the program, the

@@ -3,22 +3,20 @@
 #
 # The handshake's variable block (spec/tuning-and-link.md §7.2) on LinuxCNC (cnc/linuxcnc_link.h). The
 # machine-side program (cnc/machine_program.h, dialect linuxcnc) writes block address k with
-# M68 E<k> Q<value> (motion.analog-out-k) and reads it with M66 E<k> L0 (motion.analog-in-k into #5399);
-# formloop's collector reads and writes the same addresses through this component's socket. The component
-# keeps one register per address, the last value written by either side, and drives motion.analog-in-k
-# with it, so both sides see one shared variable, as a macro variable is on other controllers:
+# M68 E<k> Q<value> (motion.analog-out-k) and commits the write by toggling motion.digital-out-k (M64/M65
+# P<k>; the configuration wires it back to motion.digital-in-k, where the program reads its level); it
+# reads address k with M66 E<k> L0 (motion.analog-in-k into #5399). formloop's collector reads and writes
+# the same addresses through this component's socket. The component keeps one register per address, the
+# last value written by either side, and drives motion.analog-in-k with it, so both sides see one shared
+# variable, as a macro variable is on other controllers:
 #
-#   a machine write is seen as a change of motion.analog-out-k (HAL carries levels, not events);
-#   when the control word changes to POINT_READY, the data words are taken from the machine's outputs as
-#   well: the machine writes the data first and the control word last (rule R2), so the control word is
-#   the commit of the data, and a point whose data equal the previous point's (no change on the pin)
-#   still reaches the collector;
+#   a machine write is the commit bit of its address changing level: the register takes the machine's
+#   output then (M68 reaches motion before the M64/M65 after it), so every write arrives, a value equal
+#   to the last one included;
 #   a collector write replaces the register at once.
-# Left open by levels: a machine write of the very value it wrote last, after the collector has written
-# that address, is not seen (a restart right after sending point 1, before its acknowledgement, sends
-# POINT_READY(1) again); a toggled digital output per send would close it.
+# The component knows nothing of the protocol: what the words mean is the collector's (cnc/collector.h).
 #
-# Arguments: PORTS CONTROL DATA (e.g. "4 0 1": addresses 0..3, C at 0, D at 1; "6 0 1,2,3" for SPLIT).
+# Argument: PORTS (e.g. 4: addresses 0..3).
 # The socket: FORMLOOP_LINK_SOCKET (set by formloop's run); without it the registers still join the two
 # sides of each address. Protocol, one line each way per request (values in Python's repr, exact):
 #   R <start> <count>            ->  OK <v> ...
@@ -35,33 +33,25 @@ import hal
 POLL_S = 0.0005  # the machine side is looked at every 0.5 ms (a servo period is 1 ms)
 
 
-def state_of(control):
-    """ST of a control word (bits 13-12), -1 when it is not a whole number in 0..65535."""
-    if control != int(control) or not 0 <= control < 65536:
-        return -1
-    return (int(control) >> 12) & 3
-
-
 class Link:
-    def __init__(self, ports, control, data):
-        self.ports, self.control, self.data = ports, control, data
+    def __init__(self, ports):
+        self.ports = ports
         self.hal = hal.component("formloop-link")
         for k in range(ports):
             self.hal.newpin("machine-%d" % k, hal.HAL_FLOAT, hal.HAL_IN)
+            self.hal.newpin("commit-%d" % k, hal.HAL_BIT, hal.HAL_IN)
             self.hal.newpin("block-%d" % k, hal.HAL_FLOAT, hal.HAL_OUT)
         self.registers = [0.0] * ports
-        self.seen = [0.0] * ports
+        self.commits = [False] * ports
         self.hal.ready()
 
     def watch_machine(self):
-        outputs = [self.hal["machine-%d" % k] for k in range(self.ports)]
+        # The commit bits first, then the values: a value is set before its commit.
+        commits = [bool(self.hal["commit-%d" % k]) for k in range(self.ports)]
         for k in range(self.ports):
-            if outputs[k] != self.seen[k]:
-                self.registers[k] = outputs[k]
-        if outputs[self.control] != self.seen[self.control] and state_of(outputs[self.control]) == 2:
-            for k in self.data:
-                self.registers[k] = outputs[k]
-        self.seen = outputs
+            if commits[k] != self.commits[k]:
+                self.registers[k] = self.hal["machine-%d" % k]
+        self.commits = commits
         self.publish()
 
     def publish(self):
@@ -123,10 +113,7 @@ def serve(link, path):
 
 def main():
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))  # LinuxCNC's shutdown: leave HAL cleanly
-    ports = int(sys.argv[1]) if len(sys.argv) > 1 else 4
-    control = int(sys.argv[2]) if len(sys.argv) > 2 else 0
-    data = [int(k) for k in sys.argv[3].split(",")] if len(sys.argv) > 3 else [1]
-    link = Link(ports, control, data)
+    link = Link(int(sys.argv[1]) if len(sys.argv) > 1 else 4)
     try:
         serve(link, os.environ.get("FORMLOOP_LINK_SOCKET", ""))
     except KeyboardInterrupt:

@@ -97,9 +97,17 @@ class Emitter {
       AssignS(k, Var(block_.base + offset));
     }
   }
+  // LinuxCNC: HAL carries levels, so each write is committed by toggling digital output <port>
+  // (M64 sets, M65 clears; its present level is read back through digital input <port>, which the
+  // configuration wires to it): the link sees every write as an event, a value equal to the last one
+  // included (cnc/linuxcnc_link.h). M68 and M64/M65 are immediate and reach motion in this order.
   void WriteBlock(int offset, const std::string& expr) {
     if (d_ == Dialect::kLinuxCnc) {
-      Line("M68 E" + Int(block_.base + offset) + " Q" + Br(expr));
+      const std::string port = Int(block_.base + offset);
+      Line("M68 E" + port + " Q" + Br(expr));
+      Line("M66 P" + port + " L0");
+      If(Cmp("#5399", "EQ", "0"), "", [&] { Line("M64 P" + port); });
+      If(Cmp("#5399", "EQ", "1"), "", [&] { Line("M65 P" + port); });
     } else {
       Assign(block_.base + offset, expr);
     }
@@ -312,7 +320,7 @@ std::string Title(const MachineProgramOptions& o, std::size_t points) {
   std::string where;
   if (o.dialect == Dialect::kLinuxCnc) {
     where = "HAL analog ports E" + std::to_string(b.base) + "-E" + std::to_string(b.base + b.size() - 1) +
-            " M68 OUT M66 IN";
+            " M68 OUT M66 IN M64/M65 COMMIT";
   } else {
     const std::string v = o.dialect == Dialect::kSinumerik ? "R" : "#";
     where = v + std::to_string(b.base) + "-" + v + std::to_string(b.base + b.size() - 1);

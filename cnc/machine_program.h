@@ -25,10 +25,13 @@
 //   LinuxCNC  HAL analog ports: the program writes C, D, Q with M68 E<port> Q<value> (motion.analog-out-NN,
 //             immediate) and reads C and A with M66 E<port> L0 (motion.analog-in-NN into #5399). Port k is
 //             block address base+k (C = E0, D = E1, Q = E2, A = E3 for PACKED; SPLIT needs num_aio ≥ 6).
-//             On a real controller each port pair is joined by a small HAL component that keeps the last
-//             value written by either side (the collector side writes through halcmd/its own component),
-//             so C behaves as one shared variable; the emulator implements exactly that view. HAL floats
-//             are doubles, so D travels exact. Scratch parameters #1150–#1166.
+//             Each write is committed by toggling digital output <port> (M66 P<port> L0 reads its level
+//             back through digital input <port>, then M64 or M65 P<port> flips it; num_dio as num_aio),
+//             so every write is an event on HAL, a value equal to the last one included. On the
+//             controller each port pair is joined by a small HAL component (cnc/linuxcnc_link.h) that
+//             keeps the last value written by either side, so C behaves as one shared variable; the
+//             emulator implements exactly that view. HAL floats are doubles, so D travels exact.
+//             Scratch parameters #1150–#1166.
 // The reference of a point is the stylus-ball centre at nominal contact (surface point + R·normal),
 // written with 4 decimals (0.1 µm, the unit of v); ReferenceOf() gives the collector the same values.
 

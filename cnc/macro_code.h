@@ -93,6 +93,8 @@ struct Instr {
     kMessage,  // operator message `text`; the program goes on
     kPortOut,  // LinuxCNC M68 E<number> Q<value>
     kPortIn,   // LinuxCNC M66 E<number> L0 → #5399
+    kDigitalOut,  // LinuxCNC M64 P<number> (on, value 1) / M65 P<number> (off, value 0)
+    kDigitalIn,   // LinuxCNC M66 P<number> L0 → #5399 (0 or 1)
   };
   Kind kind = Kind::kNop;
   SourcePos pos;
@@ -126,7 +128,9 @@ struct MacroCode {
 // (#5061–#5063, #5070, #5399 read only); Sinumerik: R0..R<r_last> (MD28050 MM_NUM_R_PARAM − 1).
 struct MacroLimits {
   int sinumerik_r_last = 99;
-  int linuxcnc_ports = 4;  // motion.num_aio (LinuxCNC's default 4; motmod num_aio=N raises it)
+  // motion.num_aio and motion.num_dio, analog and digital ports (LinuxCNC's default 4 each; motmod
+  // num_aio=N num_dio=N raise them).
+  int linuxcnc_ports = 4;
 };
 
 // Reads and checks the files of one program (the first file holds the main program; Sinumerik

@@ -250,6 +250,12 @@ MacroInterpreter::Step MacroInterpreter::Run() {
         case Instr::Kind::kPortIn:
           params_[5399] = env_->PortIn(in.number);
           break;
+        case Instr::Kind::kDigitalOut:
+          env_->DigitalOut(in.number, Number(in.value) != 0);
+          break;
+        case Instr::Kind::kDigitalIn:
+          params_[5399] = env_->DigitalIn(in.number) ? 1 : 0;
+          break;
       }
     } catch (const ArithmeticError& e) {
       RaiseAlarm(4, e.what + " at " + Where());

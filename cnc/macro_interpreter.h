@@ -13,6 +13,7 @@
 
 #include <array>
 #include <cstdint>
+#include <map>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -37,6 +38,11 @@ class MachineEnvironment {
   // LinuxCNC analog I/O: M66 E<port> L0 reads, M68 E<port> Q<v> writes (HAL motion.analog-in/out).
   virtual double PortIn(int port) = 0;
   virtual void PortOut(int port, double value) = 0;
+  // LinuxCNC digital I/O: M64/M65 P<port> set/clear motion.digital-out-NN, M66 P<port> L0 reads
+  // motion.digital-in-NN. formloop's configuration wires each output back to its input (the link's
+  // commit bits, cnc/linuxcnc_link.h); so does this default.
+  virtual bool DigitalIn(int port) { return digital_[port]; }
+  virtual void DigitalOut(int port, bool on) { digital_[port] = on; }
   virtual ProbeOutcome Probe(const std::array<double, 3>& from, const std::array<double, 3>& to, double feed) = 0;
   virtual void Message(const std::string& text) = 0;
   // Called at each "point <id>" comment before the point's blocks run: go on, continue at another
@@ -46,6 +52,9 @@ class MachineEnvironment {
     int target = 0;
   };
   virtual MarkAction OnPointMark(int id) { return {}; }
+
+ private:
+  std::map<int, bool> digital_;
 };
 
 class MacroInterpreter {

@@ -914,19 +914,30 @@ class LinuxCncReader {
       ended_ = true;
       return;
     }
-    if (m == 66 || m == 68) {
-      if (!w.e || w.e->op != Expr::Op::kNumber) throw LineError{"M" + std::to_string(m) + " needs E<analog port>"};
-      const int port = static_cast<int>(w.e->number);
+    // HAL I/O: M64/M65 P<k> digital out, M66 P<k> L0 digital in, M66 E<k> L0 analog in, M68 E<k> Q analog out.
+    const bool digital = m == 64 || m == 65 || (m == 66 && w.p && !w.e);
+    if (digital || m == 66 || m == 68) {
+      const std::optional<Expr>& word = digital ? w.p : w.e;
+      const std::string kind = digital ? "digital" : "analog";
+      const std::string letter = digital ? "P" : "E";
+      if (!word || word->op != Expr::Op::kNumber) {
+        throw LineError{"M" + std::to_string(m) + " needs " + letter + "<" + kind + " port>"};
+      }
+      const int port = static_cast<int>(word->number);
       if (port < 0 || port >= limits_.linuxcnc_ports) {
-        throw LineError{"analog port E" + std::to_string(port) +
-                        " is beyond motion.num_aio = " + std::to_string(limits_.linuxcnc_ports)};
+        throw LineError{kind + " port " + letter + std::to_string(port) + " is beyond motion.num_" +
+                        (digital ? "dio" : "aio") + " = " + std::to_string(limits_.linuxcnc_ports)};
       }
       Instr io;
       io.number = port;
       if (m == 66) {
         if (!w.l || w.l->op != Expr::Op::kNumber || w.l->number != 0)
           throw LineError{"M66 reads immediately (L0) here"};
-        io.kind = Instr::Kind::kPortIn;
+        io.kind = digital ? Instr::Kind::kDigitalIn : Instr::Kind::kPortIn;
+      } else if (digital) {
+        io.kind = Instr::Kind::kDigitalOut;
+        io.value.op = Expr::Op::kNumber;
+        io.value.number = m == 64 ? 1 : 0;
       } else {
         if (!w.q) throw LineError{"M68 needs Q<value>"};
         io.kind = Instr::Kind::kPortOut;

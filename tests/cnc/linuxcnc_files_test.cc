@@ -56,8 +56,10 @@ TEST_F(LinuxCncFilesTest, ConfigurationHasEveryFileAndReadsBack) {
   const std::string hal = ReadFile(dir_ / "cfg" / "formloop.hal").value();
   for (const char* must : {"net probe-tripped probe-live.out => motion.probe-input", "spindle.0.on",
                            "net servo-seconds servo-clock.out => motion.analog-in-15", "joint.2.pos-cmd",
-                           "loadrt sum2 names=psurf-s0,psurf-s1", "loadusr -Wn formloop-link ./formloop_link.py 4 0 1",
-                           "net link-block-3 formloop-link.block-3 => motion.analog-in-03", "num_aio=16"}) {
+                           "loadrt sum2 names=psurf-s0,psurf-s1", "loadusr -Wn formloop-link ./formloop_link.py 4\n",
+                           "net link-block-3 formloop-link.block-3 => motion.analog-in-03",
+                           "net link-commit-2 motion.digital-out-02 => formloop-link.commit-2 motion.digital-in-02",
+                           "num_aio=16 num_dio=16"}) {
     EXPECT_NE(hal.find(must), std::string::npos) << must;
   }
   // Written again over its own files: fine.

@@ -113,6 +113,8 @@ TEST(MachineProgramReaders, RefuseWhatIsWrongAndNameTheLine) {
        "endwhile without its while"},
       {Dialect::kLinuxCnc, "%\no<fl_send> call\nM2\n%\n", 2, "called before it is defined"},
       {Dialect::kLinuxCnc, "%\nM68 E7 Q[1]\nM2\n%\n", 2, "beyond motion.num_aio"},
+      {Dialect::kLinuxCnc, "%\nG4 P1\nM64 P4\nM2\n%\n", 3, "beyond motion.num_dio"},
+      {Dialect::kLinuxCnc, "%\nM65\nM2\n%\n", 2, "M65 needs P<digital port>"},
       {Dialect::kLinuxCnc, "%\n#5070 = 1\nM2\n%\n", 2, "cannot be written"},
       {Dialect::kLinuxCnc, "%\no100 if [1]\nM2\n%\n", 3, "ends inside o100"},
       {Dialect::kSinumerik, "R100=1\nM30\n", 1, "beyond R99"},
@@ -154,6 +156,11 @@ class MapEnvironment : public MachineEnvironment {
   void PortOut(int port, double value) override {
     ports[port] = value;
     port_writes.emplace_back(port, value);
+  }
+  std::vector<std::pair<int, bool>> digital_writes;
+  void DigitalOut(int port, bool on) override {
+    MachineEnvironment::DigitalOut(port, on);
+    digital_writes.emplace_back(port, on);
   }
   ProbeOutcome Probe(const std::array<double, 3>&, const std::array<double, 3>& to, double) override {
     ProbeOutcome out;
@@ -220,6 +227,18 @@ TEST(MacroInterpreter, DialectSemantics) {
     RunToEnd(in);
     EXPECT_EQ(env.ports[0], -2147483648.0);  // LinuxCNC's round goes through a C int (rs274 prints the same)
     EXPECT_EQ(env.ports[1], -2);
+  }
+  {
+    // Digital outputs (the link's commit bits) read back through their inputs: M66 P<k> L0 → #5399.
+    const auto code =
+        ReadMacroProgram(Dialect::kLinuxCnc, {{"l",
+                                               "%\nM66 P2 L0\nM68 E0 Q#5399\nM64 P2\nM66 P2 L0\n"
+                                               "M68 E1 Q#5399\nM65 P2\nM66 P2 L0\nM68 E3 Q#5399\nM2\n%\n"}});
+    ASSERT_TRUE(code.ok()) << code.status().ToString();
+    MapEnvironment env;
+    MacroInterpreter in(&*code, &env);
+    RunToEnd(in);
+    EXPECT_EQ(env.port_writes, (std::vector<std::pair<int, double>>{{0, 0.0}, {1, 1.0}, {3, 0.0}}));
   }
   {
     const auto code =
@@ -404,6 +423,15 @@ TEST_F(Rs274Test, EveryLineRunsInRs274AndTheDataWordsAreThePackedDeviations) {
     RunToEnd(interpreter);
     EXPECT_EQ(interpreter.state(), MacroInterpreter::State::kEnded) << interpreter.alarm_text();
     EXPECT_EQ(env.port_writes, expected);
+    // Each write is committed by flipping its port's digital output (the link's event on HAL).
+    ASSERT_EQ(env.digital_writes.size(), expected.size());
+    std::map<int, bool> level;
+    for (std::size_t k = 0; k < expected.size(); ++k) {
+      const auto [port, on] = env.digital_writes[k];
+      EXPECT_EQ(port, expected[k].first) << "write " << k;
+      EXPECT_EQ(on, !level[port]) << "write " << k << " does not flip its commit bit";
+      level[port] = on;
+    }
   }
 }
 
