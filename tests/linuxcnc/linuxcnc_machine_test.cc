@@ -12,6 +12,8 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -20,7 +22,9 @@
 #include <numbers>
 #include <sstream>
 #include <string>
+#include <thread>
 
+#include "cnc/linuxcnc_link.h"
 #include "cnc/linuxcnc_run.h"
 #include "core/atomic_file.h"
 #include "core/json_io.h"
@@ -338,6 +342,66 @@ TEST_F(LinuxCncMachineTest, HandshakeOverHalTransfersEveryPointOfA25PointMeasure
   }
   EXPECT_EQ(expected_id, 26);
   EXPECT_TRUE(fs::exists(dir_ / "measure" / "probe_log.csv"));
+}
+
+// The commit bits on the real controller: a machine write of the very value it wrote last, after the
+// collector has overwritten that address, still reaches the collector (HAL levels alone would not show
+// it; a restarted program sending POINT_READY(1) again is this case). The program writes 5 to port 0
+// with the measuring program's commit (cnc/machine_program.cc), waits for the collector's 7, writes 5
+// again and waits for the collector's 9; the collector sees the second 5 or the program runs out of time.
+std::string CommittedWrite(int port, const std::string& value, int block) {
+  const std::string p = std::to_string(port), b0 = std::to_string(block), b1 = std::to_string(block + 1);
+  return "M68 E" + p + " Q" + value + "\nM66 P" + p + " L0\no" + b0 + " if [#5399 EQ 0]\nM64 P" + p + "\no" + b0 +
+         " endif\no" + b1 + " if [#5399 EQ 1]\nM65 P" + p + "\no" + b1 + " endif\n";
+}
+// Waits (5 ms looks, at most 4000) until port `port` reads `value`, else aborts. Bounded, as the
+// measuring program's waits are: the display program's preview reads through every loop first.
+std::string WaitFor(int port, const std::string& value, int block) {
+  const std::string b0 = std::to_string(block), b1 = std::to_string(block + 1);
+  return "#1 = -1\n#2 = 0\no" + b0 + " while [[#1 NE " + value +
+         "] AND [#2 LT 4000]]\nG4 P0.005\n#2 = [#2 + 1]\nM66 E" + std::to_string(port) + " L0\n#1 = #5399\no" + b0 +
+         " endwhile\no" + b1 + " if [#1 NE " + value + "]\n(abort, NO ANSWER " + value + ")\no" + b1 + " endif\n";
+}
+
+TEST_F(LinuxCncMachineTest, AMachineWriteOfItsLastValueReachesTheCollectorAfterTheCollectorsOwnWrite) {
+  Config("machine", "--no-probe");
+  std::ofstream(dir_ / "again.ngc") << "%\nG21 G90\n"
+                                    << CommittedWrite(0, "5", 100) << WaitFor(0, "7", 102)
+                                    << CommittedWrite(0, "5", 104) << WaitFor(0, "9", 106) << "M2\n%\n";
+  const auto config = cnc::ReadLinuxCncConfig(dir_ / "machine");
+  ASSERT_TRUE(config.ok()) << config.status().message();
+  char pattern[] = "/tmp/formloop-link-test-XXXXXX";
+  ASSERT_NE(::mkdtemp(pattern), nullptr);
+  const fs::path sockets = pattern;
+  cnc::LinuxCncRunOptions options;
+  options.timeout_s = 60;
+  options.link_socket = sockets / "link.sock";
+  Result<cnc::LinuxCncRunReport> run = Status::Internal("not run");
+  std::atomic<bool> ended{false};
+  std::thread controller([&] {
+    run = cnc::RunOnLinuxCnc(*config, dir_ / "again.ngc", dir_ / "session", options);
+    ended = true;
+  });
+  // The collector's side: read port 0 until `value`, then write `answer`.
+  // (The component's socket appears once the controller is up.)
+  cnc::LinuxCncLinkTransport link(options.link_socket);
+  bool connected = false;
+  auto await_then_write = [&](double value, double answer) {
+    while (!ended) {
+      if (!connected) connected = link.Connect().ok();
+      const auto v = connected ? link.ReadRange(0, 1) : Result<std::vector<cnc::MacroValue>>(Status::IoError("-"));
+      if (v.ok() && (*v)[0] == value) return link.WriteRange(0, {answer}).ok();
+      connected = v.ok();
+      std::this_thread::sleep_for(std::chrono::milliseconds(connected ? 5 : 50));
+    }
+    return false;
+  };
+  EXPECT_TRUE(await_then_write(5, 7)) << "the first 5 did not arrive";
+  EXPECT_TRUE(await_then_write(5, 9)) << "the second 5, equal to the machine's last write, did not arrive";
+  controller.join();
+  fs::remove_all(sockets);
+  ASSERT_TRUE(run.ok()) << run.status().message();
+  EXPECT_TRUE(run->ok) << run->ToStatus().message();
 }
 
 // A stand-in process named like a LinuxCNC part (a copy of sleep called "milltask"), with or without a
