@@ -47,6 +47,7 @@
 #include "core/json_io.h"
 #include "core/log.h"
 #include "core/number_text.h"
+#include "core/output_folder.h"
 #include "core/point_io.h"
 #include "metrology/decomposition.h"
 #include "metrology/morans_i.h"
@@ -123,6 +124,9 @@ Result<Eigen::MatrixXd> Coordinates(const CsvTable& table, const std::string& co
   return points;
 }
 
+// More permutations than this add nothing to a p-value reported to 4 digits and cost minutes per point.
+constexpr int kMaxPermutations = 99999;
+
 Status RunMoran(const MoranArgs& args) {
   const bool knn = args.knn != -1, band = !std::isnan(args.band);
   const int chosen = knn + !args.gal.empty() + args.delaunay + band;
@@ -131,9 +135,20 @@ Status RunMoran(const MoranArgs& args) {
                             chosen == 0 ? "no spatial weights chosen" : "more than one kind of spatial weights chosen",
                             "give exactly one of --knn K, --weights W.gal, --delaunay, --band D");
   }
-  if (args.permutations < 0) {
-    return Status::BadInput(Where{.field = "--permutations"}, "must be >= 0", "use e.g. 999, or 0 for none");
+  if (knn && args.knn < 1) return Status::BadInput(Where{.field = "--knn"}, "must be at least 1", "use e.g. 8");
+  if (band && !(args.band > 0 && std::isfinite(args.band))) {
+    return Status::BadInput(Where{.field = "--band"}, "must be a positive distance");
   }
+  if (args.permutations < 0 || args.permutations > kMaxPermutations) {
+    return Status::BadInput(Where{.field = "--permutations"}, "must lie in 0 .. " + std::to_string(kMaxPermutations),
+                            "use e.g. 999, or 0 for none");
+  }
+  if (args.lisa_permutations < 0 || args.lisa_permutations > kMaxPermutations) {
+    return Status::BadInput(Where{.field = "--lisa-permutations"},
+                            "must lie in 0 .. " + std::to_string(kMaxPermutations), "use e.g. 999, or 0");
+  }
+  FL_RETURN_IF_ERROR(CheckOutputsNotInputs({{"--lisa", args.lisa_out}},
+                                           {{"--points", args.points}, {"--weights", args.gal}}));
   FL_ASSIGN_OR_RETURN(const WeightStyle style, metrology::ParseWeightStyle(args.style, "--style"));
   FL_ASSIGN_OR_RETURN(const IslandPolicy policy, metrology::ParseIslandPolicy(args.islands, "--islands"));
   FL_ASSIGN_OR_RETURN(const CsvTable table, ReadCsvTable(args.points));
@@ -307,8 +322,9 @@ Status ValidatePartArgs(const PartArgs& a) {
     return Status::BadInput(Where{.field = "--ball-radius"}, "given together with --probe-profile",
                             "leave --ball-radius out: the profile holds the ball radius");
   }
-  if (a.lisa_permutations < 0) {
-    return Status::BadInput(Where{.field = "--lisa-permutations"}, "must be >= 0", "use e.g. 999, or 0");
+  if (a.lisa_permutations < 0 || a.lisa_permutations > kMaxPermutations) {
+    return Status::BadInput(Where{.field = "--lisa-permutations"},
+                            "must lie in 0 .. " + std::to_string(kMaxPermutations), "use e.g. 999, or 0");
   }
   if (!(a.alpha > 0 && a.alpha < 1)) {
     return Status::BadInput(Where{.field = "--alpha"}, "must lie in (0, 1)", "use e.g. 0.05");
@@ -333,6 +349,11 @@ Status CopyInput(const std::string& from, const fs::path& to, nlohmann::json* co
 
 Status RunPartAnalysis(const PartArgs& args) {
   FL_RETURN_IF_ERROR(ValidatePartArgs(args));
+  // Built whole in DIR.partial and renamed into place; only a folder formloop wrote is replaced.
+  StagedOutputFolder folder;
+  FL_RETURN_IF_ERROR(folder.Open(args.out, "--out", "analyse",
+                                 {{"--surface", args.surface}, {"--probe-log", args.probe_log}, {"--plan", args.plan},
+                                  {"--probe-profile", args.probe_profile}}));
   metrology::ProbeLogAnalysisOptions options;
   FL_ASSIGN_OR_RETURN(options.registration, metrology::ParseDofMask(args.register_dofs, "--register"));
 
@@ -431,11 +452,9 @@ Status RunPartAnalysis(const PartArgs& args) {
   analysis["outputs"]["deviations.ply"].update(columns);
   analysis["outputs"]["deviations.csv"].update(columns);
 
-  // 8. Write: inputs, points, then analysis.json last.
-  const fs::path dir(args.out);
-  std::error_code ec;
-  fs::create_directories(dir / "inputs", ec);
-  if (ec) return Status::IoError("analyse: cannot create '" + (dir / "inputs").string() + "': " + ec.message());
+  // 8. Write: inputs, points, analysis.json, then the folder into place.
+  const fs::path& dir = folder.dir();
+  FL_RETURN_IF_ERROR(MakeDirectories(dir / "inputs"));
   nlohmann::json copies = nlohmann::json::object();
   const std::string surface_ext = fs::path(args.surface).extension().string();
   FL_RETURN_IF_ERROR(CopyInput(args.surface, dir / "inputs" / ("surface" + surface_ext), &copies));
@@ -454,8 +473,8 @@ Status RunPartAnalysis(const PartArgs& args) {
   log::Info("analyse: {} points ({} flagged), rms {:.2f} um, raw Moran z {:.2f}; model {}, d_s rms {:.2f} um, "
             "d_u rms {:.2f} um -> {}",
             n, result.flagged.size(), analysis["deviations"]["rms_um"].get<double>(), dec.raw.z_normality,
-            dec.systematic.name(), dec.systematic_rms_um, dec.random_rms_um, dir.string());
-  return Status::Ok();
+            dec.systematic.name(), dec.systematic_rms_um, dec.random_rms_um, args.out);
+  return folder.Commit();
 }
 
 }  // namespace

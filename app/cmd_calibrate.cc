@@ -20,6 +20,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/command.h"
+#include "core/output_folder.h"
 #include "metrology/probe.h"
 #include "metrology/probe_calibration.h"
 
@@ -41,6 +42,7 @@ struct SphereArgs {
 
 Status CalibrateSphere(const SphereArgs& args) {
   FL_RETURN_IF_ERROR(args.options.Validate());
+  FL_RETURN_IF_ERROR(CheckOutputsNotInputs({{"--out", args.out}}, {{"LOG", args.log}}));
   FL_ASSIGN_OR_RETURN(const metrology::ProbeLog log, metrology::ReadProbeLog(args.log));
   FL_ASSIGN_OR_RETURN(const metrology::SphereCalibrationReport report, metrology::CalibrateOnSphere(log, args.options));
   nlohmann::json json = report.ToJson();

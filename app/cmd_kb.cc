@@ -36,6 +36,7 @@
 #include "app/route_calibration.h"
 #include "core/json_io.h"
 #include "core/log.h"
+#include "core/output_folder.h"
 #include "kb/library.h"
 #include "kb/schema.h"
 #include "retrieval/retrieve.h"
@@ -119,8 +120,10 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
       "Standardise the case descriptors, train the GHSOM (spec §2) and store it with its scaling, parameters, quality "
       "figures (per-map QE/TE/MQE) and the change counter. JSON report on stdout.",
       args.get());
-  train->add_option("--tau1", args->tau1, "breadth threshold (default: retrieval::LibraryGhsomDefaults)");
-  train->add_option("--tau2", args->tau2, "depth threshold (default: retrieval::LibraryGhsomDefaults)");
+  train->add_option("--tau1", args->tau1, "breadth threshold (default: retrieval::LibraryGhsomDefaults)")
+      ->check(CLI::Range(1e-9, 1.0));
+  train->add_option("--tau2", args->tau2, "depth threshold (default: retrieval::LibraryGhsomDefaults)")
+      ->check(CLI::Range(1e-9, 1.0));
   train->add_option("--seed", args->seed, "seed of the degenerate initial directions");
   train->callback([args, action] {
     *action = [args]() -> Status {
@@ -142,7 +145,8 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
   calibrate->add_option("--breadth", args->breadth, "candidate breadth (0 leaf, 1 + neighbours, 2 + the leaf's map ...)");
   calibrate->add_option("--max-cases", args->max_cases,
                         "leave out at most this many cases, evenly spaced (0: all; each costs one GHSOM training)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   calibrate->add_flag("--rerun", args->rerun, "run the retained virtual-machine parts again (a pipeline run each)");
   calibrate->add_option("--work", args->work, "keep the reruns' run folders here (default: a temporary folder)");
   calibrate->add_option("--data", args->data,
@@ -210,6 +214,9 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
       ->required();
   export_cmd->callback([args, action] {
     *action = [args]() -> Status {
+      FL_RETURN_IF_ERROR(CheckOutputsNotInputs({{"--out", args->out}}, {{"PATH", args->path},
+                                                                        {"PATH", args->path + "-wal"},
+                                                                        {"PATH", args->path + "-shm"}}));
       FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
       FL_RETURN_IF_ERROR(library->ExportToFile(args->out));
       FL_ASSIGN_OR_RETURN(kb::LibraryStats stats, library->Stats());

@@ -23,6 +23,8 @@
 #include "core/atomic_file.h"
 #include "core/log.h"
 #include "core/number_text.h"
+#include "core/output_folder.h"
+#include "core/work_estimate.h"
 #include "metrology/probe.h"
 #include "metrology/probing_plan.h"
 #include "nc-gen/compensation.h"
@@ -31,6 +33,7 @@
 #include "nc-gen/post.h"
 #include "nc-gen/probe_program.h"
 #include "nc-gen/program_compensation.h"
+#include "nc-gen/raster_estimate.h"
 #include "nc-gen/toolpath.h"
 #include "nc-gen/toolpath_io.h"
 #include "reconstruction/cad_io.h"
@@ -47,6 +50,13 @@ struct SurfaceArgs {
   }
 };
 
+Status CheckDialect(const std::string& dialect) {
+  if (nc::FindPost(dialect) != nullptr) return Status::Ok();
+  std::string names;
+  for (const std::string& name : nc::PostNames()) names += (names.empty() ? "" : ", ") + name;
+  return Status::BadInput(Where{.field = "--dialect"}, "unknown dialect '" + dialect + "'", "use one of " + names);
+}
+
 struct MachineArgs {
   std::string dialect = "linuxcnc";
   int decimals = 4;
@@ -56,6 +66,46 @@ struct MachineArgs {
   double travel_z = 200;
   double max_feed = 10000;
   double max_spindle = 24000;
+  // The options as the user typed them, checked before any planning: messages name the option.
+  Status Validate() const {
+    FL_RETURN_IF_ERROR(CheckDialect(dialect));
+    if (decimals < 1 || decimals > 6) {
+      return Status::BadInput(Where{.field = "--decimals"}, "must be 1..6, got " + std::to_string(decimals),
+                              "use 3 or 4");
+    }
+    if (max_line_length != 0 && max_line_length < 16) {
+      return Status::BadInput(Where{.field = "--max-line-length"}, "must be 0 (no limit) or at least 16",
+                              "give the controller's longest line, or 0");
+    }
+    for (const auto& [option, value] : {std::pair<const char*, double>{"--travel-mm", travel}, {"--travel-z-mm", travel_z}}) {
+      if (!(value > 0 && value <= 100000)) {
+        return Status::BadInput(Where{.field = option}, "must lie in (0, 100000] mm, got " + FormatSignificant(value, 6),
+                                "give the machine's travel from the part zero in mm");
+      }
+    }
+    if (!(max_feed > 0 && max_feed <= 200000)) {
+      return Status::BadInput(Where{.field = "--max-feed"}, "must lie in (0, 200000] mm/min");
+    }
+    if (!(max_spindle > 0 && max_spindle <= 200000)) {
+      return Status::BadInput(Where{.field = "--max-spindle"}, "must lie in (0, 200000] rpm");
+    }
+    return Status::Ok();
+  }
+  // A feed or speed above the machine's limit, named by its option.
+  Status CheckFeed(const char* option, double value) const {
+    if (value <= max_feed) return Status::Ok();
+    return Status::BadInput(Where{.field = option},
+                            FormatSignificant(value, 6) + " mm/min is above the machine's --max-feed " +
+                                FormatSignificant(max_feed, 6),
+                            "lower it, or give the machine's real limit with --max-feed");
+  }
+  Status CheckSpindle(double value) const {
+    if (value <= max_spindle) return Status::Ok();
+    return Status::BadInput(Where{.field = "--spindle"},
+                            FormatSignificant(value, 6) + " rpm is above the machine's --max-spindle " +
+                                FormatSignificant(max_spindle, 6),
+                            "lower it, or give the machine's real limit with --max-spindle");
+  }
   nc::PostOptions Post(const std::string& title) const {
     nc::PostOptions post;
     post.title = title;
@@ -101,22 +151,30 @@ struct PathArgs {
   std::string report;
 };
 
-Status CheckDialect(const std::string& dialect) {
-  if (nc::FindPost(dialect) != nullptr) return Status::Ok();
-  std::string names;
-  for (const std::string& name : nc::PostNames()) names += (names.empty() ? "" : ", ") + name;
-  return Status::BadInput(Where{.field = "--dialect"}, "unknown dialect '" + dialect + "'", "use one of " + names);
-}
-
 Status PlanAndPost(const PathArgs& input) {
   PathArgs args = input;
   if (args.one_way) args.path.zigzag = false;
   if (args.out.empty() && args.toolpath.empty()) {
     return Status::BadInput(Where{.field = "--out"}, "nothing to write", "give --out PROGRAM, --toolpath FILE or both");
   }
-  // The dialect is checked before the (longer) planning.
-  FL_RETURN_IF_ERROR(CheckDialect(args.machine.dialect));
+  // The options and the paths are checked before the (longer) planning.
+  FL_RETURN_IF_ERROR(args.machine.Validate());
+  FL_RETURN_IF_ERROR(args.machine.CheckFeed("--feed", args.path.feed_mm_per_min));
+  FL_RETURN_IF_ERROR(args.machine.CheckFeed("--plunge-feed", args.path.plunge_feed_mm_per_min));
+  FL_RETURN_IF_ERROR(args.machine.CheckSpindle(args.path.spindle_rpm));
+  FL_RETURN_IF_ERROR(CheckOutputsNotInputs(
+      {{"--out", args.out}, {"--toolpath", args.toolpath}, {"--report", args.report}},
+      {{"--surface", args.surface.surface}}));
   FL_ASSIGN_OR_RETURN(const recon::CadFace face, args.surface.Read());
+  FL_RETURN_IF_ERROR(args.path.Validate());
+  const nc::RasterEstimate estimate = nc::EstimateRaster(face.surface, args.path);
+  const WorkEstimate work{.what = "the tool path (" + FormatSignificant(estimate.passes, 3) + " passes)",
+                          .points = estimate.cl_points,
+                          .memory_bytes = 50e6 + nc::kPathBytesPerClPoint * estimate.cl_points,
+                          .machining_s = estimate.cutting_s,
+                          .output_bytes = 150 * estimate.cl_points};
+  FL_RETURN_IF_ERROR(CheckWork(work, args.surface.surface,
+                               std::string(estimate.driver()) == "scallop_um" ? "--scallop-um" : "--chord-um"));
   FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::PlanRaster(face.surface, args.path));
   std::string program;
   if (!args.out.empty()) {
@@ -159,7 +217,8 @@ struct PostArgs {
 // A planned tool path (from `nc path --toolpath`) posted for a controller; the machine-limit check runs
 // on the move list first, so a refusal writes nothing.
 Status PostToolpath(const PostArgs& args) {
-  FL_RETURN_IF_ERROR(CheckDialect(args.machine.dialect));
+  FL_RETURN_IF_ERROR(args.machine.Validate());
+  FL_RETURN_IF_ERROR(CheckOutputsNotInputs({{"--out", args.out}}, {{"--toolpath", args.toolpath}}));
   FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::ReadToolpathFile(args.toolpath));
   FL_ASSIGN_OR_RETURN(const nc::MoveList moves, nc::BuildMoveList(path));
   FL_ASSIGN_OR_RETURN(const std::string program,
@@ -198,6 +257,14 @@ Status CompensateProgram(const CompensateArgs& args) {
                             "give --toolpath (a path formloop planned) or --program (a program it did not write)");
   }
   FL_RETURN_IF_ERROR(CheckDialect(args.machine.dialect));
+  FL_RETURN_IF_ERROR(args.machine.Validate());
+  if (!(args.max_offset_um > 0 && args.max_offset_um <= 5000)) {
+    return Status::BadInput(Where{.field = "--max-offset-um"}, "must lie in (0, 5000] um",
+                            "a compensation offset is a few to a few hundred um; use e.g. 200");
+  }
+  FL_RETURN_IF_ERROR(CheckOutputsNotInputs(
+      {{"--out", args.out}, {"--side", args.side}},
+      {{"--toolpath", args.toolpath}, {"--field", args.field}, {"--nominal", args.nominal}}));
   FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::ReadToolpathFile(args.toolpath));
   FL_ASSIGN_OR_RETURN(nc::DeviationField field, nc::ReadDeviationField(args.field, {.smoothing = args.lambda}));
   const nc::PostOptions post = args.machine.Post("formloop nc compensate " + args.toolpath);
@@ -207,6 +274,8 @@ Status CompensateProgram(const CompensateArgs& args) {
     FL_ASSIGN_OR_RETURN(nominal, nc::Post(moves, args.machine.dialect, post));
   } else {
     FL_ASSIGN_OR_RETURN(nominal, ReadFile(args.nominal));
+    // Read once here so that a program that is not the path's names its file.
+    FL_RETURN_IF_ERROR(nc::ReadProgram(nominal, args.machine.dialect, args.nominal).status());
   }
   nc::CompensationOptions options;
   options.max_offset_um = args.max_offset_um;
@@ -239,7 +308,33 @@ struct ProbeArgs {
 
 Status PlanAndPostProbing(const ProbeArgs& args) {
   int nu = 0, nv = 0;
+  FL_RETURN_IF_ERROR(args.machine.Validate());
   FL_RETURN_IF_ERROR(ParseLayout(args.grid, "--grid", &nu, &nv));
+  const struct {
+    const char* option;
+    double value, max;
+  } kProbeBounds[] = {{"--ball-radius-mm", args.probe.ball_radius_mm, 50},
+                      {"--clearance-mm", args.probe.clearance_mm, 100},
+                      {"--search-mm", args.probe.search_mm, 50},
+                      {"--safe-z-mm", args.probe.safe_z_mm, 10000}};
+  for (const auto& b : kProbeBounds) {
+    if (!(b.value > 0 && b.value <= b.max)) {
+      return Status::BadInput(Where{.field = b.option}, "must lie in (0, " + FormatSignificant(b.max, 6) + "] mm",
+                              "give the distance in mm");
+    }
+  }
+  FL_RETURN_IF_ERROR(args.machine.CheckFeed("--probe-feed", args.probe.probe_feed_mm_per_min));
+  FL_RETURN_IF_ERROR(CheckOutputsNotInputs({{"--out", args.out}}, {{"--surface", args.surface.surface}}));
+  FL_RETURN_IF_ERROR(args.probe.Validate());
+  const double points = args.count > 0 ? args.count : static_cast<double>(nu) * nv;
+  const WorkEstimate work{
+      .what = "the probing program",
+      .points = points,
+      .memory_bytes = 20e6 + 2e3 * points,
+      .machining_s = nc::ProbingSeconds(points, args.probe.clearance_mm, args.probe.search_mm,
+                                        args.probe.probe_feed_mm_per_min),
+      .output_bytes = 250 * points};
+  FL_RETURN_IF_ERROR(CheckWork(work, "", args.count > 0 ? "--count" : "--grid"));
   FL_ASSIGN_OR_RETURN(const recon::CadFace face, args.surface.Read());
   metrology::ProbingPlan plan;
   if (args.count > 0) {

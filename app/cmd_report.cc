@@ -4,12 +4,14 @@
 #include <iostream>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
 #include "app/command.h"
 #include "app/report.h"
 #include "core/log.h"
+#include "core/output_folder.h"
 
 namespace formloop::app {
 namespace {
@@ -19,9 +21,25 @@ struct ReportArgs {
   std::string out;  // empty: RUN_DIR/report.html
 };
 
+// Every file of the folder the report reads from (its own report.html aside): none may be overwritten.
+std::vector<NamedPath> FolderInputs(const std::filesystem::path& dir) {
+  std::vector<NamedPath> inputs;
+  std::error_code ec;
+  for (auto it = std::filesystem::recursive_directory_iterator(dir, ec);
+       !ec && it != std::filesystem::recursive_directory_iterator(); it.increment(ec)) {
+    if (it->is_regular_file(ec) && it->path() != dir / "report.html") inputs.push_back({"RUN_DIR", it->path()});
+  }
+  return inputs;
+}
+
 Status RunReport(const ReportArgs& args) {
   const std::filesystem::path out =
       args.out.empty() ? std::filesystem::path(args.run_dir) / "report.html" : std::filesystem::path(args.out);
+  if (out.extension() != ".html" && out.extension() != ".htm") {
+    return Status::BadInput(Where{.file = out.string(), .field = "--out"}, "the report is an HTML file",
+                            "give a file name ending in .html");
+  }
+  FL_RETURN_IF_ERROR(CheckOutputsNotInputs({{"--out", out}}, FolderInputs(args.run_dir)));
   FL_RETURN_IF_ERROR(WriteRunReport(args.run_dir, out));
   log::Info("report written: {}", out.string());
   std::cout << nlohmann::json{{"report", out.string()}}.dump() << std::endl;

@@ -20,7 +20,9 @@
 //                                                    (app/part.h style), fitted from 50 × 50 samples
 //     "descriptor": [24 numbers]                      the descriptor itself
 //   }
-// A case file (`formloop kb show` output: "part" object with these fields, "descriptor") is accepted too.
+// A case file (`formloop kb show` output: "part" object with these fields, "descriptor") is accepted too, and
+// so is a part file of `formloop run` (app/part.h, e.g. data/parts/demo-saddle.json): it is described and
+// its surface fitted as the run does.
 
 #include <iostream>
 #include <map>
@@ -31,7 +33,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include "app/case_knowledge.h"
 #include "app/command.h"
+#include "app/part.h"
 #include "app/route_calibration.h"
 #include "core/json_io.h"
 #include "core/log.h"
@@ -55,8 +59,34 @@ struct RetrieveArgs {
   bool calibrate = false;
 };
 
+// A run's part file (app/part.h): described and fitted as `formloop run` does it.
+Result<retrieval::PartFeatures> PartFileFeatures(const PartSpec& part, const retrieval::FeatureOptions& options) {
+  recon::BSplineSurface q;
+  if (part.surface_kind.empty()) {
+    FL_ASSIGN_OR_RETURN(std::unique_ptr<recon::AnalyticSurface> analytic,
+                        recon::MakeReferenceSurface(part.surface_reference));
+    recon::FitReport report;
+    FL_ASSIGN_OR_RETURN(q, recon::FitAnalytic(*analytic, part.fit_samples_u, part.fit_samples_v, part.fit, 0,
+                                              part.seed, &report));
+  } else {
+    FL_ASSIGN_OR_RETURN(const recon::GridSamples g,
+                        retrieval::StarterGrid(part.surface_kind, part.surface_params, part.surface_samples));
+    recon::FitReport report;
+    FL_ASSIGN_OR_RETURN(q, recon::FitGrid(g, part.fit, &report));
+  }
+  return retrieval::ExtractFeatures(DescriptionOf(part, part.toolpath), q, options);
+}
+
 Result<retrieval::PartFeatures> QueryFeatures(const nlohmann::json& file, const std::string& source,
                                               const retrieval::FeatureOptions& options) {
+  // A part file of `formloop run` is accepted wherever a part is asked for; a file in the query format
+  // below names shape_family (or holds a case's "part" or a descriptor).
+  const bool query_format = file.is_object() && (file.contains("shape_family") || file.contains("part") ||
+                                                 file.contains("descriptor"));
+  if (!query_format) {
+    FL_ASSIGN_OR_RETURN(const PartSpec spec, ParsePart(file, source));
+    return PartFileFeatures(spec, options);
+  }
   const nlohmann::json& part = file.contains("part") && file["part"].is_object() ? file["part"] : file;
   FL_ASSIGN_OR_RETURN(retrieval::PartDescription desc, retrieval::PartDescriptionFromJson(part, source));
   const JsonFields top(file, source);
@@ -120,6 +150,11 @@ void AddRetrieveCommand(CLI::App& root, CommandAction* action) {
     *action = [args]() -> Status {
       const std::filesystem::path data =
           args->data.empty() ? retrieval::DefaultDataDir() : std::filesystem::path(args->data);
+      if (args->top < 1) return Status::BadInput(Where{.field = "--top"}, "must be at least 1", "use e.g. 5");
+      if (args->breadth < 0) return Status::BadInput(Where{.field = "--breadth"}, "must be >= 0", "use 0, 1 or 2");
+      if (args->max_scored < 0) {
+        return Status::BadInput(Where{.field = "--max-scored"}, "must be >= 0", "use 0 (all) or a count");
+      }
       FL_ASSIGN_OR_RETURN(retrieval::FacetTaxonomies tax, retrieval::FacetTaxonomies::Load(data / "taxonomies"));
       retrieval::FeatureOptions options;
       options.taxonomies = std::make_shared<const retrieval::FacetTaxonomies>(std::move(tax));

@@ -20,6 +20,7 @@
 #include "core/atomic_file.h"
 #include "core/json_io.h"
 #include "core/log.h"
+#include "core/output_folder.h"
 #include "core/progress.h"
 
 namespace formloop::app {
@@ -99,7 +100,8 @@ std::string Row(const std::string& part, const std::string& status, const std::s
 
 Status RunBatch(const RunArgs& args, const std::vector<fs::path>& files) {
   const fs::path out = args.out.empty() ? fs::path("runs") / "batch" : fs::path(args.out);
-  FL_RETURN_IF_ERROR(MakeDirectories(out));
+  // The batch folder is formloop's (marker); a folder of the user's is never written into.
+  FL_RETURN_IF_ERROR(OutputFolder::Create(out, "--out", "run (batch)"));
   nlohmann::json rows = nlohmann::json::array();
   int failed = 0, out_of_tolerance = 0;
   std::vector<std::string> table = {Row("part", "status", "route", "A", "first um", "final um", "cycles")};

@@ -14,6 +14,7 @@
 #include "app/surface_fit.h"
 #include "core/log.h"
 #include "core/point_io.h"
+#include "core/work_estimate.h"
 #include "reconstruction/analytic_surface.h"
 
 namespace formloop::app {
@@ -53,6 +54,14 @@ Status CheckGrid(int nu, int nv) {
 
 Status SampleSurface(const SampleArgs& args) {
   FL_RETURN_IF_ERROR(CheckGrid(args.nu, args.nv));
+  const double count = static_cast<double>(args.nu) * args.nv;
+  // A point with its normal, u, v and curvatures: about 100 bytes in memory, twice that as text.
+  FL_RETURN_IF_ERROR(CheckWork({.what = "sampling " + args.name + " on " + std::to_string(args.nu) + " x " +
+                                        std::to_string(args.nv) + " points",
+                                .points = count,
+                                .memory_bytes = 300 * count,
+                                .output_bytes = 200 * count},
+                               "", "--nu/--nv"));
   FL_ASSIGN_OR_RETURN(auto surface, recon::MakeReferenceSurface(args.name));
   FL_RETURN_IF_ERROR(PointFormatFromPath(args.out).status());  // reject the extension before sampling
   const PointSet points = recon::SampleGridPoints(*surface, args.nu, args.nv);

@@ -8,6 +8,7 @@
 #include "core/log.h"
 #include "core/progress.h"
 #include "core/version.h"
+#include "core/work_estimate.h"
 
 int main(int argc, char** argv) {
   using namespace formloop;
@@ -25,6 +26,11 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   bool quiet = false;
   app.add_flag("--quiet,-q", quiet, "only warnings and errors on stderr, no progress");
+  bool yes = false;
+  app.add_flag("--yes", yes,
+               "go ahead with a job above formloop's stated size limits (more than 20 million points, 4 GB of memory, "
+               "8 h on the machine or 2 GB of output, estimated before it starts); never above what this computer "
+               "can hold");
 
   app::CommandAction action;
   app::AddRunCommand(app, &action);
@@ -57,6 +63,7 @@ int main(int argc, char** argv) {
   }
   log::SetLevel(parsed.value());
   if (quiet) Progress::SetEnabled(false);
+  SetLargeWorkConfirmed(yes);
   if (!action) {
     std::cerr << app.help();
     return 2;
@@ -64,6 +71,10 @@ int main(int argc, char** argv) {
   Status status;
   try {
     status = action();
+  } catch (const std::bad_alloc&) {
+    status = Status::Failed(
+        "out of memory: the job asks for more than this computer can hold; nothing was replaced. Fix: check the "
+        "sizes given (grids, point counts, scallop and chord tolerances) and their units");
   } catch (const std::exception& e) {
     status = Status::Internal(std::string("unexpected exception: ") + e.what());
   }

@@ -9,6 +9,7 @@
 #include "core/atomic_file.h"
 #include "core/json_io.h"
 #include "core/log.h"
+#include "core/output_folder.h"
 #include "core/point_io.h"
 #include "kb/library.h"
 #include "simulation/diagnose.h"
@@ -88,6 +89,10 @@ Status RunSimulate(const SimulateArgs& args) {
   if (args.run.empty()) return Status::BadInput(Where{.field = "--run"}, "is required", "give a `formloop run` folder");
   if (args.model.empty()) return Status::BadInput(Where{.field = "--model"}, "is required", "give a MODEL.json");
   if (args.out.empty()) return Status::BadInput(Where{.field = "--out"}, "is required", "give the probe log to write");
+  std::vector<NamedPath> inputs = RunFolderInputs("--run", args.run);
+  inputs.push_back({"--model", args.model});
+  inputs.push_back({"--probe-plan", args.probe_plan});
+  FL_RETURN_IF_ERROR(CheckOutputsNotInputs({{"--out", args.out}, {"--truth", args.truth}}, inputs));
   FL_ASSIGN_OR_RETURN(const RunFolder run, ReadRunFolder(args.run));
   FL_ASSIGN_OR_RETURN(const sim::Model model, sim::ReadModel(args.model));
   FL_ASSIGN_OR_RETURN(const PlanWithApproaches plan, PlanFor(run, args.probe_plan));
@@ -142,6 +147,17 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
     return Status::BadInput(Where{.field = "--validate-run"}, "is required with --validate",
                             "give the run folder of the second part");
   }
+  // The output folder is checked (and its staging folder started) before any work: it is built whole in
+  // DIR.partial and renamed into place at the end, replacing only a folder formloop wrote.
+  const fs::path dir(args.out);
+  const std::vector<NamedPath> inputs = {
+      {"--measured", args.measured}, {"--features", args.features},   {"--run", args.run},
+      {"--plan", args.plan},         {"--probe-profile", args.probe_profile}, {"--baseline", args.baseline},
+      {"--validate", args.validate}, {"--validate-run", args.validate_run}, {"--validate-plan", args.validate_plan},
+      {"--library", args.library}};
+  StagedOutputFolder folder;
+  FL_RETURN_IF_ERROR(folder.Open(dir, "--out", "diagnose", inputs));
+  const fs::path& staging = folder.dir();
   sim::Model baseline;
   if (!args.baseline.empty()) {
     FL_ASSIGN_OR_RETURN(baseline, sim::ReadModel(args.baseline));
@@ -199,11 +215,6 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
   }
   nlohmann::json out = diagnosis.ToJson();
   out["gain"]["second_part"] = second_part;
-  // Everything into a staging folder, renamed into place at the end: the folder is whole or absent.
-  const fs::path dir(args.out);
-  const fs::path staging = dir.string() + ".partial";
-  std::error_code ec;
-  fs::remove_all(staging, ec);
   FL_RETURN_IF_ERROR(MakeDirectories(staging / "inputs"));
   for (const auto& [from, name] : std::vector<std::pair<std::string, std::string>>{
            {args.measured, "measured.csv"}, {args.features, "features.csv"}, {args.baseline, "baseline.json"},
@@ -219,9 +230,7 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
   FL_RETURN_IF_ERROR(WriteJsonFile(staging / "diagnosis.json", out));
   FL_RETURN_IF_ERROR(sim::WriteModel(staging / "model.json", diagnosis.extended));
   if (!residuals.points.empty()) FL_RETURN_IF_ERROR(WritePoints(staging / "residuals.csv", residuals, {.precision = 6}));
-  fs::remove_all(dir, ec);
-  fs::rename(staging, dir, ec);
-  if (ec) return Status::IoError("cannot move '" + staging.string() + "' to '" + dir.string() + "': " + ec.message());
+  FL_RETURN_IF_ERROR(folder.Commit());
   log::Info("{}", diagnosis.Summary());
   if (stored_run.has_value()) {
     const Status stored = StoreLearnedModel(args, *stored_run, diagnosis);

@@ -3,11 +3,16 @@
 #include "core/json_io.h"
 #include "core/log.h"
 #include "core/number_text.h"
+#include "core/work_estimate.h"
+#include "nc-gen/raster_estimate.h"
 #include "reconstruction/analytic_surface.h"
 #include "reconstruction/surface_family.h"
+#include "retrieval/taxonomy.h"
 
 namespace formloop::app {
 namespace {
+
+constexpr double kMaxTravelMm = 100000;  // 100 m: no 3-axis machine travels further
 
 Status ReadVec3(const JsonFields& f, const std::string& key, Eigen::Vector3d* out) {
   if (!f.Has(key)) return Status::Ok();
@@ -17,6 +22,11 @@ Status ReadVec3(const JsonFields& f, const std::string& key, Eigen::Vector3d* ou
                             "write three numbers, e.g. [-300, -300, -200]");
   }
   *out = Eigen::Vector3d(v[0].get<double>(), v[1].get<double>(), v[2].get<double>());
+  if (!(out->cwiseAbs().maxCoeff() <= kMaxTravelMm)) {
+    return Status::BadInput(Where{.file = f.source(), .field = f.Path(key)},
+                            "a travel beyond +-100 m (" + FormatSignificant(out->cwiseAbs().maxCoeff(), 6) + " mm)",
+                            "give the machine's travel in mm");
+  }
   return Status::Ok();
 }
 
@@ -29,6 +39,29 @@ Status ReadInt(const JsonFields& f, const std::string& key, int* out, int min, i
 
 constexpr NumberRange kPositive{.min = 0, .exclusive_min = true};
 constexpr NumberRange kNonNegative{.min = 0};
+// Upper bounds of the fields that steer the machine or the probe: far beyond any real 3-axis job, well
+// short of the values a wrong unit or a typo gives (core/work_estimate.h bounds the job's size).
+constexpr NumberRange kLength{.min = 0, .max = 1000, .exclusive_min = true};            // mm: clearances, spacing
+constexpr NumberRange kBallRadius{.min = 0, .max = 50, .exclusive_min = true};          // mm: tools and styli
+constexpr NumberRange kMicrons{.min = 0, .max = 1000, .exclusive_min = true};           // um: scallop, chord
+constexpr NumberRange kFeed{.min = 0, .max = 200000, .exclusive_min = true};            // mm/min
+constexpr NumberRange kSpindle{.min = 0, .max = 200000, .exclusive_min = true};         // rpm
+constexpr NumberRange kEffectMicrons{.min = -1000, .max = 1000};                        // um of a simulated effect
+
+
+// The material must be a concept (or alias) of data/taxonomies/material.txt, spelled as there: the case
+// library and retrieval know no other (a "h13 " stored in a case breaks every later retrieval).
+Status CheckMaterial(const std::string& material, const std::string& source) {
+  if (material == "unspecified") return Status::Ok();
+  const std::filesystem::path file = retrieval::DefaultDataDir() / "taxonomies" / "material.txt";
+  FL_ASSIGN_OR_RETURN(const retrieval::Taxonomy taxonomy, retrieval::Taxonomy::Load(file));
+  if (taxonomy.Find(material)) return Status::Ok();
+  const std::optional<std::string> near = taxonomy.Suggest(material);
+  return Status::BadInput(Where{.file = source, .field = "material"},
+                          "'" + material + "' is not a material of data/taxonomies/material.txt" +
+                              (near ? " (did you mean '" + *near + "'?)" : std::string()),
+                          "write a name or alias exactly as listed there, e.g. H13, 1.2344, 6061, or leave it out");
+}
 
 // "profile": a probe profile file from `formloop calibrate sphere` (relative to the part file) or the
 // profile itself inline; it replaces ball_radius_mm and pretravel_mm, which may then not be given too.
@@ -74,7 +107,7 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
                                      "toolpath", "machine", "probing", "analysis", "loops", "comment", "shape_family",
                                      "finish_ra_um", "batch_size"}));
   FL_RETURN_IF_ERROR(top.OptionalString("shape_family", &part.shape_family));
-  FL_RETURN_IF_ERROR(top.OptionalNumber("finish_ra_um", &part.finish_ra_um, kPositive));
+  FL_RETURN_IF_ERROR(top.OptionalNumber("finish_ra_um", &part.finish_ra_um, {.min = 0, .max = 100, .exclusive_min = true}));
   FL_RETURN_IF_ERROR(ReadInt(top, "batch_size", &part.batch_size, 1, 1000000));
   FL_RETURN_IF_ERROR(top.String("name", &part.name));
   if (part.name.empty() || part.name.find_first_of("/\\()") != std::string::npos) {
@@ -82,7 +115,7 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
                             "use letters, digits, '-' and '_'");
   }
   FL_RETURN_IF_ERROR(top.OptionalString("material", &part.material));
-  FL_RETURN_IF_ERROR(top.Number("tolerance_mm", &part.tolerance_mm, kPositive));
+  FL_RETURN_IF_ERROR(top.Number("tolerance_mm", &part.tolerance_mm, {.min = 0, .max = 10, .exclusive_min = true}));
   long long seed = static_cast<long long>(part.seed);
   FL_RETURN_IF_ERROR(top.OptionalInteger("seed", &seed, 0));
   part.seed = static_cast<unsigned long long>(seed);
@@ -125,7 +158,7 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
     FL_RETURN_IF_ERROR(f->CheckKnown({"samples_u", "samples_v", "tolerance_mm", "check_points"}));
     FL_RETURN_IF_ERROR(ReadInt(*f, "samples_u", &part.fit_samples_u, 4, 2000));
     FL_RETURN_IF_ERROR(ReadInt(*f, "samples_v", &part.fit_samples_v, 4, 2000));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("tolerance_mm", &part.fit.tolerance_mm, kPositive));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("tolerance_mm", &part.fit.tolerance_mm, {.min = 0, .max = 1, .exclusive_min = true}));
     FL_RETURN_IF_ERROR(ReadInt(*f, "check_points", &part.fit_check_points, 0, 1000000));
   }
 
@@ -133,7 +166,7 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
   if (f) {
     FL_RETURN_IF_ERROR(f->CheckKnown({"number", "radius_mm", "flutes"}));
     FL_RETURN_IF_ERROR(ReadInt(*f, "number", &part.toolpath.tool.number, 1, 9999));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("radius_mm", &part.toolpath.tool.radius_mm, kPositive));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("radius_mm", &part.toolpath.tool.radius_mm, kBallRadius));
     FL_RETURN_IF_ERROR(ReadInt(*f, "flutes", &part.flutes, 1, 16));
   }
   if (json.contains("tools")) {
@@ -149,7 +182,7 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
       FL_RETURN_IF_ERROR(t.CheckKnown({"number", "radius_mm"}));
       nc::BallEndTool tool;
       FL_RETURN_IF_ERROR(ReadInt(t, "number", &tool.number, 1, 9999));
-      FL_RETURN_IF_ERROR(t.Number("radius_mm", &tool.radius_mm, kPositive));
+      FL_RETURN_IF_ERROR(t.Number("radius_mm", &tool.radius_mm, kBallRadius));
       part.tools.push_back(tool);
     }
   }
@@ -161,14 +194,14 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
                                       "clearance_mm"}));
     FL_RETURN_IF_ERROR(f->OptionalNumber("raster_angle_deg", &t.raster_angle_deg, {.min = -360, .max = 360}));
     FL_RETURN_IF_ERROR(f->OptionalNumber("lead_mm", &t.lead_mm, {.min = 0, .max = 100}));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("scallop_um", &t.scallop_um, kPositive));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("chord_tolerance_um", &t.chord_tolerance_um, kPositive));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("max_point_spacing_mm", &t.max_point_spacing_mm, kPositive));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("scallop_um", &t.scallop_um, kMicrons));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("chord_tolerance_um", &t.chord_tolerance_um, kMicrons));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("max_point_spacing_mm", &t.max_point_spacing_mm, {.min = 0, .max = 100, .exclusive_min = true}));
     FL_RETURN_IF_ERROR(f->OptionalBool("zigzag", &t.zigzag));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("feed_mm_per_min", &t.feed_mm_per_min, kPositive));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("plunge_feed_mm_per_min", &t.plunge_feed_mm_per_min, kPositive));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("spindle_rpm", &t.spindle_rpm, kPositive));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("clearance_mm", &t.clearance_mm, kPositive));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("feed_mm_per_min", &t.feed_mm_per_min, kFeed));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("plunge_feed_mm_per_min", &t.plunge_feed_mm_per_min, kFeed));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("spindle_rpm", &t.spindle_rpm, kSpindle));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("clearance_mm", &t.clearance_mm, kLength));
   }
   FL_RETURN_IF_ERROR(top.Object("machine", &f));
   if (f) {
@@ -185,8 +218,8 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
       return Status::BadInput(Where{.file = source, .field = "machine.dialect"},
                               "unknown controller dialect '" + part.dialect + "'", "use one of " + names);
     }
-    FL_RETURN_IF_ERROR(f->OptionalNumber("max_feed_mm_per_min", &part.limits.max_feed_mm_per_min, kPositive));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("max_spindle_rpm", &part.limits.max_spindle_rpm, kPositive));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("max_feed_mm_per_min", &part.limits.max_feed_mm_per_min, kFeed));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("max_spindle_rpm", &part.limits.max_spindle_rpm, kSpindle));
     std::optional<JsonFields> e;
     FL_RETURN_IF_ERROR(f->Object("effects", &e));
     if (e && (e->Has("format") || e->Has("effects"))) {
@@ -199,12 +232,12 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
       sim::MachineEffects x;
       FL_RETURN_IF_ERROR(e->CheckKnown({"tool_radius_error_um", "deflection_um", "thermal_amplitude_um",
                                         "thermal_tau_s", "surface_noise_um", "probe_noise_um"}));
-      FL_RETURN_IF_ERROR(e->OptionalNumber("tool_radius_error_um", &x.tool_radius_error_um));
-      FL_RETURN_IF_ERROR(e->OptionalNumber("deflection_um", &x.deflection_um));
-      FL_RETURN_IF_ERROR(e->OptionalNumber("thermal_amplitude_um", &x.thermal_amplitude_um));
-      FL_RETURN_IF_ERROR(e->OptionalNumber("thermal_tau_s", &x.thermal_tau_s, kPositive));
-      FL_RETURN_IF_ERROR(e->OptionalNumber("surface_noise_um", &x.surface_noise_um, kNonNegative));
-      FL_RETURN_IF_ERROR(e->OptionalNumber("probe_noise_um", &x.probe_noise_um, kNonNegative));
+      FL_RETURN_IF_ERROR(e->OptionalNumber("tool_radius_error_um", &x.tool_radius_error_um, kEffectMicrons));
+      FL_RETURN_IF_ERROR(e->OptionalNumber("deflection_um", &x.deflection_um, kEffectMicrons));
+      FL_RETURN_IF_ERROR(e->OptionalNumber("thermal_amplitude_um", &x.thermal_amplitude_um, kEffectMicrons));
+      FL_RETURN_IF_ERROR(e->OptionalNumber("thermal_tau_s", &x.thermal_tau_s, {.min = 0, .max = 1e6, .exclusive_min = true}));
+      FL_RETURN_IF_ERROR(e->OptionalNumber("surface_noise_um", &x.surface_noise_um, {.min = 0, .max = 100}));
+      FL_RETURN_IF_ERROR(e->OptionalNumber("probe_noise_um", &x.probe_noise_um, {.min = 0, .max = 100}));
       FL_RETURN_IF_ERROR(x.Validate().WithContext(source + ": machine.effects"));
       part.effects = x.ToModel();
       log::Warn("{}: machine.effects with the fields tool_radius_error_um, deflection_um, ... is deprecated and will "
@@ -217,8 +250,8 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
     if (p) {
       FL_RETURN_IF_ERROR(p->CheckKnown({"ball_radius_mm", "pretravel_mm", "profile"}));
       FL_RETURN_IF_ERROR(ReadProbeProfileField(*p, source, &part.true_probe, &part.true_probe_profile_given));
-      FL_RETURN_IF_ERROR(p->OptionalNumber("ball_radius_mm", &part.true_probe.ball_radius_mm, kPositive));
-      FL_RETURN_IF_ERROR(p->OptionalNumber("pretravel_mm", &part.true_probe.pretravel_mm));
+      FL_RETURN_IF_ERROR(p->OptionalNumber("ball_radius_mm", &part.true_probe.ball_radius_mm, kBallRadius));
+      FL_RETURN_IF_ERROR(p->OptionalNumber("pretravel_mm", &part.true_probe.pretravel_mm, {.min = -1, .max = 1}));
     }
   }
   FL_RETURN_IF_ERROR(top.Object("probing", &f));
@@ -239,11 +272,11 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
       part.probe_nv = g[1].get<int>();
     }
     FL_RETURN_IF_ERROR(f->OptionalNumber("inset_fraction", &part.probe_inset_fraction, {.min = 0, .max = 0.45}));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("ball_radius_mm", &part.probe.ball_radius_mm, kPositive));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("pretravel_mm", &part.probe.pretravel_mm));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("clearance_mm", &part.probe_program.clearance_mm, kPositive));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("search_mm", &part.probe_program.search_mm, kPositive));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("feed_mm_per_min", &part.probe_program.probe_feed_mm_per_min, kPositive));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("ball_radius_mm", &part.probe.ball_radius_mm, kBallRadius));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("pretravel_mm", &part.probe.pretravel_mm, {.min = -1, .max = 1}));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("clearance_mm", &part.probe_program.clearance_mm, {.min = 0, .max = 100, .exclusive_min = true}));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("search_mm", &part.probe_program.search_mm, {.min = 0, .max = 50, .exclusive_min = true}));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("feed_mm_per_min", &part.probe_program.probe_feed_mm_per_min, kFeed));
   }
   if (!true_probe_given) part.true_probe = part.probe;
   part.probe_program.ball_radius_mm = part.probe.ball_radius_mm;
@@ -252,18 +285,42 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
     FL_RETURN_IF_ERROR(f->CheckKnown({"neighbours", "max_control_net", "coverage_factor"}));
     FL_RETURN_IF_ERROR(ReadInt(*f, "neighbours", &part.analysis.neighbours, 1, 64));
     FL_RETURN_IF_ERROR(ReadInt(*f, "max_control_net", &part.analysis.max_control_net, 3, 20));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("coverage_factor", &part.analysis.coverage_factor, kPositive));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("coverage_factor", &part.analysis.coverage_factor, {.min = 0, .max = 10, .exclusive_min = true}));
   }
   FL_RETURN_IF_ERROR(top.Object("loops", &f));
   if (f) {
     FL_RETURN_IF_ERROR(f->CheckKnown({"max", "max_offset_um"}));
     FL_RETURN_IF_ERROR(ReadInt(*f, "max", &part.max_loops, 1, 20));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("max_offset_um", &part.compensation.max_offset_um, kPositive));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("max_offset_um", &part.compensation.max_offset_um, {.min = 0, .max = 5000, .exclusive_min = true}));
   }
   // The magazine always holds the part's own tool.
   bool has_own_tool = false;
   for (const auto& t : part.tools) has_own_tool |= t.radius_mm == part.toolpath.tool.radius_mm;
   if (!has_own_tool) part.tools.insert(part.tools.begin(), part.toolpath.tool);
+  // What the machine cannot do is refused here, naming both fields, before any program exists.
+  const struct {
+    const char* field;
+    double value;
+    const char* limit_field;
+    double limit;
+  } kMachineBounds[] = {
+      {"toolpath.feed_mm_per_min", part.toolpath.feed_mm_per_min, "machine.max_feed_mm_per_min",
+       part.limits.max_feed_mm_per_min},
+      {"toolpath.plunge_feed_mm_per_min", part.toolpath.plunge_feed_mm_per_min, "machine.max_feed_mm_per_min",
+       part.limits.max_feed_mm_per_min},
+      {"probing.feed_mm_per_min", part.probe_program.probe_feed_mm_per_min, "machine.max_feed_mm_per_min",
+       part.limits.max_feed_mm_per_min},
+      {"toolpath.spindle_rpm", part.toolpath.spindle_rpm, "machine.max_spindle_rpm", part.limits.max_spindle_rpm},
+  };
+  for (const auto& b : kMachineBounds) {
+    if (b.value > b.limit) {
+      return Status::BadInput(Where{.file = source, .field = b.field},
+                              FormatSignificant(b.value, 6) + " is above the machine's " + b.limit_field + " " +
+                                  FormatSignificant(b.limit, 6),
+                              "lower it, or correct the machine's limit");
+    }
+  }
+  FL_RETURN_IF_ERROR(CheckMaterial(part.material, source));
   // Cross-field validation, reported against the part file.
   auto in_file = [&](Status s) { return s.ok() ? s : Status(s.code(), source + ": " + s.message()); };
   FL_RETURN_IF_ERROR(in_file(part.toolpath.Validate()));
@@ -273,6 +330,40 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
   FL_RETURN_IF_ERROR(in_file(part.analysis.Validate()));
   FL_RETURN_IF_ERROR(in_file(part.fit.Validate()));
   return part;
+}
+
+Status CheckPartWork(const PartSpec& part, const nc::ToolpathOptions& plan, const std::string& source,
+                     const recon::BSplineSurface* q) {
+  // A CAD or scan part's Q exists only once its file is read: its work is checked with the chosen plan, on Q.
+  if (q == nullptr && part.surface_file) return Status::Ok();
+  nc::RasterEstimate raster;
+  if (q != nullptr) {
+    raster = nc::EstimateRaster(*q, plan);
+  } else if (part.surface_kind.empty()) {
+    FL_ASSIGN_OR_RETURN(const std::unique_ptr<recon::AnalyticSurface> surface,
+                        recon::MakeReferenceSurface(part.surface_reference));
+    raster = nc::EstimateRaster([&surface](double u, double v) { return surface->Derivatives(u, v); },
+                                surface->domain(), plan);
+  } else {
+    FL_ASSIGN_OR_RETURN(const recon::BSplineSurface fitted,
+                        recon::FitParametric(part.surface_kind, part.surface_params, part.surface_samples));
+    raster = nc::EstimateRaster(fitted, plan);
+  }
+  const double probe_points = static_cast<double>(part.probe_nu) * part.probe_nv;
+  const double probing_s = nc::ProbingSeconds(probe_points, part.probe_program.clearance_mm,
+                                              part.probe_program.search_mm,
+                                              part.probe_program.probe_feed_mm_per_min);
+  WorkEstimate work;
+  work.what = "part '" + part.name + "' (" + FormatSignificant(raster.passes, 3) + " passes of a ball r " +
+              FormatSignificant(plan.tool.radius_mm, 4) + " mm at a scallop of " + FormatSignificant(plan.scallop_um, 4) +
+              " um, " + FormatSignificant(probe_points, 7) + " probe points, up to " + std::to_string(part.max_loops) +
+              " cycles)";
+  work.points = raster.cl_points + probe_points;
+  work.memory_bytes = 60e6 + nc::kRunBytesPerClPoint * raster.cl_points + 2e3 * probe_points;
+  work.machining_s = part.max_loops * (raster.cutting_s + probing_s);
+  work.output_bytes = part.max_loops * nc::kRunOutputBytesPerClPoint * raster.cl_points;
+  const std::string field = probing_s > raster.cutting_s ? "probing.grid" : std::string("toolpath.") + raster.driver();
+  return CheckWork(work, source, field);
 }
 
 Result<PartSpec> ReadPart(const std::filesystem::path& path) {

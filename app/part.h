@@ -97,4 +97,11 @@ struct PartSpec {
 Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source);
 Result<PartSpec> ReadPart(const std::filesystem::path& path);
 
+// The work of running `part` with the tool-path options `plan` (core/work_estimate.h): cutter locations
+// and probe points, memory, time on the machine over part.max_loops cycles and the run folder's size,
+// from the part's surface (nc-gen/raster_estimate.h). Refuses above the stated limits (unless --yes),
+// naming `source` and the field that drives the estimate. `q`: the fitted surface when there is one.
+Status CheckPartWork(const PartSpec& part, const nc::ToolpathOptions& plan, const std::string& source,
+                     const recon::BSplineSurface* q = nullptr);
+
 }  // namespace formloop::app

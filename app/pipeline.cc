@@ -3,10 +3,13 @@
 #include <chrono>
 #include <optional>
 
+#include "app/machine_profile.h"
 #include "app/pipeline_stages.h"
 #include "app/report.h"
 #include "app/run_folder.h"
 #include "core/log.h"
+#include "kb/schema.h"
+#include "metrology/probe.h"
 #include "retrieval/starter.h"
 
 namespace formloop::app {
@@ -81,7 +84,8 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
     if (loop == 0) {
       FL_RETURN_IF_ERROR(folder.Begin("7/9: loop 0 diagnosis"));
       FL_ASSIGN_OR_RETURN(sim::Diagnosis d,
-                          stages::DiagnoseFirstCycle(part, q, machined, plan.tool.radius_mm, programs.probing_plan,
+                          stages::DiagnoseFirstCycle(part, q, machined, analysed.flagged_ids, plan.tool.radius_mm,
+                                                     programs.probing_plan,
                                                      choice, summary->case_uid, folder));
       for (const auto& c : d.causes) summary->causes.push_back(c.effect);
       diagnosis = std::move(d);
@@ -142,22 +146,73 @@ json RunSummary::ToJson() const {
           {"retained", retained}};
 }
 
+std::vector<NamedPath> RunInputs(const RunOptions& options) {
+  std::vector<NamedPath> inputs = {{"PART", options.part_source}, {"--kb", options.kb}};
+  if (!options.kb.empty()) {
+    for (const char* suffix : {"-wal", "-shm"}) inputs.push_back({"--kb", options.kb + suffix});
+  }
+  for (const std::string& log : options.measured) inputs.push_back({"--measured", log});
+  const std::string profile = options.machine.rfind("virtual:", 0) == 0 ? options.machine.substr(8) : "";
+  if (profile.find('/') != std::string::npos || profile.find(".json") != std::string::npos) {
+    inputs.push_back({"--machine", profile});
+  }
+  return inputs;
+}
+
+// What can be checked of the inputs before the run folder exists, so that a wrong option, a missing
+// profile or library or an unreadable log is refused with nothing written.
+Status CheckRunInputs(const PartSpec& part, const RunOptions& options) {
+  const fs::path data_dir = options.data_dir.empty() ? retrieval::DefaultDataDir() : options.data_dir;
+  if (!options.measured.empty()) {
+    if (!options.machine.empty()) {
+      return Status::BadInput(Where{.field = "--machine"}, "cannot be combined with --measured",
+                              "give either a virtual machine or measured probe logs");
+    }
+    for (const std::string& log : options.measured) FL_RETURN_IF_ERROR(metrology::ReadProbeLog(log).status());
+  } else {
+    const std::string spec = options.machine.empty() ? "virtual" : options.machine;
+    if (spec != "virtual" && spec.rfind("virtual:", 0) != 0) {
+      return Status::BadInput(Where{.field = "--machine"}, "unknown machine '" + spec + "'",
+                              "use virtual, virtual:PROFILE or --measured LOG.csv");
+    }
+    if (spec != "virtual" || !part.effects_given) {
+      const std::string profile = spec == "virtual" ? part.machine_name : spec.substr(8);
+      FL_RETURN_IF_ERROR(ReadMachineProfile(profile, data_dir).status());
+    }
+  }
+  if (!options.kb.empty()) FL_RETURN_IF_ERROR(kb::ProbeLibraryFile(options.kb, /*allow_unversioned=*/false).status());
+  // The size of the job: a scallop typed in the wrong unit is refused here.
+  return CheckPartWork(part, part.toolpath, options.part_source);
+}
+
 Result<RunSummary> RunPart(const PartSpec& part, const RunOptions& options) {
+  FL_RETURN_IF_ERROR(CheckRunInputs(part, options));
   RunFolderWriter folder(options.out, options.on_stage);
-  FL_RETURN_IF_ERROR(folder.Open(options.force, part.name));
+  FL_RETURN_IF_ERROR(folder.Open(options.force, part.name, RunInputs(options)));
   log::Info("formloop {} run of part '{}' into {}", stages::kVersion, part.name, options.out.string());
 
   RunSummary summary;
   summary.out = options.out;
   std::optional<kb::CaseRecord> retained;
-  Status status = RunStages(part, options, folder, &summary, &retained);
-  // The library changes last, in one transaction, after every file of the run is written.
-  if (status.ok() && retained) {
-    const auto start = std::chrono::steady_clock::now();
-    status = stages::CommitRetained(options.kb, *retained);
-    if (options.on_stage) {
-      options.on_stage("retain commit", std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+  // Whatever goes wrong inside (std::bad_alloc included) ends as DIR.failed with the error, never as a
+  // DIR.partial that looks like a killed run.
+  Status status;
+  try {
+    status = RunStages(part, options, folder, &summary, &retained);
+    // The library changes last, in one transaction, after every file of the run is written.
+    if (status.ok() && retained) {
+      const auto start = std::chrono::steady_clock::now();
+      status = stages::CommitRetained(options.kb, *retained);
+      if (options.on_stage) {
+        options.on_stage("retain commit", std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+      }
     }
+  } catch (const std::bad_alloc&) {
+    status = Status::Failed("out of memory during the run; the part asks for more work than this computer can hold. "
+                            "Fix: check the part's sizes (toolpath.scallop_um, toolpath.chord_tolerance_um, "
+                            "probing.grid)");
+  } catch (const std::exception& e) {
+    status = Status::Internal(std::string("unexpected exception: ") + e.what());
   }
   if (status.ok()) status = folder.MarkComplete();
   if (status.ok()) {

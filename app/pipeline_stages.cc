@@ -1,5 +1,6 @@
 #include "app/pipeline_stages.h"
 
+#include <set>
 #include <cmath>
 #include <cstdlib>
 #include <memory>
@@ -248,6 +249,8 @@ Result<planning::PlanChoice> ChoosePlan(const Inputs& in, const Retrieved& retri
 Result<Programs> WritePrograms(const PartSpec& part, const recon::BSplineSurface& q, const nc::ToolpathOptions& plan,
                                const RunFolderWriter& folder) {
   Programs p;
+  // The plan may come from a case or the simulation-correction step: its size is checked again.
+  FL_RETURN_IF_ERROR(CheckPartWork(part, plan, "the chosen plan (plan.json)", &q));
   FL_ASSIGN_OR_RETURN(p.nominal, nc::PlanRaster(q, plan));
   p.post.limits = part.limits;
   p.post.title = "formloop " + std::string(kVersion) + " part " + part.name + " loop 0, nominal";
@@ -384,16 +387,20 @@ Result<Analysed> AnalyseCycle(const PartSpec& part, const recon::BSplineSurface&
   options.decomposition.tolerance_mm = part.tolerance_mm;
   options.lisa_permutations = 199;  // cluster map of the report
   options.lisa_seed = seed;
+  // A point farther from Q than the probing program searches cannot be a real contact: flagged and left
+  // out (a log mostly made of such points is refused).
+  options.max_distance_mm = part.probe_program.search_mm;
   FL_ASSIGN_OR_RETURN(const metrology::ProbeLogAnalysis analysed,
                       metrology::AnalyseProbeLog(q, log, part.probe, &plan, options));
   const metrology::Decomposition& decomposition = analysed.decomposition;
   const PointSet points = analysed.PerPointTable();
+  Analysed r;
+  for (const auto& f : analysed.flagged) r.flagged_ids.push_back(f.id);
   FL_RETURN_IF_ERROR(WritePoints(folder.Path(loop_dir / "deviations.csv"), points, {.precision = 6}));
   FL_RETURN_IF_ERROR(WritePoints(folder.Path(loop_dir / "deviations.ply"), points));
 
   const metrology::FormEvaluation& evaluation = *decomposition.evaluation;
   const metrology::DecompositionStep& chosen = decomposition.steps[static_cast<std::size_t>(decomposition.chosen_step)];
-  Analysed r;
   LoopSummary& ls = r.summary;
   ls.index = loop;
   ls.form_error_um = decomposition.form_error_um;
@@ -443,15 +450,21 @@ Result<Analysed> AnalyseCycle(const PartSpec& part, const recon::BSplineSurface&
 }
 
 Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSplineSurface& q,
-                                          const Machined& machined, double tool_radius_mm,
-                                          const metrology::ProbingPlan& plan, const planning::PlanChoice& choice,
-                                          const std::string& case_uid, const RunFolderWriter& folder) {
+                                          const Machined& machined, const std::vector<std::int64_t>& excluded_ids,
+                                          double tool_radius_mm, const metrology::ProbingPlan& plan,
+                                          const planning::PlanChoice& choice, const std::string& case_uid,
+                                          const RunFolderWriter& folder) {
+  metrology::ProbeLog used = machined.log;
+  if (!excluded_ids.empty()) {
+    const std::set<std::int64_t> excluded(excluded_ids.begin(), excluded_ids.end());
+    std::erase_if(used.records, [&](const metrology::ProbeRecord& r) { return excluded.count(r.id) > 0; });
+  }
   sim::ProbeDataInput input;
   input.surface = &q;
   input.cutter_locations = &machined.cutter_locations;
   input.tool_radius_mm = tool_radius_mm;
   input.plan = &plan;
-  input.measured = &machined.log;
+  input.measured = &used;
   input.probe = part.probe;
   const sim::Model baseline = choice.learned ? *choice.learned : sim::Model{};
   sim::Diagnosis d;

@@ -134,6 +134,7 @@ Result<Machined> MachineCycle(const Inputs& in, const Program& program, double t
 // 7b. The cycle's analysis (deviations.csv|.ply, analysis.json) and its compensation decision.
 struct Analysed {
   LoopSummary summary;
+  std::vector<std::int64_t> flagged_ids;  // points beyond the search distance or past Q's edge, left out
   std::optional<metrology::FieldModel> systematic;  // when the cycle is to be compensated
 };
 Result<Analysed> AnalyseCycle(const PartSpec& part, const recon::BSplineSurface& q, const metrology::ProbingPlan& plan,
@@ -142,10 +143,11 @@ Result<Analysed> AnalyseCycle(const PartSpec& part, const recon::BSplineSurface&
 
 // 7c. Loop 0: what the simulation (the case's model) gets wrong on this part, and the extended model
 // (loop-0/diagnosis/).
+// The points the analysis flagged (`excluded_ids`) are left out of the diagnosis too.
 Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSplineSurface& q, const Machined& machined,
-                                double tool_radius_mm, const metrology::ProbingPlan& plan,
-                                const planning::PlanChoice& choice, const std::string& case_uid,
-                                const RunFolderWriter& folder);
+                                const std::vector<std::int64_t>& excluded_ids, double tool_radius_mm,
+                                const metrology::ProbingPlan& plan, const planning::PlanChoice& choice,
+                                const std::string& case_uid, const RunFolderWriter& folder);
 
 // 7d. The mirror-compensated program of the next cycle from the sum of the fields so far
 // (loop-K/program_compensated.*, compensation_side.csv, compensation.json).

@@ -9,6 +9,7 @@
 #include "core/atomic_file.h"
 #include "core/json_io.h"
 #include "core/log.h"
+#include "core/output_folder.h"
 #include "core/progress.h"
 #include "retrieval/starter.h"
 
@@ -130,9 +131,20 @@ Result<RegressResult> RunRegress(const RegressOptions& options) {
   std::sort(files.begin(), files.end());
   if (files.empty()) return Status::BadInput(Where{.file = options.parts.string()}, "no reference parts (*.json)");
 
-  // A fresh starter library: the regression must not depend on what earlier runs stored.
-  fs::remove_all(options.out, ec);
-  FL_RETURN_IF_ERROR(MakeDirectories(options.out));
+  for (const std::string& name : options.only) {
+    const bool known = std::any_of(files.begin(), files.end(), [&](const fs::path& f) { return f.stem() == name; });
+    if (!known) {
+      return Status::BadInput(Where{.file = options.parts.string(), .field = "--only"},
+                              "no reference part '" + name + "'", "name parts as their files are named (without .json)");
+    }
+  }
+  // A fresh starter library: the regression must not depend on what earlier runs stored. The old folder
+  // goes only when formloop wrote it and it holds neither the parts, the goldens nor the data.
+  const std::vector<NamedPath> inputs = {
+      {"--parts", options.parts}, {"--goldens", options.goldens}, {"data folder", data_dir}};
+  FL_RETURN_IF_ERROR(CheckOutputsNotInputs({}, inputs, {{"--out", options.out}}));
+  FL_RETURN_IF_ERROR(OutputFolder::Remove(options.out, "--out", inputs));
+  FL_RETURN_IF_ERROR(OutputFolder::Create(options.out, "--out", "regress"));
   const fs::path kb = options.out / "kb.sqlite";
   FL_RETURN_IF_ERROR(CreateStarterLibrary(kb.string(), data_dir).status());
   if (options.update) FL_RETURN_IF_ERROR(MakeDirectories(options.goldens));

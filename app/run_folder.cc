@@ -133,46 +133,40 @@ std::string StageName(const std::string& stage) {
 }  // namespace
 
 RunFolderWriter::RunFolderWriter(fs::path out, StageTimer on_stage)
-    : out_(std::move(out)), on_stage_(std::move(on_stage)) {
-  dir_ = out_;
-  dir_ += ".partial";
-  failed_ = out_;
-  failed_ += ".failed";
-}
+    : out_(std::move(out)), on_stage_(std::move(on_stage)) {}
 
 RunFolderWriter::~RunFolderWriter() {
   if (logging_) log::StopFileLog();
 }
 
-Status RunFolderWriter::Open(bool force, const std::string& what) {
+Status RunFolderWriter::Open(bool force, const std::string& what, const std::vector<NamedPath>& inputs) {
   if (out_.empty()) return Status::BadInput(Where{.field = "--out"}, "no run folder given");
+  fs::path partial = out_;
+  partial += ".partial";
   std::error_code ec;
-  if (fs::exists(out_, ec) && !force) {
-    return Status::BadInput(Where{.field = "--out"}, "run folder '" + out_.string() + "' already exists",
-                            "choose another folder or pass --force to replace it");
+  std::string previous_stage;
+  if (OutputFolder::HasMarker(partial) && fs::exists(partial / "status.json", ec)) {
+    auto previous = ReadJsonFile(partial / "status.json");
+    previous_stage = previous.ok() ? previous->value("stage", "?") : "?";
   }
-  if (out_.has_parent_path() && !fs::exists(out_.parent_path(), ec)) {
-    FL_RETURN_IF_ERROR(MakeDirectories(out_.parent_path()));
+  bool had_partial = false;
+  FL_RETURN_IF_ERROR(folder_.Open(out_, "--out", "run", inputs, force, &had_partial));
+  if (had_partial && !previous_stage.empty()) {
+    log::Warn("an incomplete run of '{}' was found in {} (stopped at: {}); starting it again", what, partial.string(),
+              previous_stage);
   }
-  if (fs::exists(dir_ / "status.json", ec)) {
-    auto previous = ReadJsonFile(dir_ / "status.json");
-    log::Warn("an incomplete run of '{}' was found in {} (stopped at: {}); starting it again", what, dir_.string(),
-              previous.ok() ? previous->value("stage", "?") : "?");
-  }
-  fs::remove_all(dir_, ec);
-  FL_RETURN_IF_ERROR(MakeDirectories(dir_));
-  FL_RETURN_IF_ERROR(log::StartFileLog(dir_ / "formloop.log"));
+  FL_RETURN_IF_ERROR(log::StartFileLog(dir() / "formloop.log"));
   logging_ = true;
   return Status::Ok();
 }
 
-std::string RunFolderWriter::Relative(const fs::path& path) const { return fs::relative(path, dir_).string(); }
+std::string RunFolderWriter::Relative(const fs::path& path) const { return fs::relative(path, dir()).string(); }
 
 Status RunFolderWriter::Begin(const std::string& stage) {
   EndStage();
   stage_ = stage;
   start_ = std::chrono::steady_clock::now();
-  return WriteJsonFile(dir_ / "status.json", {{"state", "incomplete"}, {"stage", stage}});
+  return WriteJsonFile(dir() / "status.json", {{"state", "incomplete"}, {"stage", stage}});
 }
 
 void RunFolderWriter::EndStage() {
@@ -182,39 +176,46 @@ void RunFolderWriter::EndStage() {
   stage_.clear();
 }
 
-Status RunFolderWriter::MakeFolder(const fs::path& relative) const { return MakeDirectories(dir_ / relative); }
+Status RunFolderWriter::MakeFolder(const fs::path& relative) const { return MakeDirectories(dir() / relative); }
 
 Status RunFolderWriter::WriteJson(const fs::path& relative, const Json& value) const {
   if (relative.has_parent_path()) FL_RETURN_IF_ERROR(MakeFolder(relative.parent_path()));
-  return WriteJsonFile(dir_ / relative, value);
+  return WriteJsonFile(dir() / relative, value);
 }
 
 Status RunFolderWriter::WriteText(const fs::path& relative, std::string_view text) const {
   if (relative.has_parent_path()) FL_RETURN_IF_ERROR(MakeFolder(relative.parent_path()));
-  return WriteFileAtomic(dir_ / relative, text);
+  return WriteFileAtomic(dir() / relative, text);
 }
 
-Status RunFolderWriter::MarkComplete() const { return WriteJsonFile(dir_ / "status.json", {{"state", "complete"}}); }
+Status RunFolderWriter::MarkComplete() const { return WriteJsonFile(dir() / "status.json", {{"state", "complete"}}); }
 
 Status RunFolderWriter::Close(const Status& status, const std::string& what) {
   if (logging_) log::StopFileLog();
   logging_ = false;
-  std::error_code ec;
   if (!status.ok()) {
-    fs::remove_all(failed_, ec);
-    fs::rename(dir_, failed_, ec);
-    return status.WithContext(what + " (log and partial outputs in " + failed_.string() + ")");
+    const Status moved = folder_.Fail();
+    const std::string where = moved.ok() ? folder_.failed().string() : dir().string();
+    return status.WithContext(what + " (log and partial outputs in " + where + ")");
   }
-  fs::remove_all(out_, ec);
-  fs::remove_all(failed_, ec);
-  fs::rename(dir_, out_, ec);
-  if (ec) return Status::IoError("cannot rename '" + dir_.string() + "' to '" + out_.string() + "': " + ec.message());
-  return Status::Ok();
+  return folder_.Commit();
 }
 
 Result<PlanWithApproaches> ReadPlanFile(const fs::path& path) {
   if (path.extension() == ".csv") return ReadPlanCsv(path);
   return ReadPlanJson(path);
+}
+
+namespace {
+constexpr const char* kRunFolderFiles[] = {"inputs/part.json", "surface/Q.step", "toolpath/toolpath.csv",
+                                           "toolpath/probing_plan.json"};
+}  // namespace
+
+std::vector<NamedPath> RunFolderInputs(const std::string& option, const fs::path& dir) {
+  std::vector<NamedPath> inputs;
+  if (dir.empty()) return inputs;
+  for (const char* file : kRunFolderFiles) inputs.push_back({option, dir / file});
+  return inputs;
 }
 
 Result<RunFolder> ReadRunFolder(const fs::path& dir) {
@@ -223,7 +224,7 @@ Result<RunFolder> ReadRunFolder(const fs::path& dir) {
   }
   RunFolder run;
   run.dir = dir;
-  for (const char* file : {"inputs/part.json", "surface/Q.step", "toolpath/toolpath.csv", "toolpath/probing_plan.json"}) {
+  for (const char* file : kRunFolderFiles) {
     if (!fs::exists(dir / file)) {
       return Status::NotFound("run folder '" + dir.string() + "' has no " + file +
                               ". Fix: give a folder written by `formloop run`");

@@ -20,6 +20,7 @@
 
 #include "app/part.h"
 #include "core/json_io.h"
+#include "core/output_folder.h"
 #include "core/status.h"
 #include "metrology/probe.h"
 #include "nc-gen/toolpath.h"
@@ -38,13 +39,15 @@ class RunFolderWriter {
   RunFolderWriter& operator=(const RunFolderWriter&) = delete;
   ~RunFolderWriter();  // stops the run's log if Close was not reached
 
-  // Refuses an existing `out` unless `force`; starts "<out>.partial" afresh (an incomplete one left by a
-  // killed run is logged with the part name `what`, and replaced) and the run's formloop.log in it.
-  Status Open(bool force, const std::string& what);
+  // Refuses an existing `out` unless `force`, and any folder formloop did not write or that holds the
+  // current directory or one of `inputs` (core/output_folder.h); starts "<out>.partial" afresh (an
+  // incomplete one left by a killed run is logged with the part name `what`, and replaced) and the run's
+  // formloop.log in it.
+  Status Open(bool force, const std::string& what, const std::vector<NamedPath>& inputs);
 
-  const std::filesystem::path& dir() const { return dir_; }  // the .partial folder being written
+  const std::filesystem::path& dir() const { return folder_.dir(); }  // the .partial folder being written
   const std::filesystem::path& out() const { return out_; }
-  std::filesystem::path Path(const std::filesystem::path& relative) const { return dir_ / relative; }
+  std::filesystem::path Path(const std::filesystem::path& relative) const { return dir() / relative; }
   static std::filesystem::path LoopDir(int loop) { return "loop-" + std::to_string(loop); }
   // A path inside the folder as the run's JSON files name it ("toolpath/program.ngc").
   std::string Relative(const std::filesystem::path& path) const;
@@ -65,7 +68,8 @@ class RunFolderWriter {
   Status Close(const Status& status, const std::string& what);
 
  private:
-  std::filesystem::path out_, dir_, failed_;
+  std::filesystem::path out_;
+  StagedOutputFolder folder_;
   StageTimer on_stage_;
   std::string stage_;
   std::chrono::steady_clock::time_point start_;
@@ -82,6 +86,8 @@ struct RunFolder {
 };
 
 Result<RunFolder> ReadRunFolder(const std::filesystem::path& dir);
+// The files ReadRunFolder reads, named by `option` (e.g. "--run"), for CheckOutputsNotInputs.
+std::vector<NamedPath> RunFolderInputs(const std::string& option, const std::filesystem::path& dir);
 
 // A probing plan with optional approach directions: formloop's JSON ({"points": [{"id", "u", "v",
 // "point", "normal"}]}) or CSV with the columns id, u, v, x, y, z, nx, ny, nz and optionally ax, ay, az

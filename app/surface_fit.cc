@@ -8,7 +8,9 @@
 
 #include "core/atomic_file.h"
 #include "core/log.h"
+#include "core/output_folder.h"
 #include "core/point_io.h"
+#include "core/work_estimate.h"
 #include "core/random.h"
 #include "reconstruction/analytic_surface.h"
 #include "reconstruction/foot_point.h"
@@ -62,7 +64,9 @@ Status CheckOutputs(const FitRequest& request) {
     return Status::BadInput(Where{.file = request.out_report, .field = "--report"}, "the report is JSON",
                             "name it *.json");
   }
-  return Status::Ok();
+  const bool file_input = request.input.rfind("analytic:", 0) != 0;
+  return CheckOutputsNotInputs({{"--out", request.out_step}, {"--report", request.out_report}},
+                               {{"INPUT", file_input ? request.input : std::string()}});
 }
 
 // A row-major grid layout for `n` points: the requested one, or a square one when none is given.
@@ -236,8 +240,28 @@ std::string FitMethodName(FitMethod method) {
   return "?";
 }
 
+// The size of the fit before it starts: samples and check points of an analytic input, and the
+// control net of a scattered fit (its banded normal equations hold about 4 (degree + 1) u_poles
+// numbers per pole).
+Status CheckFitWork(const FitRequest& request, bool analytic) {
+  double points = 0;
+  std::string field = "--poles";
+  if (analytic) {
+    const double grid = static_cast<double>(request.grid_nu > 0 ? request.grid_nu : kDefaultAnalyticGrid) *
+                        (request.grid_nv > 0 ? request.grid_nv : kDefaultAnalyticGrid);
+    points = std::max(grid, static_cast<double>(request.scattered_samples)) + std::max(request.check_points, 0);
+    field = request.check_points > request.scattered_samples ? "--check" : "--samples";
+  }
+  const double poles = static_cast<double>(request.scattered.u_poles) * request.scattered.v_poles;
+  const double band = 4.0 * (request.scattered.degree + 1) * std::max(request.scattered.u_poles, 1);
+  const double memory = 200 * points + 8 * poles * band * 3;
+  if (poles > 0 && 8 * poles * band * 3 > 200 * points) field = "--poles";
+  return CheckWork({.what = "the fit", .points = points + poles, .memory_bytes = memory}, request.input, field);
+}
+
 Result<FitOutcome> FitSurface(const FitRequest& request) {
   FL_RETURN_IF_ERROR(CheckOutputs(request));
+  FL_RETURN_IF_ERROR(CheckFitWork(request, request.input.rfind(kAnalyticPrefix, 0) == 0));
   if (request.input.empty()) return Status::BadInput(Where{.field = "input"}, "no input given");
   const bool analytic = request.input.rfind(kAnalyticPrefix, 0) == 0;
   const bool cad = !analytic && recon::IsCadPath(request.input);
@@ -331,6 +355,8 @@ Result<ProjectOutcome> ProjectPoints(const ProjectRequest& request) {
     return Status::BadInput(Where{.field = "--out"}, "no output file given", "add --out deviations.csv");
   }
   FL_RETURN_IF_ERROR(PointFormatFromPath(request.out).status());
+  FL_RETURN_IF_ERROR(
+      CheckOutputsNotInputs({{"--out", request.out}}, {{"--surface", request.surface}, {"--points", request.points}}));
   FL_ASSIGN_OR_RETURN(const recon::CadFace face, recon::ReadCadFace(request.surface, request.face));
   FL_ASSIGN_OR_RETURN(PointSet set, ReadPoints(request.points));
   if (set.empty()) return Status::BadInput(Where{.file = request.points}, "the file holds no points");

@@ -1,5 +1,6 @@
 #include "core/csv.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "core/atomic_file.h"
@@ -15,6 +16,7 @@ std::string_view TrimBlanks(std::string_view text) {
 }
 
 bool TextLines::Next(std::string_view* line) {
+  if (pos_ == 0 && line_number_ == 0 && text_.substr(0, 3) == "\xEF\xBB\xBF") pos_ = 3;  // UTF-8 byte-order mark
   if (pos_ >= text_.size()) return false;
   const std::size_t end = text_.find('\n', pos_);
   const std::size_t stop = end == std::string_view::npos ? text_.size() : end;
@@ -34,17 +36,46 @@ bool TextLines::NextContent(std::string_view* line) {
   return false;
 }
 
-void SplitCsvCells(std::string_view line, std::vector<std::string_view>* cells) {
+void SplitCsvCells(std::string_view line, std::vector<std::string_view>* cells, char separator) {
   cells->clear();
   std::size_t start = 0;
   while (true) {
-    const std::size_t end = line.find(',', start);
+    const std::size_t end = line.find(separator, start);
     std::string_view cell = TrimBlanks(line.substr(start, end == std::string_view::npos ? end : end - start));
     if (cell.size() >= 2 && cell.front() == '"' && cell.back() == '"') cell = cell.substr(1, cell.size() - 2);
     cells->push_back(cell);
     if (end == std::string_view::npos) return;
     start = end + 1;
   }
+}
+
+Status CheckText(std::string_view text, const std::string& source) {
+  const std::size_t nul = text.find('\0');
+  if (nul == std::string_view::npos) return Status::Ok();
+  std::string encoding = "binary data, not text";
+  if (text.substr(0, 4) == std::string_view("\xFF\xFE\0\0", 4) || text.substr(0, 4) == std::string_view("\0\0\xFE\xFF", 4)) {
+    encoding = "UTF-32 text";
+  } else if (text.substr(0, 2) == "\xFF\xFE" || text.substr(0, 2) == "\xFE\xFF" ||
+             (text.size() >= 2 && (text[0] == '\0' || text[1] == '\0'))) {
+    encoding = "UTF-16 text (\"Unicode text\" in spreadsheets)";
+  }
+  const long line = 1 + static_cast<long>(std::count(text.begin(), text.begin() + static_cast<long>(nul), '\n'));
+  return Status::BadInput(Where{.file = source, .line = line}, "the file is " + encoding + ": it holds NUL bytes",
+                          "save it as \"CSV UTF-8\" (or plain ASCII text)");
+}
+
+Result<std::string> ReadTextFile(const std::filesystem::path& path) {
+  FL_ASSIGN_OR_RETURN(std::string text, ReadFile(path));
+  FL_RETURN_IF_ERROR(CheckText(text, path.string()));
+  return text;
+}
+
+std::string RaggedRowFix(char separator, std::size_t cells, std::size_t header_cells) {
+  std::string fix = std::string("give every row one cell per header column, separated by '") + separator + "'";
+  if (separator == ',' && cells > header_cells) {
+    fix += "; if the numbers are written with a decimal comma, separate the cells with ';' (header included)";
+  }
+  return fix;
 }
 
 bool CsvReader::Next() {
@@ -57,8 +88,22 @@ bool CsvReader::Next() {
     line_ = trimmed;
     if (comment_) {
       cells_.clear();
-    } else {
-      SplitCsvCells(trimmed, &cells_);
+      return true;
+    }
+    if (!header_seen_) {
+      header_seen_ = true;
+      if (trimmed.find(';') != std::string_view::npos && trimmed.find(',') == std::string_view::npos) separator_ = ';';
+    }
+    SplitCsvCells(trimmed, &cells_, separator_);
+    if (separator_ == ';') {
+      // Decimal commas become points; the cells then view into decimal_points_ (filled before any view).
+      decimal_points_.assign(cells_.begin(), cells_.end());
+      for (std::size_t c = 0; c < cells_.size(); ++c) {
+        std::string& cell = decimal_points_[c];
+        if (cell.find(',') == std::string::npos) continue;
+        std::replace(cell.begin(), cell.end(), ',', '.');
+      }
+      for (std::size_t c = 0; c < cells_.size(); ++c) cells_[c] = decimal_points_[c];
     }
     return true;
   }
@@ -118,7 +163,7 @@ Result<CsvTable> ParseCsvTable(std::string_view text, const std::string& source,
       return Status::BadInput(
           Where{.file = source, .line = line},
           "row has " + std::to_string(cells.size()) + " cells, the header " + std::to_string(t.header.size()),
-          "give every row one cell per header column, separated by commas");
+          RaggedRowFix(reader.separator(), cells.size(), t.header.size()));
     }
     t.rows.emplace_back(cells.begin(), cells.end());
     t.lines.push_back(line);
@@ -131,7 +176,7 @@ Result<CsvTable> ParseCsvTable(std::string_view text, const std::string& source,
 }
 
 Result<CsvTable> ReadCsvTable(const std::filesystem::path& path, bool require_rows) {
-  FL_ASSIGN_OR_RETURN(const std::string text, ReadFile(path));
+  FL_ASSIGN_OR_RETURN(const std::string text, ReadTextFile(path));
   return ParseCsvTable(text, path.string(), require_rows);
 }
 

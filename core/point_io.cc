@@ -22,6 +22,7 @@
 #include "core/atomic_file.h"
 #include "core/csv.h"
 #include "core/log.h"
+#include "core/number_text.h"
 
 namespace formloop {
 namespace {
@@ -520,6 +521,17 @@ bool SkipBinaryElement(std::string_view data, const PlyElement& element, bool sw
 
 }  // namespace
 
+Status CheckCoordinateRange(const Eigen::Vector3d& p, Where where, const std::string& what) {
+  static const char* kAxis[] = {"x", "y", "z"};
+  for (int a = 0; a < 3; ++a) {
+    if (std::abs(p[a]) <= kMaxCoordinateMm) continue;
+    if (where.field.empty()) where.field = kAxis[a];
+    return Status::BadInput(where, what + "coordinate " + FormatSignificant(p[a], 6) + " mm is beyond +-1e6 mm (1 km)",
+                            "check the file's unit and export; delete points that are not measurements");
+  }
+  return Status::Ok();
+}
+
 Result<PointFormat> PointFormatFromPath(const std::filesystem::path& path) {
   std::string extension = path.extension().string();
   std::transform(extension.begin(), extension.end(), extension.begin(),
@@ -539,7 +551,7 @@ Result<PointFormat> PointFormatFromPath(const std::filesystem::path& path) {
 
 Result<PointSet> ReadCsv(const std::filesystem::path& path, CsvLayout* layout) {
   const std::string file = path.string();
-  FL_ASSIGN_OR_RETURN(const std::string text, ReadFile(path));
+  FL_ASSIGN_OR_RETURN(const std::string text, ReadTextFile(path));
   CsvReader rows(text);
   if (!rows.Next()) {
     return Status::BadInput(Where{.file = file}, "no points: the file has no header row and no data",
@@ -565,7 +577,7 @@ Result<PointSet> ReadCsv(const std::filesystem::path& path, CsvLayout* layout) {
                               "the row has " + std::to_string(fields.size()) +
                                   " fields but the header (line " + std::to_string(header_line) + ") has " +
                                   std::to_string(names.size()) + " columns",
-                              "give every row one value per header column, separated by ','");
+                              RaggedRowFix(rows.separator(), fields.size(), names.size()));
     }
     std::int64_t id = 0;
     for (std::size_t c = 0; c < fields.size(); ++c) {
@@ -576,6 +588,7 @@ Result<PointSet> ReadCsv(const std::filesystem::path& path, CsvLayout* layout) {
       }
     }
     AppendRow(plan, values.data(), id, &points);
+    FL_RETURN_IF_ERROR(CheckCoordinateRange(points.points.back(), Where{.file = file, .line = number}));
     if (layout != nullptr) layout->row_lines.push_back(number);
   }
   if (points.empty()) {
@@ -609,7 +622,7 @@ Status WriteCsv(const std::filesystem::path& path, const PointSet& points, const
 Result<PointSet> ReadXyz(const std::filesystem::path& path) {
   static const std::vector<std::string> kNames = {"x", "y", "z", "nx", "ny", "nz"};
   const std::string file = path.string();
-  FL_ASSIGN_OR_RETURN(const std::string text, ReadFile(path));
+  FL_ASSIGN_OR_RETURN(const std::string text, ReadTextFile(path));
   TextLines lines(text);
   std::string_view line;
   std::vector<std::string_view> tokens;
@@ -641,6 +654,7 @@ Result<PointSet> ReadXyz(const std::filesystem::path& path) {
       FL_RETURN_IF_ERROR(ParseNumberField(tokens[c], file, number, kNames[c], &values[c]));
     }
     points.points.emplace_back(values[0], values[1], values[2]);
+    FL_RETURN_IF_ERROR(CheckCoordinateRange(points.points.back(), Where{.file = file, .line = number}));
     if (columns == 6) points.normals.emplace_back(values[3], values[4], values[5]);
   }
   if (points.empty()) {
@@ -750,6 +764,7 @@ Result<PointSet> ReadPly(const std::filesystem::path& path) {
         }
       }
       AppendRow(plan, values.data(), id, &points);
+      FL_RETURN_IF_ERROR(CheckCoordinateRange(points.points.back(), Where{.file = file, .line = number}));
     }
     return points;
   }
@@ -811,6 +826,8 @@ Result<PointSet> ReadPly(const std::filesystem::path& path) {
                               "store ids as whole numbers (an int property)");
     }
     AppendRow(plan, values.data(), id, &points);
+    FL_RETURN_IF_ERROR(
+        CheckCoordinateRange(points.points.back(), Where{.file = file}, "vertex " + std::to_string(i) + ": "));
   }
   return points;
 }

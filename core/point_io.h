@@ -36,6 +36,13 @@ struct PointWriteOptions {
                         // negative: shortest text that reads back exactly (FormatExact)
 };
 
+// Every reader refuses a coordinate beyond ±kMaxCoordinateMm (1 km): no machine or part is that large, and
+// such a value (1e300 typed or exported by mistake) breaks every kd-tree and fit downstream.
+inline constexpr double kMaxCoordinateMm = 1e6;
+// BadInput at `where` (its field set to the axis) when a coordinate of p is beyond kMaxCoordinateMm;
+// `what` names the point ("vertex 12: ") when the line is unknown.
+Status CheckCoordinateRange(const Eigen::Vector3d& p, Where where, const std::string& what = "");
+
 // Where the rows of a CSV point file stand in it, for messages about them (ReadCsv fills it).
 struct CsvLayout {
   long header_line = 0;

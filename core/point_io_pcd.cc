@@ -321,6 +321,7 @@ Result<PointSet> ReadPcdQuiet(const std::filesystem::path& path) {
           break;
       }
     }
+    FL_RETURN_IF_ERROR(CheckCoordinateRange(p, Where{.file = file}, "point " + std::to_string(i) + ": "));
     points.points.push_back(p);
     if (has_normals) points.normals.push_back(normal);
     if (has_id) points.ids.push_back(id);

@@ -5,6 +5,7 @@
 #include <unordered_map>
 
 #include "core/log.h"
+#include "core/number_text.h"
 #include "reconstruction/foot_point.h"
 
 namespace formloop::metrology {
@@ -144,6 +145,19 @@ Result<ProbeLogAnalysis> AnalyseProbeLog(const recon::BSplineSurface& q, const P
     d.on_boundary = m.foot.on_boundary;
     a.deviations.push_back(d);
     a.lines.push_back(m.record->line);
+  }
+  // A log most of whose points are not on Q does not measure this part (another part, a wrong work offset
+  // or surface): refused, not analysed on the few that happen to be near.
+  if (2 * a.flagged.size() > measured.size()) {
+    const FlaggedPoint& first = a.flagged.front();
+    return Status::BadInput(
+        Where{.file = log.source},
+        std::to_string(a.flagged.size()) + " of " + std::to_string(measured.size()) +
+            " points lie farther from Q than the search distance " + FormatSignificant(options.max_distance_mm, 4) +
+            " mm or past its edge (the first on line " + std::to_string(first.line) + ", " +
+            FormatSignificant(first.distance_mm, 4) + " mm away)",
+        "check that the log belongs to this part and that the log and Q share one frame (work offset); "
+        "registration (--register) can align a part that is only shifted");
   }
   if (!a.flagged.empty()) {
     log::Warn("analyse: {} of {} points flagged (beyond {} mm of Q or past its edge) and left out; see "

@@ -245,7 +245,7 @@ Result<SideFile> ParseSideFile(const std::string& text, const std::string& sourc
 }
 
 Result<SideFile> ReadSideFile(const std::filesystem::path& path) {
-  FL_ASSIGN_OR_RETURN(std::string text, ReadFile(path));
+  FL_ASSIGN_OR_RETURN(std::string text, ReadTextFile(path));
   return ParseSideFile(text, path.string());
 }
 

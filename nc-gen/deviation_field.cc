@@ -117,7 +117,7 @@ SystematicField DeviationField::AsSystematicField() const {
 }
 
 Result<std::vector<DeviationSample>> ReadDeviationSamples(const std::filesystem::path& path) {
-  FL_ASSIGN_OR_RETURN(std::string text, ReadFile(path));
+  FL_ASSIGN_OR_RETURN(std::string text, ReadTextFile(path));
   const std::string file = path.string();
   CsvReader rows(text);
   long number = 0;

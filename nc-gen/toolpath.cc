@@ -24,16 +24,25 @@ Status ToolpathOptions::Validate() const {
   auto bad = [](const std::string& field, const std::string& what) {
     return Status::BadInput(Where{.field = field}, what);
   };
-  if (!(tool.radius_mm > 0)) return bad("tool.radius_mm", "must be > 0");
-  if (!(scallop_um > 0) || scallop_um >= 1000 * tool.radius_mm) {
-    return bad("toolpath.scallop_um", "must be > 0 and below the tool radius");
+  // Upper bounds far beyond any real ball-end finishing job, short of what a wrong unit gives.
+  if (!(tool.radius_mm > 0 && tool.radius_mm <= 50)) return bad("tool.radius_mm", "must lie in (0, 50] mm");
+  if (!(scallop_um > 0) || scallop_um >= 1000 * tool.radius_mm || scallop_um > 1000) {
+    return bad("toolpath.scallop_um", "must be > 0, at most 1000 um and below the tool radius");
   }
-  if (!(chord_tolerance_um > 0)) return bad("toolpath.chord_tolerance_um", "must be > 0");
-  if (!(max_point_spacing_mm > 0)) return bad("toolpath.max_point_spacing_mm", "must be > 0");
-  if (!(feed_mm_per_min > 0)) return bad("toolpath.feed_mm_per_min", "must be > 0");
-  if (!(plunge_feed_mm_per_min > 0)) return bad("toolpath.plunge_feed_mm_per_min", "must be > 0");
-  if (!(spindle_rpm > 0)) return bad("toolpath.spindle_rpm", "must be > 0");
-  if (!(clearance_mm > 0)) return bad("toolpath.clearance_mm", "must be > 0");
+  if (!(chord_tolerance_um > 0 && chord_tolerance_um <= 1000)) {
+    return bad("toolpath.chord_tolerance_um", "must lie in (0, 1000] um");
+  }
+  if (!(max_point_spacing_mm > 0 && max_point_spacing_mm <= 100)) {
+    return bad("toolpath.max_point_spacing_mm", "must lie in (0, 100] mm");
+  }
+  if (!(feed_mm_per_min > 0 && feed_mm_per_min <= 200000)) {
+    return bad("toolpath.feed_mm_per_min", "must lie in (0, 200000] mm/min");
+  }
+  if (!(plunge_feed_mm_per_min > 0 && plunge_feed_mm_per_min <= 200000)) {
+    return bad("toolpath.plunge_feed_mm_per_min", "must lie in (0, 200000] mm/min");
+  }
+  if (!(spindle_rpm > 0 && spindle_rpm <= 200000)) return bad("toolpath.spindle_rpm", "must lie in (0, 200000] rpm");
+  if (!(clearance_mm > 0 && clearance_mm <= 1000)) return bad("toolpath.clearance_mm", "must lie in (0, 1000] mm");
   if (!std::isfinite(raster_angle_deg)) return bad("toolpath.raster_angle_deg", "must be a finite angle in degrees");
   if (!(lead_mm >= 0) || lead_mm > 100) return bad("toolpath.lead_mm", "must be between 0 (no leads) and 100 mm");
   return Status::Ok();

@@ -6,6 +6,7 @@
 
 #include "core/atomic_file.h"
 #include "core/csv.h"
+#include "core/point_io.h"
 #include "core/json_io.h"
 #include "core/number_text.h"
 
@@ -181,9 +182,10 @@ Result<Toolpath> ParseToolpath(const std::string& text, const std::string& sourc
       return Status::BadInput(Where{.file = source, .line = number, .field = "nx"},
                               "the normal (nx, ny, nz) is not a unit vector");
     }
-    if (cl.lift_mm < 0) {
-      return Status::BadInput(Where{.file = source, .line = number, .field = "lift_mm"}, "must be >= 0");
+    if (cl.lift_mm < 0 || cl.lift_mm > kMaxCoordinateMm) {
+      return Status::BadInput(Where{.file = source, .line = number, .field = "lift_mm"}, "must be >= 0 and plausible");
     }
+    FL_RETURN_IF_ERROR(CheckCoordinateRange(cl.cc, Where{.file = source, .line = number}));
     cl.index_in_pass = (cl.pass == last_pass) ? t.points.back().index_in_pass + 1 : 0;
     last_pass = cl.pass;
     t.points.push_back(cl);
@@ -201,7 +203,7 @@ Result<Toolpath> ParseToolpath(const std::string& text, const std::string& sourc
 }
 
 Result<Toolpath> ReadToolpathFile(const std::filesystem::path& path) {
-  FL_ASSIGN_OR_RETURN(std::string text, ReadFile(path));
+  FL_ASSIGN_OR_RETURN(std::string text, ReadTextFile(path));
   return ParseToolpath(text, path.string());
 }
 

@@ -190,6 +190,10 @@ std::string FaceList(const std::vector<CadFaceInfo>& infos) {
 Result<int> ChooseFace(const std::filesystem::path& path, const std::vector<CadFaceInfo>& infos,
                        const CadFaceSelector& selector) {
   const int count = static_cast<int>(infos.size());
+  if (selector.index < -1) {  // -1: not given
+    return Status::BadInput(Where{.file = path.string(), .field = "face index"},
+                            "face index " + std::to_string(selector.index) + " is negative", "use a 0-based index");
+  }
   if (!selector.name.empty()) {
     std::vector<int> matches;
     for (const CadFaceInfo& info : infos) {

@@ -1,6 +1,8 @@
 #include "retrieval/taxonomy.h"
 
 #include <algorithm>
+#include <cctype>
+#include <string_view>
 #include <cmath>
 #include <fstream>
 #include <limits>
@@ -231,6 +233,22 @@ int Taxonomy::depth(int id) const {
   int d = 0;
   for (int n = nodes_.at(id).parent; n != kNone; n = nodes_[n].parent) ++d;
   return d;
+}
+
+std::optional<std::string> Taxonomy::Suggest(const std::string& text) const {
+  auto folded = [](std::string_view t) {
+    const auto begin = t.find_first_not_of(" \t\r\n");
+    const auto end = t.find_last_not_of(" \t\r\n");
+    std::string out(begin == std::string_view::npos ? std::string_view() : t.substr(begin, end - begin + 1));
+    for (char& c : out) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    return out;
+  };
+  const std::string want = folded(text);
+  if (want.empty()) return std::nullopt;
+  for (const auto& [key, id] : index_) {
+    if (folded(key) == want) return nodes_.at(static_cast<std::size_t>(id)).name;
+  }
+  return std::nullopt;
 }
 
 std::optional<int> Taxonomy::Find(const std::string& name_or_alias) const {

@@ -85,6 +85,9 @@ class Taxonomy {
 
   // Node id for a name or alias; nullopt when unknown.
   std::optional<int> Find(const std::string& name_or_alias) const;
+  // The name of the node whose name or alias matches `text` but for case and surrounding blanks ("h13 " ->
+  // "H13"), for a "did you mean" in messages; nullopt when none does.
+  std::optional<std::string> Suggest(const std::string& text) const;
   // As Find, but NotFound naming `what` (e.g. "material") and listing a few valid names.
   Result<int> Require(const std::string& name_or_alias, const std::string& what) const;
 

@@ -1,10 +1,12 @@
 #include "simulation/model.h"
 
+#include <algorithm>
 #include <cmath>
 #include <optional>
 
 #include "core/atomic_file.h"
 #include "core/json_io.h"
+#include "core/number_text.h"
 
 namespace formloop::sim {
 namespace {
@@ -131,6 +133,15 @@ Result<Model> Model::FromJson(const nlohmann::json& json, const std::string& sou
       }
       double value = 0, se = 0;
       FL_RETURN_IF_ERROR(params->Number(p.name, &value));
+      // A value a thousand times beyond the effect's typical range is a wrong unit or a typo, and would
+      // move the simulated surface by metres.
+      const double scale = std::max({std::abs(p.typical_min), std::abs(p.typical_max), 1.0});
+      if (std::abs(value) > 1000 * scale) {
+        return bad(params->Path(p.name),
+                   "is " + FormatSignificant(value, 6) + ", beyond 1000 times the effect's typical range (" +
+                       FormatSignificant(p.typical_min, 4) + " .. " + FormatSignificant(p.typical_max, 4) + ")",
+                   "check the value and its unit");
+      }
       if (errors) FL_RETURN_IF_ERROR(errors->OptionalNumber(p.name, &se, {.min = 0}));
       values.push_back(value);
       ses.push_back(se);

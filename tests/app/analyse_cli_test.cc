@@ -167,9 +167,9 @@ TEST_F(AnalyseCliTest, BadInputNamesFileLineColumnAndFix) {
   Analyse("analyse moran --points " + data + " --value z --knn 2 --delaunay --style W", 2, &err);
   EXPECT_NE(err.find("exactly one of"), std::string::npos) << err;
   Analyse("analyse moran --points " + data + " --value z --band 0 --style W", 2, &err);
-  EXPECT_NE(err.find("band distance must be positive"), std::string::npos) << err;
+  EXPECT_NE(err.find("'--band': must be a positive distance"), std::string::npos) << err;
   Analyse("analyse moran --points " + data + " --value z --knn 0 --style W", 2, &err);
-  EXPECT_NE(err.find("at least one neighbour"), std::string::npos) << err;
+  EXPECT_NE(err.find("'--knn': must be at least 1"), std::string::npos) << err;
   Analyse("analyse moran --points " + data + " --value z --knn 2 --style Q", 2, &err);
   EXPECT_NE(err.find("--style"), std::string::npos) << err;
   Analyse("analyse moran --points " + data + " --value z --knn 2 --style W --islands keep", 2, &err);
