@@ -37,6 +37,7 @@
 #include "app/command.h"
 #include "app/part.h"
 #include "app/route_calibration.h"
+#include "app/surface_source.h"
 #include "core/json_io.h"
 #include "core/log.h"
 #include "kb/library.h"
@@ -62,7 +63,10 @@ struct RetrieveArgs {
 // A run's part file (app/part.h): described and fitted as `formloop run` does it.
 Result<retrieval::PartFeatures> PartFileFeatures(const PartSpec& part, const retrieval::FeatureOptions& options) {
   recon::BSplineSurface q;
-  if (part.surface_kind.empty()) {
+  if (part.surface_file) {
+    FL_ASSIGN_OR_RETURN(SurfaceFromFile built, BuildSurfaceFromFile(*part.surface_file, part.tolerance_mm));
+    q = std::move(built.q);
+  } else if (part.surface_kind.empty()) {
     FL_ASSIGN_OR_RETURN(std::unique_ptr<recon::AnalyticSurface> analytic,
                         recon::MakeReferenceSurface(part.surface_reference));
     recon::FitReport report;
@@ -70,7 +74,7 @@ Result<retrieval::PartFeatures> PartFileFeatures(const PartSpec& part, const ret
                                               part.seed, &report));
   } else {
     FL_ASSIGN_OR_RETURN(const recon::GridSamples g,
-                        retrieval::StarterGrid(part.surface_kind, part.surface_params, part.surface_samples));
+                        recon::ParametricGrid(part.surface_kind, part.surface_params, part.surface_samples));
     recon::FitReport report;
     FL_ASSIGN_OR_RETURN(q, recon::FitGrid(g, part.fit, &report));
   }

@@ -7,6 +7,7 @@
 #include "nc-gen/raster_estimate.h"
 #include "reconstruction/analytic_surface.h"
 #include "reconstruction/surface_family.h"
+#include "retrieval/starter.h"
 #include "retrieval/taxonomy.h"
 
 namespace formloop::app {

@@ -171,11 +171,12 @@ Status CheckRunInputs(const PartSpec& part, const RunOptions& options) {
     for (const std::string& log : options.measured) FL_RETURN_IF_ERROR(metrology::ReadProbeLog(log).status());
   } else {
     const std::string spec = options.machine.empty() ? "virtual" : options.machine;
-    if (spec != "virtual" && spec.rfind("virtual:", 0) != 0) {
+    const bool linuxcnc = spec.rfind("linuxcnc:", 0) == 0;  // its configuration is read by stages::ResolveInputs
+    if (spec != "virtual" && spec.rfind("virtual:", 0) != 0 && !linuxcnc) {
       return Status::BadInput(Where{.field = "--machine"}, "unknown machine '" + spec + "'",
-                              "use virtual, virtual:PROFILE or --measured LOG.csv");
+                              "use virtual, virtual:PROFILE, linuxcnc:CONFIG or --measured LOG.csv");
     }
-    if (spec != "virtual" || !part.effects_given) {
+    if (!linuxcnc && (spec != "virtual" || !part.effects)) {
       const std::string profile = spec == "virtual" ? part.machine_name : spec.substr(8);
       FL_RETURN_IF_ERROR(ReadMachineProfile(profile, data_dir).status());
     }
