@@ -213,7 +213,7 @@ TEST_F(RunTest, MachineEffectsAreTheCatalogueModelAndTheOldFieldsStillRead) {
   ASSERT_TRUE(as_model.ok()) << as_model.status().ToString();
   ASSERT_TRUE(as_model->effects.has_value());
   Json old = *json;
-  old["machine"]["effects"] = {{"tool_radius_error_um", 8}, {"deflection_um", 20}, {"thermal_amplitude_um", 6},
+  old["machine"]["effects"] = {{"tool_radius_error_um", 18}, {"deflection_um", 20}, {"thermal_amplitude_um", 6},
                                {"thermal_tau_s", 900}, {"surface_noise_um", 1.0}, {"probe_noise_um", 0.5}};
   const auto as_fields = ParsePart(old, "old.json");
   ASSERT_TRUE(as_fields.ok()) << as_fields.status().ToString();
