@@ -9,17 +9,22 @@
 //                                                   retained outcomes, and with --rerun the retained virtual-machine
 //                                                   parts run again on a library without them
 //   formloop kb migrate PATH                        bring an existing library to the current schema
-//   formloop kb add     PATH CASE.json [--replace]  add one case (refuses an existing uid unless --replace); when
+//   formloop kb add     PATH CASE.json [--replace]  add one case (refuses an existing uid unless --replace, and a
+//                                                   case retrieval could not use: concepts not in the taxonomies
+//                                                   of --data, a descriptor not of 24 finite values); when
 //                                                   the stored GHSOM was current, the case is inserted into it
 //                                                   (Ghsom::Insert, local retraining) and it stays current;
 //                                                   otherwise the GHSOM is left stale (kb check) until kb train
-//   formloop kb import  PATH FILE.jsonl [--replace] import an export file in one transaction
+//   formloop kb import  PATH FILE.jsonl [--replace] import an export file in one transaction (cases checked as
+//                                                   by add; one bad case refuses the whole file)
 //   formloop kb export  PATH --out FILE.jsonl       deterministic JSON Lines, written atomically
 //   formloop kb list    PATH [--family F] [--json]  the cases, sorted by uid
 //   formloop kb show    PATH UID                    one case as its case-file JSON
 //   formloop kb remove  PATH UID
 //   formloop kb stats   PATH                        counts per family and facet concept, GHSOM status
-//   formloop kb check   PATH                        JSON report; exit 1 when the library is not clean
+//   formloop kb check   PATH                        JSON report; exit 1 when the library is not clean, including
+//                                                   whatever retrieval would trip on (bad concepts/descriptors,
+//                                                   a stored model that does not load)
 //   formloop kb rules   PATH [--set RULES.json]     print the active rule base, or write a new version
 //
 // Machine-readable output goes to stdout (JSON unless `list` without --json); logs go to stderr.
@@ -182,9 +187,13 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
   CLI::App* add = PathCommand(kb, "add", "Add one case from a case file (JSON; format in kb/library.h).", args.get());
   add->add_option("case", args->file, "case file, e.g. blade-017.json")->required();
   add->add_flag("--replace", args->replace, "overwrite a case with the same uid (keeps its created_at)");
+  add->add_option("--data", args->data, "data folder whose taxonomies/ the concepts are checked against");
   add->callback([args, action] {
     *action = [args]() -> Status {
       FL_ASSIGN_OR_RETURN(kb::CaseRecord record, kb::ReadCaseFile(args->file));
+      FL_ASSIGN_OR_RETURN(const retrieval::FacetTaxonomies tax,
+                          retrieval::FacetTaxonomies::Load(DataDir(*args) / "taxonomies"));
+      FL_RETURN_IF_ERROR(retrieval::CheckCaseForRetrieval(record, tax).WithContext(args->file + " (not added)"));
       FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
       FL_ASSIGN_OR_RETURN(const nlohmann::json ghsom, retrieval::AddCaseAndGrowGhsom(*library, record, args->replace));
       log::Info("added case {} to {}", record.uid, args->path);
@@ -197,11 +206,15 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
                                  args.get());
   import_cmd->add_option("file", args->file, "export file, e.g. cases.jsonl")->required();
   import_cmd->add_flag("--replace", args->replace, "replace cases whose uid exists instead of refusing the import");
+  import_cmd->add_option("--data", args->data, "data folder whose taxonomies/ the concepts are checked against");
   import_cmd->callback([args, action] {
     *action = [args]() -> Status {
       FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
+      FL_ASSIGN_OR_RETURN(const retrieval::FacetTaxonomies tax,
+                          retrieval::FacetTaxonomies::Load(DataDir(*args) / "taxonomies"));
       kb::ImportOptions options;
       options.replace = args->replace;
+      options.check_case = [&tax](const kb::CaseRecord& r) { return retrieval::CheckCaseForRetrieval(r, tax); };
       FL_ASSIGN_OR_RETURN(kb::ImportReport report, library->ImportFile(args->file, options));
       log::Info("imported {} case(s) into {}", report.cases_added + report.cases_replaced, args->path);
       Print(report.ToJson());
@@ -292,11 +305,20 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
       "Integrity, foreign keys, orphan concepts, descriptors, rule-base sanity, GHSOM staleness. JSON report; "
       "exit 1 when not clean.",
       args.get());
+  check->add_option("--data", args->data, "data folder whose taxonomies/ the concepts are checked against");
   check->callback([args, action] {
     *action = [args]() -> Status {
       FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
       FL_ASSIGN_OR_RETURN(kb::CheckReport report, library->Check());
-      Print(report.ToJson());
+      // What retrieval would trip on: the cases' concepts and descriptors, and the model as retrieve loads it.
+      FL_ASSIGN_OR_RETURN(const retrieval::FacetTaxonomies tax,
+                          retrieval::FacetTaxonomies::Load(DataDir(*args) / "taxonomies"));
+      FL_ASSIGN_OR_RETURN(const std::vector<std::string> retrieval_problems,
+                          retrieval::RetrievalProblems(*library, tax));
+      for (const std::string& p : retrieval_problems) report.problems.push_back("retrieval: " + p);
+      nlohmann::json out = report.ToJson();
+      out["retrieval_problems"] = retrieval_problems;
+      Print(out);
       if (!report.clean()) {
         return Status::Failed("case library '" + args->path + "' is not clean: " + report.problems.front() +
                               (report.problems.size() > 1 ? " (and " + std::to_string(report.problems.size() - 1) +

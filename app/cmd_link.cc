@@ -42,6 +42,7 @@
 #include "core/atomic_file.h"
 #include "core/json_io.h"
 #include "core/log.h"
+#include "core/output_folder.h"
 #include "core/point_io.h"
 
 namespace formloop::app {
@@ -344,8 +345,9 @@ Status CollectCommand(const CollectArgs& a) {
   o.journal = a.journal.empty() ? a.out + ".journal" : a.journal;
   o.fsync = !a.no_fsync;
   o.progress = true;
-  if (std::filesystem::path(a.out) == o.journal)
-    return Status::BadInput(Where{.field = "--journal"}, "must differ from --out");
+  // No output onto an input or onto another output (core/output_folder.h).
+  FL_RETURN_IF_ERROR(CheckOutputsNotInputs({{"--out", a.out}, {"--journal", o.journal}, {"--probe-log", a.probe_log}},
+                                           {{"--plan", a.plan}}));
   TcpTransport transport(host, port, TcpTransportOptions{2.0, a.call_timeout_s});
   RealClock clock;
   FL_ASSIGN_OR_RETURN(const CollectorReport report, Collect(transport, clock, o));
@@ -453,6 +455,7 @@ struct ProgramArgs {
 };
 
 Status ProgramCommand(const ProgramArgs& a) {
+  FL_RETURN_IF_ERROR(CheckOutputsNotInputs({}, {{"--plan", a.plan}}, {{"--out", a.out}}));
   FL_ASSIGN_OR_RETURN(const PlanWithApproaches plan, ReadPlanFile(a.plan));
   MachineProgramOptions o;
   FL_ASSIGN_OR_RETURN(o.dialect, ParseDialect(a.dialect));

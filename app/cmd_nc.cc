@@ -59,7 +59,7 @@ Status CheckDialect(const std::string& dialect) {
 
 struct MachineArgs {
   std::string dialect = "linuxcnc";
-  int decimals = 4;
+  int decimals = -1;  // the dialect's default (Fanuc 3, others 4)
   bool block_numbers = false;
   int max_line_length = 0;
   double travel = 300;  // ± mm in x and y; z from −travel_z to +travel_z
@@ -69,10 +69,11 @@ struct MachineArgs {
   // The options as the user typed them, checked before any planning: messages name the option.
   Status Validate() const {
     FL_RETURN_IF_ERROR(CheckDialect(dialect));
-    if (decimals < 1 || decimals > 6) {
+    if (decimals != -1 && (decimals < 1 || decimals > 6)) {
       return Status::BadInput(Where{.field = "--decimals"}, "must be 1..6, got " + std::to_string(decimals),
                               "use 3 or 4");
     }
+    FL_RETURN_IF_ERROR(nc::FindPost(dialect)->CheckDecimals(decimals, "--decimals"));
     if (max_line_length != 0 && max_line_length < 16) {
       return Status::BadInput(Where{.field = "--max-line-length"}, "must be 0 (no limit) or at least 16",
                               "give the controller's longest line, or 0");
@@ -109,7 +110,7 @@ struct MachineArgs {
   nc::PostOptions Post(const std::string& title) const {
     nc::PostOptions post;
     post.title = title;
-    post.decimals = decimals;
+    post.decimals = decimals != -1 ? decimals : nc::FindPost(dialect)->DefaultDecimals();
     post.block_numbers = block_numbers;
     post.max_line_length = max_line_length;
     post.limits.travel_min_mm = {-travel, -travel, -travel_z};
@@ -130,8 +131,8 @@ void AddMachineOptions(CLI::App* app, MachineArgs* args) {
   std::string names;
   for (const std::string& name : nc::PostNames()) names += (names.empty() ? "" : ", ") + name;
   app->add_option("--dialect", args->dialect, "controller dialect: " + names)->capture_default_str();
-  app->add_option("--decimals", args->decimals, "decimals of coordinates in mm (Fanuc IS-B: at most 3)")
-      ->capture_default_str();
+  app->add_option("--decimals", args->decimals,
+                  "decimals of coordinates in mm (default: Fanuc 3 for IS-B, at most 4 on IS-C; others 4, at most 6)");
   app->add_flag("--block-numbers", args->block_numbers, "number the blocks (N10, N20, ...)");
   app->add_option("--max-line-length", args->max_line_length, "longest line the controller accepts (0 = no limit)")
       ->capture_default_str();
@@ -243,7 +244,8 @@ struct CompensateArgs {
     s.side = side;
     s.max_offset_um = max_offset_um;
     s.dialect = machine.dialect;
-    s.decimals = machine.decimals;
+    // A program formloop did not write keeps 4 decimals (0.1 um) unless --decimals is given.
+    s.decimals = machine.decimals != -1 ? machine.decimals : 4;
     return s;
   }
 };
@@ -324,6 +326,9 @@ Status PlanAndPostProbing(const ProbeArgs& args) {
     }
   }
   FL_RETURN_IF_ERROR(args.machine.CheckFeed("--probe-feed", args.probe.probe_feed_mm_per_min));
+  if (args.probe.probe_tool < 1 || args.probe.probe_tool > 9999) {
+    return Status::BadInput(Where{.field = "--probe-tool"}, "must be 1..9999", "give the probe's tool number");
+  }
   FL_RETURN_IF_ERROR(CheckOutputsNotInputs({{"--out", args.out}}, {{"--surface", args.surface.surface}}));
   FL_RETURN_IF_ERROR(args.probe.Validate());
   const double points = args.count > 0 ? args.count : static_cast<double>(nu) * nv;
@@ -345,9 +350,26 @@ Status PlanAndPostProbing(const ProbeArgs& args) {
   }
   nc::ProbeProgramOptions options = args.probe;
   options.post = args.machine.Post("formloop nc probe " + args.surface.surface);
-  FL_ASSIGN_OR_RETURN(const std::string program, nc::PostProbing(plan, args.machine.dialect, options));
-  FL_RETURN_IF_ERROR(WriteFileAtomic(args.out, program));
-  log::Info("nc probe: {} points, {} program -> {}", plan.points.size(), args.machine.dialect, args.out);
+  FL_ASSIGN_OR_RETURN(const std::vector<std::string> programs,
+                      nc::PostProbingBatches(plan, args.machine.dialect, options));
+  // One program: --out. Batches (the controller cannot store every result at once): OUT_1.ext, OUT_2.ext, ...
+  const std::filesystem::path out(args.out);
+  std::vector<std::filesystem::path> paths;
+  for (std::size_t b = 0; b < programs.size(); ++b) {
+    paths.push_back(programs.size() == 1 ? out
+                                         : out.parent_path() / (out.stem().string() + "_" + std::to_string(b + 1) +
+                                                                out.extension().string()));
+  }
+  std::vector<NamedPath> outputs;
+  for (const auto& path : paths) outputs.push_back({"--out", path});
+  FL_RETURN_IF_ERROR(CheckOutputsNotInputs(outputs, {{"--surface", args.surface.surface}}));
+  for (std::size_t b = 0; b < programs.size(); ++b) FL_RETURN_IF_ERROR(WriteFileAtomic(paths[b], programs[b]));
+  log::Info("nc probe: {} points, {} {} program(s) -> {}{}", plan.points.size(), programs.size(),
+            args.machine.dialect, paths.front().string(),
+            programs.size() > 1 ? " .. " + paths.back().string() + " (the controller stores the results of at most " +
+                                      std::to_string(nc::FindPost(args.machine.dialect)->ProbeResultCapacity(options)) +
+                                      " points at once)"
+                                : "");
   return Status::Ok();
 }
 
@@ -485,6 +507,19 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
   probe->add_option("--search-mm", o.search_mm, "probe this far beyond Q, mm")->capture_default_str();
   probe->add_option("--probe-feed", o.probe_feed_mm_per_min, "probing feed, mm/min")->capture_default_str();
   probe->add_option("--safe-z-mm", o.safe_z_mm, "rapid height between points, mm")->capture_default_str();
+  probe->add_option("--fanuc-result-base", o.fanuc_result_base,
+                    "Fanuc: first common variable of the results (#100-#199 or #500-#999); a plan that does not fit "
+                    "is split into programs OUT_1, OUT_2, ...")
+      ->capture_default_str();
+  probe->add_option("--sinumerik-r-base", o.sinumerik_r_base, "Sinumerik: first R parameter of the results")
+      ->capture_default_str();
+  probe->add_option("--sinumerik-r-last", o.sinumerik_r_last,
+                    "Sinumerik: the control's last R parameter (MD28050 - 1); a plan that does not fit is split")
+      ->capture_default_str();
+  probe->add_option("--probe-tool", o.probe_tool,
+                    "the probe's tool number: changed to and its length offset activated (G43 H; length to the "
+                    "stylus-ball centre)")
+      ->capture_default_str();
   probe->add_option("--out", probe_args->out, "the program")->required();
   probe->callback([action, probe_args] { *action = [probe_args] { return PlanAndPostProbing(*probe_args); }; });
 

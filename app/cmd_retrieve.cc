@@ -36,6 +36,7 @@
 #include "app/case_knowledge.h"
 #include "app/command.h"
 #include "app/part.h"
+#include "app/pipeline_stages.h"
 #include "app/route_calibration.h"
 #include "app/surface_source.h"
 #include "core/json_io.h"
@@ -62,23 +63,13 @@ struct RetrieveArgs {
 
 // A run's part file (app/part.h): described and fitted as `formloop run` does it.
 Result<retrieval::PartFeatures> PartFileFeatures(const PartSpec& part, const retrieval::FeatureOptions& options) {
-  recon::BSplineSurface q;
-  if (part.surface_file) {
-    FL_ASSIGN_OR_RETURN(SurfaceFromFile built, BuildSurfaceFromFile(*part.surface_file, part.tolerance_mm));
-    q = std::move(built.q);
-  } else if (part.surface_kind.empty()) {
-    FL_ASSIGN_OR_RETURN(std::unique_ptr<recon::AnalyticSurface> analytic,
-                        recon::MakeReferenceSurface(part.surface_reference));
-    recon::FitReport report;
-    FL_ASSIGN_OR_RETURN(q, recon::FitAnalytic(*analytic, part.fit_samples_u, part.fit_samples_v, part.fit, 0,
-                                              part.seed, &report));
-  } else {
-    FL_ASSIGN_OR_RETURN(const recon::GridSamples g,
-                        recon::ParametricGrid(part.surface_kind, part.surface_params, part.surface_samples));
-    recon::FitReport report;
-    FL_ASSIGN_OR_RETURN(q, recon::FitGrid(g, part.fit, &report));
+  if (part.surface_file) {  // CAD faces or a scan (app/surface_source.h)
+    FL_ASSIGN_OR_RETURN(const SurfaceFromFile from_file, BuildSurfaceFromFile(*part.surface_file, part.tolerance_mm));
+    return retrieval::ExtractFeatures(DescriptionOf(part, part.toolpath), from_file.q, options);
   }
-  return retrieval::ExtractFeatures(DescriptionOf(part, part.toolpath), q, options);
+  FL_ASSIGN_OR_RETURN(const recon::FamilySurface built,
+                      recon::BuildFamilySurface(stages::FamilySurfaceOptionsOf(part, part.seed, /*check_points=*/0)));
+  return retrieval::ExtractFeatures(DescriptionOf(part, part.toolpath), built.q, options);
 }
 
 Result<retrieval::PartFeatures> QueryFeatures(const nlohmann::json& file, const std::string& source,

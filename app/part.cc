@@ -259,9 +259,20 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
   bool true_probe_given = json.contains("machine") && json["machine"].contains("probe");
   if (f) {
     FL_RETURN_IF_ERROR(f->CheckKnown({"grid", "inset_fraction", "edge_margin_mm", "ball_radius_mm", "pretravel_mm",
-                                      "profile", "clearance_mm", "search_mm", "feed_mm_per_min"}));
+                                      "profile", "clearance_mm", "search_mm", "feed_mm_per_min", "tool",
+                                      "fanuc_result_base", "sinumerik_r_base", "sinumerik_r_last"}));
     FL_RETURN_IF_ERROR(ReadProbeProfileField(*f, source, &part.probe, &part.probe_profile_given));
     FL_RETURN_IF_ERROR(f->OptionalNumber("edge_margin_mm", &part.probe_edge_margin_mm, kNonNegative));
+    FL_RETURN_IF_ERROR(ReadInt(*f, "tool", &part.probe_program.probe_tool, 1, 9999));
+    // Where the controller keeps the results (nc-gen/probe_program.h); a plan that does not fit is split.
+    FL_RETURN_IF_ERROR(ReadInt(*f, "fanuc_result_base", &part.probe_program.fanuc_result_base, 100, 997));
+    FL_RETURN_IF_ERROR(ReadInt(*f, "sinumerik_r_base", &part.probe_program.sinumerik_r_base, 0, 32765));
+    FL_RETURN_IF_ERROR(ReadInt(*f, "sinumerik_r_last", &part.probe_program.sinumerik_r_last, 2, 32767));
+    if (part.probe_program.sinumerik_r_last < part.probe_program.sinumerik_r_base + 2) {
+      return Status::BadInput(Where{.file = source, .field = "probing.sinumerik_r_last"},
+                              "leaves no room for one point's X, Y, Z after probing.sinumerik_r_base",
+                              "give the control's last R parameter (MD28050 - 1, 99 by default)");
+    }
     if (f->Has("grid")) {
       const Json& g = f->json().at("grid");
       if (!g.is_array() || g.size() != 2 || !g[0].is_number_integer() || !g[1].is_number_integer() ||
@@ -425,7 +436,11 @@ nlohmann::json PartSpec::ToJson() const {
                          {"pretravel_mm", probe.pretravel_mm},
                          {"clearance_mm", probe_program.clearance_mm},
                          {"search_mm", probe_program.search_mm},
-                         {"feed_mm_per_min", probe_program.probe_feed_mm_per_min}}},
+                         {"feed_mm_per_min", probe_program.probe_feed_mm_per_min},
+                         {"tool", probe_program.probe_tool},
+                         {"fanuc_result_base", probe_program.fanuc_result_base},
+                         {"sinumerik_r_base", probe_program.sinumerik_r_base},
+                         {"sinumerik_r_last", probe_program.sinumerik_r_last}}},
                        {"analysis",
                         {{"neighbours", analysis.neighbours},
                          {"max_control_net", analysis.max_control_net},

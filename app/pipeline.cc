@@ -78,9 +78,14 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
 
     FL_RETURN_IF_ERROR(folder.Begin(cycle + " analysis"));
     const bool another = loop + 1 < max_loops || !in.machine.virtual_machine;
-    FL_ASSIGN_OR_RETURN(stages::Analysed analysed,
-                        stages::AnalyseCycle(part, q, programs.probing_plan, machined.log, loop, another,
-                                             in.analysis_seed + static_cast<std::uint64_t>(loop), folder));
+    auto analysed_or = stages::AnalyseCycle(part, q, programs.probing_plan, machined.log, loop, another,
+                                            in.analysis_seed + static_cast<std::uint64_t>(loop), folder);
+    if (!analysed_or.ok() && !in.machine.virtual_machine) {
+      // A measured log is the user's file: name it, not only its copy in the run folder.
+      return analysed_or.status().WithContext("the probe log of --measured " +
+                                              options.measured[static_cast<std::size_t>(loop)]);
+    }
+    FL_ASSIGN_OR_RETURN(stages::Analysed analysed, std::move(analysed_or));
     if (loop == 0) {
       FL_RETURN_IF_ERROR(folder.Begin("7/9: loop 0 diagnosis"));
       FL_ASSIGN_OR_RETURN(sim::Diagnosis d,
@@ -171,7 +176,7 @@ Status CheckRunInputs(const PartSpec& part, const RunOptions& options) {
     for (const std::string& log : options.measured) FL_RETURN_IF_ERROR(metrology::ReadProbeLog(log).status());
   } else {
     const std::string spec = options.machine.empty() ? "virtual" : options.machine;
-    const bool linuxcnc = spec.rfind("linuxcnc:", 0) == 0;  // its configuration is read by stages::ResolveInputs
+    const bool linuxcnc = spec.rfind("linuxcnc:", 0) == 0;  // its configuration is checked by the machine stage
     if (spec != "virtual" && spec.rfind("virtual:", 0) != 0 && !linuxcnc) {
       return Status::BadInput(Where{.field = "--machine"}, "unknown machine '" + spec + "'",
                               "use virtual, virtual:PROFILE, linuxcnc:CONFIG or --measured LOG.csv");

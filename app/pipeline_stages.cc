@@ -133,18 +133,21 @@ Result<Inputs> ResolveInputs(const PartSpec& given, const RunOptions& options, c
   return in;
 }
 
-Result<Surface> BuildSurface(const PartSpec& part, std::uint64_t seed, const RunFolderWriter& folder) {
+recon::FamilySurfaceOptions FamilySurfaceOptionsOf(const PartSpec& part, std::uint64_t seed, int check_points) {
   const bool parametric = !part.surface_kind.empty();
-  const recon::FamilySurfaceOptions options{
-      .kind = parametric ? recon::SurfaceFamilyKind::kParametric : recon::SurfaceFamilyKind::kReference,
-      .name = parametric ? part.surface_kind : part.surface_reference,
-      .params = part.surface_params,
-      .samples_u = part.fit_samples_u,
-      .samples_v = part.fit_samples_v,
-      .samples = part.surface_samples,
-      .fit = part.fit,
-      .check_points = part.fit_check_points,
-      .seed = seed};
+  return {.kind = parametric ? recon::SurfaceFamilyKind::kParametric : recon::SurfaceFamilyKind::kReference,
+          .name = parametric ? part.surface_kind : part.surface_reference,
+          .params = part.surface_params,
+          .samples_u = part.fit_samples_u,
+          .samples_v = part.fit_samples_v,
+          .samples = part.surface_samples,
+          .fit = part.fit,
+          .check_points = check_points,
+          .seed = seed};
+}
+
+Result<Surface> BuildSurface(const PartSpec& part, std::uint64_t seed, const RunFolderWriter& folder) {
+  const recon::FamilySurfaceOptions options = FamilySurfaceOptionsOf(part, seed, part.fit_check_points);
   FL_RETURN_IF_ERROR(folder.MakeFolder("surface"));
   const fs::path samples_path = folder.Path(fs::path("surface") / "samples.csv");
   if (part.surface_file) {
@@ -270,8 +273,18 @@ Result<Programs> WritePrograms(const PartSpec& part, const recon::BSplineSurface
   probe_options.post = p.post;
   probe_options.post.title = "formloop " + std::string(kVersion) + " probing program for part " + part.name;
   probe_options.safe_z_mm = p.nominal.safe_z_mm + part.probe.ball_radius_mm + part.probe_program.clearance_mm;
-  FL_ASSIGN_OR_RETURN(const std::string probe_program, nc::PostProbing(p.probing_plan, part.dialect, probe_options));
-  FL_RETURN_IF_ERROR(folder.WriteText(fs::path("toolpath") / ("probe" + p.extension), probe_program));
+  // Split into batches when the controller cannot store every result at once (probe_1, probe_2, ...).
+  FL_ASSIGN_OR_RETURN(const std::vector<std::string> probe_programs,
+                      nc::PostProbingBatches(p.probing_plan, part.dialect, probe_options));
+  for (std::size_t b = 0; b < probe_programs.size(); ++b) {
+    const std::string name = probe_programs.size() == 1 ? "probe" : "probe_" + std::to_string(b + 1);
+    FL_RETURN_IF_ERROR(folder.WriteText(fs::path("toolpath") / (name + p.extension), probe_programs[b]));
+  }
+  if (probe_programs.size() > 1) {
+    log::Info("[nc] the probing plan is split into {} programs: the {} controller stores the results of at most {} "
+              "points at once", probe_programs.size(), part.dialect,
+              nc::FindPost(part.dialect)->ProbeResultCapacity(probe_options));
+  }
   // The nominal program as written: what the first cycle cuts (unless pre-compensated).
   FL_ASSIGN_OR_RETURN(p.program.moves,
                       nc::ReadProgram(p.program.text, part.dialect, folder.Path(p.program.path).string()));

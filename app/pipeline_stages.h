@@ -24,6 +24,7 @@
 #include "nc-gen/toolpath.h"
 #include "planning/case_plan.h"
 #include "reconstruction/bspline_surface.h"
+#include "reconstruction/surface_family.h"
 #include "retrieval/features.h"
 #include "simulation/diagnose.h"
 #include "simulation/model.h"
@@ -55,6 +56,9 @@ struct Inputs {
 };
 Result<Inputs> ResolveInputs(const PartSpec& given, const RunOptions& options, const std::filesystem::path& data_dir,
                              const RunFolderWriter& folder);
+
+// The part's surface family as recon::BuildFamilySurface takes it (the run's surface stage, retrieve's part files).
+recon::FamilySurfaceOptions FamilySurfaceOptionsOf(const PartSpec& part, std::uint64_t seed, int check_points);
 
 // 2. The ideal surface Q: a reference surface or a parametric kind fitted as a B-spline, checked against
 // its defining function at random points not used in the fit, or CAD faces or a scan

@@ -67,6 +67,7 @@ std::string Ini(const LinuxCncMachineOptions& o, const std::vector<std::string>&
   s << "# what a run copies into its session folder\nFILES = " << joined << "\n";
   s << "SERVO_CLOCK_INPUT = " << kLinuxCncServoClockInput << "\n";
   s << "LINK_PORTS = " << (o.link ? kLinuxCncLinkPorts : 0) << "\n";
+  s << "# the touch probe's tool number (in " << kToolTable << ")\nPROBE_TOOL = " << o.probe_tool << "\n";
   if (probe) {
     s << "PROBE_SURFACE = " << probe->surface << "\nPROBE_BALL_RADIUS_MM = " << Num(probe->ball_radius_mm)
       << "\nPROBE_SHIFT_UM = " << Num(probe->pose.shift_um.x()) << " " << Num(probe->pose.shift_um.y()) << " "
@@ -141,6 +142,10 @@ std::string Hal(const LinuxCncMachineOptions& o, const std::optional<ProbeSurfac
 std::string ToolTable(const LinuxCncMachineOptions& o) {
   std::string t = "; " + std::string(kMarker) + ": tool table (the simulated machine does not use tool geometry)\n";
   for (int k = 1; k <= o.tools; ++k) t += "T" + std::to_string(k) + " P" + std::to_string(k) + " Z0 D0 ;\n";
+  if (o.probe_tool > o.tools) {
+    const std::string n = std::to_string(o.probe_tool);
+    t += "T" + n + " P" + n + " Z0 D0 ;touch probe\n";
+  }
   return t;
 }
 
@@ -173,6 +178,7 @@ Status LinuxCncMachineOptions::Validate() const {
     return Status::BadInput(Where{.field = "servo_period_ns"}, "must be in 100000..10000000 (0.1 to 10 ms)");
   }
   if (tools < 1 || tools > 999) return Status::BadInput(Where{.field = "tools"}, "must be in 1..999");
+  if (probe_tool < 1 || probe_tool > 9999) return Status::BadInput(Where{.field = "probe_tool"}, "must be in 1..9999");
   if (name.find_first_of("\n\r[]") != std::string::npos) {
     return Status::BadInput(Where{.field = "name"}, "must be one line without brackets");
   }

@@ -53,6 +53,10 @@ struct LinuxCncMachineOptions {
   bool link = true;                          // the handshake block on analog ports 0..3 (header comment)
   ProbeSurfaceOptions surface;
   int tools = 20;  // tool table entries T1..Tn (geometry is not simulated)
+  // The touch probe's tool number, in the tool table too (length 0: the probe surface acts on the joint
+  // positions, so the controlled point is the stylus-ball centre): formloop's probing programs change to
+  // it and activate its length offset (T.. M6, G43 H..; nc::ProbeProgramOptions::probe_tool, default 99).
+  int probe_tool = 99;
   Status Validate() const;
 };
 

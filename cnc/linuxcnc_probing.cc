@@ -103,6 +103,15 @@ Result<LinuxCncProbing> ProbePlanOnLinuxCnc(const LinuxCncConfig& config, const 
     FL_ASSIGN_OR_RETURN(const double clock, IniNumber(config, "FORMLOOP", "SERVO_CLOCK_INPUT"));
     program.linuxcnc_time_input = static_cast<int>(clock);
   }
+  if (!config.Get("FORMLOOP", "PROBE_TOOL").empty()) {
+    FL_ASSIGN_OR_RETURN(const double tool, IniNumber(config, "FORMLOOP", "PROBE_TOOL"));
+    if (tool != program.probe_tool) {
+      return Status::BadInput(Where{.file = config.ini.string(), .field = "[FORMLOOP] PROBE_TOOL"},
+                              "the configuration's probe is T" + FormatExact(tool) + ", the probing program's T" +
+                                  std::to_string(program.probe_tool),
+                              "give the probing program the configuration's probe tool (probing.tool)");
+    }
+  }
   if (program.post.title.empty()) program.post.title = "formloop probing on LinuxCNC, " + config.Get("EMC", "MACHINE");
   if (std::isnan(program.safe_z_mm)) {
     double top = -std::numeric_limits<double>::infinity();

@@ -473,6 +473,21 @@ Result<MachineProgram> WriteMachineProgram(const metrology::ProbingPlan& plan, c
     e.Line("o<fl_send> endsub");
   }
   e.Line(d == Dialect::kSinumerik ? "G71 G90 G17 G40 G94" : "G21 G90 G17 G94 G40 G49 G80");
+  // The probe in the spindle with its length offset (measured to the stylus-ball centre, the programmed
+  // point), as in nc-gen's probing programs: T.. M6, then G43 H<tool> with the first Z move (Sinumerik: D1).
+  const std::string probe_tool = std::to_string(o.probe.probe_tool);
+  switch (d) {
+    case Dialect::kFanuc:
+      e.Line("T" + probe_tool + " M06");
+      break;
+    case Dialect::kLinuxCnc:
+      e.Line("T" + probe_tool + " M6");
+      break;
+    case Dialect::kSinumerik:
+      e.Line("T" + probe_tool + " D1");
+      e.Line("M6");
+      break;
+  }
   // An earlier part's NG result waits for the operator.
   e.ReadBlock(a_offset, kTmp);
   e.If(e.Cmp(e.S(kTmp), "GT", "0"), e.Cmp(e.S(kTmp), "LE", "0"),
@@ -485,7 +500,11 @@ Result<MachineProgram> WriteMachineProgram(const metrology::ProbingPlan& plan, c
   e.ReadBlock(0, kC);
   WaitLoop(e, e.Cmp(e.S(kC), "NE", arm), o.arm_timeout_s, o.dwell_s);
   e.If(e.Cmp(e.S(kC), "NE", arm), e.Cmp(e.S(kC), "EQ", arm), [&] { e.Alarm(kAlarmOffline, "COLLECTOR OFFLINE"); });
-  e.Move(true, {0, 0, o.probe.safe_z_mm}, true);
+  if (d == Dialect::kSinumerik) {
+    e.Move(true, {0, 0, o.probe.safe_z_mm}, true);
+  } else {
+    e.Line(std::string(d == Dialect::kFanuc ? "G00" : "G0") + " G43 H" + probe_tool + " Z" + e.Num(o.probe.safe_z_mm));
+  }
   const bool trips = o.log_trips && d == Dialect::kLinuxCnc;
   if (trips) e.Line("(PROBEOPEN " + nc::CommentText(o.probe.results_file) + ")");
   for (std::size_t k = 0; k < n; ++k) {

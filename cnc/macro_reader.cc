@@ -456,6 +456,7 @@ struct Words {
   std::vector<int> m;
   std::array<std::optional<Expr>, 3> axes;
   std::optional<Expr> f, p, e, q, l;
+  std::optional<Expr> t, h, d;  // tool, its length offset (G43 H), Sinumerik's cutting edge (D1)
   bool meas = false;  // Sinumerik MEAS=1
 };
 
@@ -504,8 +505,8 @@ Words ParseWords(Cursor& c, Builder& b, Dialect d) {
       slot = &w.axes[letter - 'X'];
       if (*slot) throw LineError{std::string("two ") + letter + " words in one block"};
     } else {
-      const std::pair<char, std::optional<Expr>*> kSlots[] = {
-          {'F', &w.f}, {'P', &w.p}, {'E', &w.e}, {'Q', &w.q}, {'L', &w.l}};
+      const std::pair<char, std::optional<Expr>*> kSlots[] = {{'F', &w.f}, {'P', &w.p}, {'E', &w.e}, {'Q', &w.q},
+                                                              {'L', &w.l}, {'T', &w.t}, {'H', &w.h}, {'D', &w.d}};
       for (const auto& [l, where] : kSlots) slot = l == letter ? where : slot;
     }
     if (slot == nullptr) throw LineError{std::string("word ") + letter + " is not in the subset"};
@@ -515,7 +516,9 @@ Words ParseWords(Cursor& c, Builder& b, Dialect d) {
 }
 
 // Modal codes the subset accepts and ignores (units mm, absolute, XY plane, feed per minute, no
-// cutter compensation, no tool length offset, no canned cycle).
+// cutter compensation, no canned cycle). The tool words (T.. M6, G43 H.., Sinumerik D..) are accepted
+// too and have no effect here: the program's positions are the controlled point, the stylus-ball centre,
+// which the probe's length offset on the machine makes them.
 bool IsModalNop(double g, Dialect d) {
   static const double kFanuc[] = {17, 21, 40, 49, 80, 90, 94};
   static const double kLinux[] = {17, 21, 40, 49, 80, 90, 94};
@@ -531,8 +534,13 @@ bool IsModalNop(double g, Dialect d) {
 // A motion/dwell/probe/modal block from its words. Returns false when the words hold nothing to do.
 void EmitWords(Builder& b, Words w, Dialect d, const std::function<void(int m, const Words&)>& on_m) {
   std::optional<double> motion;
+  bool length_offset = false;
   for (double g : w.g) {
     if (IsModalNop(g, d)) continue;
+    if (g == 43 && d != Dialect::kSinumerik) {
+      length_offset = true;
+      continue;
+    }
     if (g == 0 || g == 1 || g == 4 || (d == Dialect::kFanuc && g == 31) ||
         (d == Dialect::kLinuxCnc && std::fabs(g - 38.2) < 1e-9)) {
       if (motion) throw LineError{"two motion codes in one block"};
@@ -540,6 +548,11 @@ void EmitWords(Builder& b, Words w, Dialect d, const std::function<void(int m, c
       continue;
     }
     throw LineError{"G" + std::to_string(g) + " is not in the " + std::string(DialectName(d)) + " subset"};
+  }
+  if (length_offset != w.h.has_value()) throw LineError{length_offset ? "G43 needs H<offset>" : "H without G43"};
+  if (w.d && d != Dialect::kSinumerik) throw LineError{"word D is not in the subset"};
+  for (const std::optional<Expr>* number : {&w.t, &w.h, &w.d}) {
+    if (*number && (*number)->op != Expr::Op::kNumber) throw LineError{"T, H and D take a number here"};
   }
   const bool has_axes = w.axes[0] || w.axes[1] || w.axes[2];
   if (motion && *motion == 4) {
@@ -739,6 +752,8 @@ class FanucReader {
       call.kind = Instr::Kind::kCall;
       const int at = b_.Emit(std::move(call));
       b_.fixups.push_back({at, "O" + std::to_string(static_cast<int>(w.p->number)), b_.pos});
+    } else if (m == 6) {
+      // Tool change: nothing to do on the emulator (EmitWords).
     } else if (m == 99 || m == 30 || m == 2) {
       if (!b_.blocks.empty()) throw LineError{"the program ends inside an open loop (" + b_.blocks.back().key + ")"};
       Instr end;
@@ -906,6 +921,7 @@ class LinuxCncReader {
     if (!c.AtEnd()) throw LineError{"unexpected text after the o-word" + c.Near()};
   }
   void MCode(int m, const Words& w) {
+    if (m == 6) return;  // tool change: nothing to do on the emulator (EmitWords)
     if (m == 2 || m == 30) {
       if (!b_.blocks.empty()) throw LineError{"the program ends inside o" + b_.blocks.back().key};
       Instr end;
@@ -1122,6 +1138,7 @@ class SinumerikReader {
     }
     Words w = ParseWords(c, b_, Dialect::kSinumerik);
     EmitWords(b_, std::move(w), Dialect::kSinumerik, [&](int m, const Words&) {
+      if (m == 6) return;  // tool change
       throw LineError{"M" + std::to_string(m) + " is not in the Sinumerik subset (M30, M17 on their own line)"};
     });
   }

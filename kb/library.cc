@@ -631,6 +631,10 @@ Result<ImportReport> Library::ImportText(const std::string& text, const std::str
     if (type == "case") {
       if (!j.contains("case")) return Status::BadInput(Where{.file = source, .line = line_no, .field = "case"}, "missing");
       FL_ASSIGN_OR_RETURN(CaseRecord record, CaseRecord::FromJson(j["case"], where));
+      if (options.check_case) {
+        FL_RETURN_IF_ERROR(options.check_case(record).WithContext(source + ":" + std::to_string(line_no) +
+                                                                  " (nothing was imported)"));
+      }
       cases.emplace_back(line_no, std::move(record));
     } else if (type == "rule") {
       Rule r;

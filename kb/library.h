@@ -162,6 +162,9 @@ struct ImportOptions {
   bool replace = false;  // replace cases whose uid exists instead of refusing the import
   // Called inside the transaction after each case is written (tests use it to interrupt an import).
   std::function<void(std::size_t cases_written)> on_case;
+  // Called for every case of the file before anything is written; an error refuses the whole import
+  // (`formloop kb import` checks the concepts and descriptor against the taxonomies this way).
+  std::function<Status(const CaseRecord&)> check_case;
 };
 
 struct ImportReport {

@@ -165,7 +165,10 @@ Result<CaseRecord> CaseRecord::FromJson(const json& j, const Where& source) {
 
 Result<CaseRecord> ReadCaseFile(const std::filesystem::path& path) {
   FL_ASSIGN_OR_RETURN(json j, ReadJsonFile(path));
-  return CaseRecord::FromJson(j, Where{.file = path.string()});
+  // The messages name the case too, when its uid can be read.
+  const bool has_uid = j.is_object() && j.contains("uid") && j["uid"].is_string();
+  return CaseRecord::FromJson(
+      j, Where{.file = path.string() + (has_uid ? " (case '" + j["uid"].get<std::string>() + "')" : "")});
 }
 
 // ---------------------------------------------------------------------------------------------- rules

@@ -101,10 +101,19 @@ const PostDialect* FindPost(std::string_view name) {
   return nullptr;
 }
 
+Status PostDialect::CheckDecimals(int decimals, const std::string& field) const {
+  if (decimals <= MaxDecimals()) return Status::Ok();
+  return Status::BadInput(Where{.field = field},
+                          std::string(Name()) + " takes at most " + std::to_string(MaxDecimals()) +
+                              " coordinate decimals, got " + std::to_string(decimals),
+                          "use " + std::to_string(DefaultDecimals()) + " (the dialect's default)");
+}
+
 Result<std::string> Post(const MoveList& list, std::string_view dialect, const PostOptions& options) {
   const PostDialect* post = FindPost(dialect);
   if (post == nullptr) return UnknownDialect(dialect);
   FL_RETURN_IF_ERROR(options.Validate());
+  FL_RETURN_IF_ERROR(post->CheckDecimals(options.decimals, "post.decimals"));
   // Safety first, once for every dialect: nothing is formatted unless every position and rate is within limits.
   FL_RETURN_IF_ERROR(CheckMoveList(list, options.limits));
   return post->Format(list, options);
@@ -209,15 +218,18 @@ std::string PlainComment(const std::string& text) {
 }
 
 void WriteWordAddressBody(const MoveList& list, const std::string& rapid, const std::string& feed,
-                          std::string (*comment)(const std::string&), ProgramText* w) {
+                          std::string (*comment)(const std::string&), ProgramText* w,
+                          const std::string& length_offset) {
   double modal_feed = -1;
+  bool offset_written = length_offset.empty();
   for (const Move& m : list.moves) {
     switch (m.type) {
       case MoveType::kComment:
         w->Comment(comment(m.text));
         break;
       case MoveType::kRapid:
-        w->Block(rapid + " " + AxisWords(*w, m));
+        w->Block(rapid + " " + (offset_written ? "" : length_offset + " ") + AxisWords(*w, m));
+        offset_written = true;
         break;
       case MoveType::kSetFeed:
         modal_feed = m.feed_mm_per_min;
@@ -235,6 +247,8 @@ void WriteWordAddressBody(const MoveList& list, const std::string& rapid, const 
     }
   }
 }
+
+std::string LengthOffsetWords(int tool) { return "G43 H" + std::to_string(tool); }
 
 std::string AxisWords(const ProgramText& w, const Move& move, const std::string& separator) {
   static const char kAxis[] = {'X', 'Y', 'Z'};

@@ -85,6 +85,15 @@ class PostDialect {
   // what is checked before any text).
   virtual Result<std::string> FormatProbing(const metrology::ProbingPlan& plan,
                                             const ProbeProgramOptions& options) const = 0;
+  // The most probe points one program of this dialect can store the results of (Fanuc: the common-variable
+  // range from the base, Sinumerik: the R parameters up to sinumerik_r_last; 0 = no limit, the results are
+  // logged to a file or by the cycle). 0 too when the base itself is invalid: FormatProbing refuses it.
+  virtual std::size_t ProbeResultCapacity(const ProbeProgramOptions&) const { return 0; }
+  // Coordinate decimals the controller takes (Fanuc: 4 on IS-C, 3 on IS-B) and the default of the CLI.
+  virtual int MaxDecimals() const { return 6; }
+  virtual int DefaultDecimals() const { return 4; }
+  // BadInput naming `field` when `decimals` is beyond MaxDecimals.
+  Status CheckDecimals(int decimals, const std::string& field) const;
 };
 
 // The registry: every dialect by name, in a fixed order.

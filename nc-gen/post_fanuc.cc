@@ -5,6 +5,10 @@
 // every coordinate carries a decimal point (PostOptions::decimals >= 1) and IS-B machines want decimals
 // <= 3; F and S are whole mm/min and rpm. Codes written: G21 mm, G90 absolute, G17 XY plane, G40/G49/G80
 // cancel radius compensation, length compensation and canned cycles, G00/G01, T.. M06, S.. M03, M05, M30.
+// Tool length compensation: "G43 H<n>" with the first Z move after the tool change ("G00 G43 H2 Z10.000",
+// operator's manual "Tool length compensation (G43, G44, G49)": the offset of register H<n> is added to
+// the Z end point, so the programmed point is the tool tip when the register holds the length to the tip).
+// H is numbered like the tool. The probing program does the same with the probe tool.
 
 // Probing (FormatProbing):
 // Fanuc 0i/30i: G31 is the one-shot skip function (group 00): a linear move at F that stops when the skip
@@ -48,6 +52,14 @@ class FanucPost : public PostDialect {
  public:
   std::string_view Name() const override { return "fanuc"; }
   std::string_view FileExtension() const override { return ".nc"; }
+  // An axis word takes 4 decimals on IS-C (0.0001 mm) and 3 on IS-B (0.001 mm), the common increment system.
+  int MaxDecimals() const override { return 4; }
+  int DefaultDecimals() const override { return 3; }
+  std::size_t ProbeResultCapacity(const ProbeProgramOptions& options) const override {
+    const long base = options.fanuc_result_base;
+    const long top = base >= 100 && base <= 199 ? 199 : (base >= 500 && base <= 999 ? 999 : -1);
+    return top < 0 ? 0 : static_cast<std::size_t>((top - base + 1) / 3);
+  }
 
   Result<std::string> Format(const MoveList& list, const PostOptions& options) const override {
     ProgramText w(options, Numbering::kBlocks, "(", ")");
@@ -57,12 +69,13 @@ class FanucPost : public PostDialect {
     w.Raw("O" + std::string(4 - number.size(), '0') + number);  // O0001..O9999
     w.Comment(FanucComment(options.title));
     w.Comment(FanucComment("ball-end tool T" + std::to_string(h.tool_number) + " radius " + w.Num(h.tool_radius_mm) +
-                           " mm, programmed point = ball tip, " + std::to_string(h.passes) + " passes"));
+                           " mm, programmed point = ball tip, G43 H" + std::to_string(h.tool_number) +
+                           " tool length to the ball tip, " + std::to_string(h.passes) + " passes"));
     w.Block("G21 G90 G17 G40 G49 G80");
     w.Block("T" + std::to_string(h.tool_number) + " M06");
     w.Block("S" + FormatFixed(h.spindle_rpm, 0) + " M03");
     if (h.coolant) w.Block("M08");
-    WriteWordAddressBody(list, "G00", "G01", FanucComment, &w);
+    WriteWordAddressBody(list, "G00", "G01", FanucComment, &w, LengthOffsetWords(h.tool_number));
     if (h.coolant) w.Block("M09");
     w.Block("M05");
     w.Block("M30");
@@ -104,7 +117,8 @@ class FanucPost : public PostDialect {
     w.Comment(FanucComment("results X Y Z per point in macro variables " + std::to_string(base) + " - " +
                            std::to_string(last)));
     w.Block("G21 G90 G17 G94 G40 G49 G80");
-    w.Block("G00 Z" + w.Num(options.safe_z_mm));
+    w.Block("T" + std::to_string(options.probe_tool) + " M06");
+    w.Block("G00 " + LengthOffsetWords(options.probe_tool) + " Z" + w.Num(options.safe_z_mm));
     const std::string feed = " F" + FormatFixed(options.probe_feed_mm_per_min, 0);
     long var = base;
     for (const ProbeStation& s : *stations) {

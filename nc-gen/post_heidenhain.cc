@@ -71,7 +71,8 @@ class HeidenhainPost : public PostDialect {
     w.Block("BEGIN PGM " + options.program_name + " MM");
     w.Comment(PlainComment(options.title));
     w.Comment("ball-end tool T" + std::to_string(h.tool_number) + " radius " + w.Num(h.tool_radius_mm) +
-              " mm; programmed point = ball tip; " + std::to_string(h.passes) + " passes");
+              " mm; programmed point = ball tip [TOOL CALL: length L of the tool table to the ball tip]; " +
+              std::to_string(h.passes) + " passes");
     w.Block("TOOL CALL " + std::to_string(h.tool_number) + " Z S" + FormatFixed(h.spindle_rpm, 0));
     double written_feed = -1;  // the last numeric F in the program (FMAX does not change it)
     for (std::size_t i = 0; i < list.moves.size(); ++i) {
@@ -190,12 +191,14 @@ class HeidenhainPost : public PostDialect {
     ProgramText w(options.post, Numbering::kAllLines, "; ", "");
     w.Block("BEGIN PGM " + options.post.program_name + " MM");
     w.Comment(PlainComment(options.post.title));
-    w.Comment("touch probe ball radius " + FormatFixed(options.ball_radius_mm, 4) +
+    w.Comment("touch probe T" + std::to_string(options.probe_tool) + " ball radius " +
+              FormatFixed(options.ball_radius_mm, 4) +
               " mm; cycle 444 at the nominal surface point along -n; " + std::to_string(plan.points.size()) +
               " points");
     // formloop has not checked these Q-parameter numbers against a TNC 640 manual: the program says
     // so, so that nobody runs it on a machine before a dry run and a check of the cycle on the control.
     w.Comment("CHECK BEFORE USE: cycle 444 Q-parameter numbers not verified against the TNC manual; dry run first");
+    w.Block("TOOL CALL " + std::to_string(options.probe_tool) + " Z");
     w.Block("L Z" + num(options.safe_z_mm) + " R0 FMAX");
     for (const ProbeStation& s : *stations) {
       w.Comment("point " + std::to_string(s.id));

@@ -1,6 +1,11 @@
 // LinuxCNC RS274NGC post (LinuxCNC G-code reference, "G Codes" and "Overview": comments in parentheses
 // may not nest; '%' lines bracket a program; N words are optional; G64 P sets the path blending
 // tolerance). Accepted by LinuxCNC's own rs274 interpreter (tests/nc-gen/post_test.cc).
+// Tool length: "G43 H<n>" (LinuxCNC G-code reference, "G43 Tool Length Offset": the offset of tool-table
+// entry n is applied, so the controlled point is the tool tip, the point the program gives) after the tool
+// change "T<n> M6", in the first rapid, the retract to safe Z. G49 in the first block cancels what an earlier
+// program left. tests/nc-gen/rs274_test.cc runs both programs through rs274 with a tool table whose
+// tools have non-zero lengths.
 
 #include <sstream>
 #include <string>
@@ -35,13 +40,14 @@ class LinuxCncPost : public PostDialect {
     w.Raw("%");
     w.Comment(CommentText(options.title));
     w.Comment("ball-end tool T" + std::to_string(h.tool_number) + " radius " + w.Num(h.tool_radius_mm) +
-              " mm; programmed point = ball tip; " + std::to_string(h.passes) + " passes");
+              " mm; programmed point = ball tip [G43 H" + std::to_string(h.tool_number) +
+              ": tool length measured to the ball tip]; " + std::to_string(h.passes) + " passes");
     w.Block("G21 G90 G17 G94 G40 G49 G80");
     w.Block("G64 P0.001");  // blend within 1 µm: the path is a dense polyline, exact stop would dwell at each point
     w.Block("T" + std::to_string(h.tool_number) + " M6");
     w.Block("S" + FormatFixed(h.spindle_rpm, 0) + " M3");
     if (h.coolant) w.Block("M8");
-    WriteWordAddressBody(list, "G0", "G1", CommentText, &w);
+    WriteWordAddressBody(list, "G0", "G1", CommentText, &w, LengthOffsetWords(h.tool_number));
     if (h.coolant) w.Block("M9");
     w.Block("M5");
     w.Block("M30");
@@ -71,7 +77,8 @@ class LinuxCncPost : public PostDialect {
     out << "%\n(" << CommentText(options.post.title) << ")\n";
     out << "(" << ProbeHeader(options, plan.points.size()) << ")\n";
     out << "G21 G90 G17 G94 G40 G49 G80\n";
-    out << "G0 Z" << FormatFixed(options.safe_z_mm, dec) << "\n";
+    out << "T" << options.probe_tool << " M6\n";
+    out << "G0 " << LengthOffsetWords(options.probe_tool) << " Z" << FormatFixed(options.safe_z_mm, dec) << "\n";
     out << "(PROBEOPEN " << CommentText(options.results_file) << ")\n";
     if (logged) {
       out << "(LOGOPEN," << CommentText(options.linuxcnc_log_file) << ")\n";

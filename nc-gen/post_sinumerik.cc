@@ -1,6 +1,7 @@
 // Siemens Sinumerik 840D sl post (SINUMERIK 840D sl Programming Manual "Fundamentals"): ';' starts a
 // comment to the end of the block; G71 metric, G90 absolute, G17 XY plane, G40 no radius compensation,
-// G94 feed in mm/min; "T1 D1" selects the tool and its first cutting edge (length offset), M6 changes it;
+// G94 feed in mm/min; "T1 D1" selects the tool and its first cutting edge, M6 changes it, and the length
+// offset of D1 takes effect with the first Z move (the controlled point is the tool tip);
 // G0/G1 with axis words (plain "X10.000" is the short form of "X=10.000"); M3/M5 spindle; M30 end.
 // Block numbers are optional "N" words.
 
@@ -27,13 +28,18 @@ class SinumerikPost : public PostDialect {
  public:
   std::string_view Name() const override { return "sinumerik"; }
   std::string_view FileExtension() const override { return ".mpf"; }
+  std::size_t ProbeResultCapacity(const ProbeProgramOptions& options) const override {
+    const long n = options.sinumerik_r_base < 0 ? 0 : (options.sinumerik_r_last - options.sinumerik_r_base + 1) / 3;
+    return n > 0 ? static_cast<std::size_t>(n) : 0;
+  }
 
   Result<std::string> Format(const MoveList& list, const PostOptions& options) const override {
     ProgramText w(options, Numbering::kBlocks, "; ", "");
     const MoveListHeader& h = list.header;
     w.Comment(PlainComment(options.title));
     w.Comment("ball-end tool T" + std::to_string(h.tool_number) + " radius " + w.Num(h.tool_radius_mm) +
-              " mm; programmed point = ball tip; " + std::to_string(h.passes) + " passes");
+              " mm; programmed point = ball tip [T" + std::to_string(h.tool_number) +
+              " D1: tool length to the ball tip]; " + std::to_string(h.passes) + " passes");
     w.Block("G71 G90 G17 G40 G94");
     w.Block("T" + std::to_string(h.tool_number) + " D1");
     w.Block("M6");
@@ -71,6 +77,8 @@ class SinumerikPost : public PostDialect {
     w.Comment(ProbeHeader(options, plan.points.size()));
     w.Comment("results X Y Z per point in R" + std::to_string(base) + " .. R" + std::to_string(last));
     w.Block("G71 G90 G17 G40 G94");
+    w.Block("T" + std::to_string(options.probe_tool) + " D1");
+    w.Block("M6");
     w.Block("G0 Z" + w.Num(options.safe_z_mm));
     const std::string feed = " F" + FormatFixed(options.probe_feed_mm_per_min, 0);
     long r = base;

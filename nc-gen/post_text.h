@@ -56,9 +56,16 @@ std::string FanucComment(const std::string& text);
 
 // The body of a word-address program (LinuxCNC, Fanuc, Sinumerik): comment lines through `comment`
 // (the dialect's sanitiser), rapids as `rapid` + axis words, feed moves as `feed` + axis words with F
-// written only when it changes (modal), feed-only blocks as "F..".
+// written only when it changes (modal), feed-only blocks as "F..". `length_offset` ("G43 H2"; empty for
+// none) goes into the first rapid, the retract to safe Z, so the offset takes effect with a Z move away
+// from the part, as Fanuc wants it ("G00 G43 H2 Z10.000"; LinuxCNC applies G43 before the motion of its block).
 void WriteWordAddressBody(const MoveList& list, const std::string& rapid, const std::string& feed,
-                          std::string (*comment)(const std::string&), ProgramText* w);
+                          std::string (*comment)(const std::string&), ProgramText* w,
+                          const std::string& length_offset = "");
+
+// The words that activate tool length compensation for tool `tool` on LinuxCNC and Fanuc: "G43 H<tool>"
+// (the length offset register numbered like the tool, the usual shop convention).
+std::string LengthOffsetWords(int tool);
 
 // The word-address reader's view of a dialect.
 struct WordDialect {

@@ -4,6 +4,8 @@
 // nc-gen/post_<dialect>.cc, with the dialect's conventions); here are what they share: the checked
 // stations, the header text, and the dispatch by dialect name.
 
+#include <algorithm>
+
 #include "core/number_text.h"
 #include "nc-gen/post_text.h"
 
@@ -46,8 +48,10 @@ std::string XyzWords(const ProgramText& w, const Eigen::Vector3d& p) {
 }
 
 std::string ProbeHeader(const ProbeProgramOptions& options, std::size_t points) {
-  return "stylus ball radius " + FormatFixed(options.ball_radius_mm, 4) +
-         " mm; programmed point = ball centre; " + std::to_string(points) + " points";
+  return "probe T" + std::to_string(options.probe_tool) + ", stylus ball radius " +
+         FormatFixed(options.ball_radius_mm, 4) +
+         " mm; programmed point = ball centre, tool length of the probe measured to the ball centre; " +
+         std::to_string(points) + " points";
 }
 
 }  // namespace internal
@@ -74,6 +78,10 @@ Status ProbeProgramOptions::Validate() const {
   if (linuxcnc_time_input > 63) {
     return Status::BadInput(Where{.field = "probe.linuxcnc_time_input"}, "LinuxCNC has analog inputs 0..63");
   }
+  if (probe_tool < 1 || probe_tool > 9999) {
+    return Status::BadInput(Where{.field = "probe.tool"}, "must be 1..9999, got " + std::to_string(probe_tool),
+                            "give the probe's pocket/tool number of the machine's tool table");
+  }
   return post.limits.Validate();
 }
 
@@ -87,7 +95,31 @@ Result<std::string> PostProbing(const metrology::ProbingPlan& plan, std::string_
                             "no probing post for dialect '" + std::string(dialect) + "'",
                             "use linuxcnc, fanuc, heidenhain or sinumerik");
   }
+  FL_RETURN_IF_ERROR(post->CheckDecimals(options.post.decimals, "post.decimals"));
   return post->FormatProbing(plan, options);
+}
+
+Result<std::vector<std::string>> PostProbingBatches(const metrology::ProbingPlan& plan, std::string_view dialect,
+                                                    const ProbeProgramOptions& options) {
+  const PostDialect* post = FindPost(dialect);
+  const std::size_t capacity = post != nullptr ? post->ProbeResultCapacity(options) : 0;
+  if (capacity == 0 || plan.points.size() <= capacity) {
+    FL_ASSIGN_OR_RETURN(std::string one, PostProbing(plan, dialect, options));
+    return std::vector<std::string>{std::move(one)};
+  }
+  const std::size_t n = (plan.points.size() + capacity - 1) / capacity;
+  std::vector<std::string> programs;
+  for (std::size_t b = 0; b < n; ++b) {
+    metrology::ProbingPlan part;
+    const std::size_t first = b * capacity, last = std::min(plan.points.size(), first + capacity);
+    part.points.assign(plan.points.begin() + static_cast<long>(first), plan.points.begin() + static_cast<long>(last));
+    ProbeProgramOptions o = options;
+    o.post.title += " (batch " + std::to_string(b + 1) + " of " + std::to_string(n) + ", points " +
+                    std::to_string(part.points.front().id) + "-" + std::to_string(part.points.back().id) + ")";
+    FL_ASSIGN_OR_RETURN(std::string text, PostProbing(part, dialect, o));
+    programs.push_back(std::move(text));
+  }
+  return programs;
 }
 
 Result<std::string> PostLinuxCncProbing(const metrology::ProbingPlan& plan, const ProbeProgramOptions& options) {

@@ -44,6 +44,10 @@ struct ProbeProgramOptions {
   double search_mm = 2.0;             // probe this far beyond the nominal surface
   double probe_feed_mm_per_min = 200;
   double safe_z_mm = 50;              // rapids between points
+  // The probe's tool number: the program changes to it (T.. M6; TOOL CALL on Heidenhain) and activates its
+  // length offset (G43 H<tool> on LinuxCNC and Fanuc, D1 on Sinumerik), which must be measured to the
+  // stylus-ball centre, the programmed point.
+  int probe_tool = 99;
   std::string results_file = "probe_results.txt";  // LinuxCNC (PROBEOPEN)
   // LinuxCNC: > 0 probes each point twice, the second time at this feed (header comment); 0 = once.
   double touch_feed_mm_per_min = 0;
@@ -64,6 +68,13 @@ std::vector<std::string> ProbingDialectNames();
 // The probing program for `plan` in `dialect` (a name of PostNames()); unknown dialects are refused.
 Result<std::string> PostProbing(const metrology::ProbingPlan& plan, std::string_view dialect,
                                 const ProbeProgramOptions& options);
+
+// The plan split into consecutive batches of at most the dialect's ProbeResultCapacity points (all in one
+// when it has no limit or the plan fits), each posted as its own program with " (batch i of n, points
+// a-b)" appended to the title; every batch stores its results from the same base, so the controller's
+// results are read out after each batch (issue 17 item 7: 400 points on a Fanuc with #500-#999).
+Result<std::vector<std::string>> PostProbingBatches(const metrology::ProbingPlan& plan, std::string_view dialect,
+                                                    const ProbeProgramOptions& options);
 
 // = PostProbing(plan, "linuxcnc", options).
 Result<std::string> PostLinuxCncProbing(const metrology::ProbingPlan& plan, const ProbeProgramOptions& options);

@@ -671,6 +671,64 @@ Result<json> InsertCaseIntoGhsom(kb::Library& library, const kb::CaseRecord& rec
               {"depth_threshold", ins.threshold}};
 }
 
+Status CheckCaseForRetrieval(const kb::CaseRecord& record, const FacetTaxonomies& taxonomies) {
+  const std::string what = "case '" + record.uid + "'";
+  const std::map<std::string, Taxonomy> by_facet = taxonomies.ByFacet();
+  for (const auto& [facet, value] : record.concepts) {
+    if (by_facet.count(facet) == 0) {
+      std::string names;
+      for (const auto& [name, tax] : by_facet) names += (names.empty() ? "" : ", ") + name;
+      return Status::BadInput(Where{.file = what, .field = "concepts." + facet}, "is not a facet",
+                              "use the facets " + names);
+    }
+  }
+  for (const auto& [facet, taxonomy] : by_facet) {
+    const auto it = record.concepts.find(facet);
+    if (it == record.concepts.end()) {
+      return Status::BadInput(Where{.file = what, .field = "concepts." + facet}, "is missing",
+                              "give the " + facet + " concept of the case (retrieval compares every facet)");
+    }
+    if (taxonomy.Find(it->second)) continue;
+    const std::optional<std::string> near = taxonomy.Suggest(it->second);
+    return Status::BadInput(Where{.file = what, .field = "concepts." + facet},
+                            "'" + it->second + "' is not a concept of the " + facet + " taxonomy",
+                            near ? "did you mean '" + *near + "'?"
+                                 : "use a node or alias of data/taxonomies/" +
+                                       std::string(facet == kMachineToolFacet ? "machine_tool" : facet) + ".txt");
+  }
+  if (record.descriptor) {
+    const std::vector<double>& d = *record.descriptor;
+    if (d.size() != static_cast<std::size_t>(kDescriptorCount)) {
+      return Status::BadInput(Where{.file = what, .field = "descriptor"},
+                              "has " + std::to_string(d.size()) + " values; the library's descriptors have " +
+                                  std::to_string(kDescriptorCount),
+                              "compute it with formloop (retrieve --part/--surface prints it) or leave it out");
+    }
+    for (std::size_t i = 0; i < d.size(); ++i) {
+      if (!std::isfinite(d[i])) {
+        return Status::BadInput(Where{.file = what, .field = "descriptor[" + std::to_string(i) + "]"},
+                                "is not a finite number (" + std::string(DescriptorNames()[i]) + ")");
+      }
+    }
+  }
+  return Status::Ok();
+}
+
+Result<std::vector<std::string>> RetrievalProblems(kb::Library& library, const FacetTaxonomies& taxonomies) {
+  std::vector<std::string> problems;
+  FL_ASSIGN_OR_RETURN(const std::vector<kb::CaseRecord> records, library.ListCases());
+  for (const kb::CaseRecord& r : records) {
+    const Status s = CheckCaseForRetrieval(r, taxonomies);
+    if (!s.ok()) problems.push_back(s.message());
+  }
+  FL_ASSIGN_OR_RETURN(const kb::GhsomStatus ghsom, library.Ghsom());
+  if (ghsom.present) {
+    const auto model = RetrievalModel::Load(library, taxonomies);
+    if (!model.ok()) problems.push_back("retrieval model: " + model.status().message());
+  }
+  return problems;
+}
+
 Result<json> AddCaseAndGrowGhsom(kb::Library& library, const kb::CaseRecord& record, bool replace) {
   FL_ASSIGN_OR_RETURN(long long changes_before, library.ChangeCounter());
   FL_RETURN_IF_ERROR(library.AddCase(record, replace));

@@ -102,6 +102,18 @@ Result<nlohmann::json> InsertCaseIntoGhsom(kb::Library& library, const kb::CaseR
 // `formloop kb add` and the retain step of `formloop run` both store cases this way.
 Result<nlohmann::json> AddCaseAndGrowGhsom(kb::Library& library, const kb::CaseRecord& record, bool replace);
 
+// A case as retrieval uses it (issue 17): the five facet concepts (kShapeFacet ...) present, each a node
+// or alias of its facet's taxonomy (the message offers the node that matches but for case and blanks,
+// "h13 " -> "H13"), no other facet, and the descriptor, when present, kDescriptorCount finite values.
+// BadInput naming the case uid and the field. `formloop kb add` and `kb import` refuse such a case before
+// writing anything; `kb check` reports it (RetrievalProblems).
+Status CheckCaseForRetrieval(const kb::CaseRecord& record, const FacetTaxonomies& taxonomies);
+
+// What `formloop retrieve` and `run --kb` would trip on in a library: every case through
+// CheckCaseForRetrieval, and, when a GHSOM is stored, the retrieval model loaded as retrieval loads it
+// (RetrievalModel::Load). One message per problem, empty when retrieval works.
+Result<std::vector<std::string>> RetrievalProblems(kb::Library& library, const FacetTaxonomies& taxonomies);
+
 struct RetrieveOptions {
   int breadth = 1;
   int min_candidates = 1;

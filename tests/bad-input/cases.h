@@ -351,6 +351,15 @@ inline std::vector<Case> AllCases() {
           .File("p.json", PartWith("/probing/ball_radius_mm", 100)),
       C("part_pretravel_huge", "part JSON", "run p.json --out r", 2, {"p.json", "pretravel_mm"})
           .File("p.json", PartWith("/probing/pretravel_mm", 10)),
+      C("part_probe_tool_zero", "part JSON", "run p.json --out r", 2, {"p.json", "probing.tool"})
+          .File("p.json", PartWith("/probing/tool", 0)),
+      C("part_sinumerik_r_last_below_base", "part JSON", "run p.json --out r", 2,
+        {"p.json", "probing.sinumerik_r_last"})
+          .File("p.json", PartWith("/probing/sinumerik_r_last", 5)),
+      C("part_fanuc_result_base_huge", "part JSON", "run p.json --out r", 2, {"p.json", "probing.fanuc_result_base"})
+          .File("p.json", PartWith("/probing/fanuc_result_base", 5000)),
+      C("nc_probe_tool_zero", "options", "nc probe --surface {F}/Q.step --probe-tool 0 --out p.ngc", 2,
+        {"--probe-tool"}),
       C("part_fit_samples_huge", "part JSON", "run p.json --out r", 2, {"p.json", "fit.samples_u"})
           .File("p.json", PartWith("/fit/samples_u", 5000)),
       C("part_travel_inverted", "part JSON", "run p.json --out r", 2, {"p.json", "travel"})

@@ -16,6 +16,21 @@ namespace {
 using testing::KbLibraryTest;
 using testing::ReadBytes;
 using testing::SyntheticCase;
+
+// A synthetic case that retrieval can use (issue 17: `kb add` and `kb check` hold cases to the taxonomies
+// in data/taxonomies and the 24-value descriptor): SyntheticCase with such concepts and descriptor.
+CaseRecord RetrievableCase(int index) {
+  CaseRecord r = SyntheticCase(index);
+  std::vector<double> d(24, 0.0);
+  for (std::size_t k = 0; k < d.size(); ++k) d[k] = 1.0 + 0.01 * static_cast<double>(index) + 0.1 * static_cast<double>(k);
+  r.descriptor = d;
+  r.concepts = {{"shape", "blade"},
+                {"material", "H13"},
+                {"tolerance", "fine"},
+                {"finish", "fine milled"},
+                {"machine_tool", "3-axis ball r<=3"}};
+  return r;
+}
 using testing::WriteBytes;
 namespace fs = std::filesystem;
 
@@ -36,7 +51,7 @@ TEST_F(KbCliTest, InitAddListShowExportImportCheckRemove) {
   EXPECT_EQ(Out()["schema_version"], 2);
   // The starter library (252 cases, GHSOM trained) is tested in kb_train_cli_test.cc.
   for (int i = 0; i < 4; ++i) {
-    WriteBytes(dir_ / "case.json", SyntheticCase(i).ToJson().dump(2));
+    WriteBytes(dir_ / "case.json", RetrievableCase(i).ToJson().dump(2));
     ASSERT_EQ(Run("kb add " + P("a.db") + " " + P("case.json")), 0) << err_;
   }
   EXPECT_EQ(Run("kb add " + P("a.db") + " " + P("case.json")), 2);  // duplicate uid
@@ -96,13 +111,16 @@ TEST_F(KbCliTest, RefusalsExitNonZeroAndLeaveFilesAlone) {
   {
     auto lib = Library::Open(dir_ / "a.db");
     ASSERT_TRUE((*lib)->StoreGhsom(GhsomRecord{}).ok());
-    ASSERT_TRUE((*lib)->AddCase(SyntheticCase(1)).ok());
+    ASSERT_TRUE((*lib)->AddCase(RetrievableCase(1)).ok());
   }
-  // A stale GHSOM is reported (a warning and ghsom.stale) without making the library unclean.
-  EXPECT_EQ(Run("kb check " + P("a.db")), 0);
-  EXPECT_EQ(Out()["clean"], true);
+  // A stale GHSOM is reported (a warning and ghsom.stale); this stored record is also empty, so the
+  // retrieval model does not load: what `retrieve` would trip on makes the library unclean (issue 17).
+  EXPECT_EQ(Run("kb check " + P("a.db")), 1);
+  EXPECT_EQ(Out()["clean"], false);
   EXPECT_EQ(Out()["ghsom"]["stale"], true);
   EXPECT_NE(Out().dump().find("is stale"), std::string::npos) << out_;
+  ASSERT_EQ(Out()["retrieval_problems"].size(), 1u) << out_;
+  EXPECT_NE(Out()["retrieval_problems"][0].get<std::string>().find("retrieval model"), std::string::npos) << out_;
 }
 
 }  // namespace

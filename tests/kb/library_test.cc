@@ -198,7 +198,7 @@ TEST_F(KbLibraryTest, ExampleCaseFileIsValid) {
   const auto example = ReadCaseFile(fs::path(FORMLOOP_SOURCE_DIR) / "data/kb/example_case.json");
   ASSERT_TRUE(example.ok()) << example.status().message();
   EXPECT_EQ(example->uid, "example-blade-001");
-  EXPECT_EQ(example->descriptor->size(), 10u);
+  EXPECT_EQ(example->descriptor->size(), 24u);  // retrieval::kDescriptorCount: the library's descriptors
   auto lib = NewLibrary("cases.db");
   ASSERT_NE(lib, nullptr);
   ASSERT_TRUE(lib->AddCase(*example).ok());

@@ -206,7 +206,7 @@ std::size_t Count(const std::string& text, const std::string& word) {
 }
 
 TEST(PostTest, LinuxCncInterpreterAcceptsProgramsAndProbing) {
-  if (std::system("command -v rs274 >/dev/null 2>&1") != 0) {
+  if (!testing::Rs274Installed()) {
     GTEST_SKIP() << "rs274 not found: install Debian's linuxcnc-uspace (scripts/setup.sh does)";
   }
   const auto q = Saddle();

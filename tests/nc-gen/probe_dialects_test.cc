@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -197,6 +198,47 @@ TEST(ProbeDialectsTest, HeidenhainNumbersBlocksButNotCycleParameterLines) {
   }
   EXPECT_EQ(parameter_lines, 3 * 9);
   EXPECT_NE(text->find("Q294=-1.500 ;1ST POINT 3RD AXIS"), std::string::npos) << *text;
+}
+
+// Issue 17 item 7: a plan larger than the controller's result storage is split into programs that each fit
+// (400 points: Fanuc #500-#999 holds 166, Sinumerik R10-R99 holds 30), every point in exactly one of them, in
+// plan order; a plan that fits and the dialects without a limit give one program equal to PostProbing's.
+TEST(ProbeDialectsTest, APlanBeyondTheResultStorageIsSplitIntoBatchesThatFit) {
+  metrology::ProbingPlan plan;
+  for (int k = 0; k < 400; ++k) {
+    metrology::ProbePoint p;
+    p.id = k + 1;
+    p.point = Eigen::Vector3d(-50.0 + 0.25 * k, 10.0 * std::sin(0.1 * k), 1.0);
+    p.normal = Eigen::Vector3d::UnitZ();
+    plan.points.push_back(p);
+  }
+  ProbeProgramOptions o = GoldenOptions();
+  EXPECT_FALSE(PostProbing(plan, "fanuc", o).ok()) << "one Fanuc program cannot hold 400 results";
+  struct Expect {
+    const char* dialect;
+    std::size_t capacity, programs;
+  } const expectations[] = {{"fanuc", 166, 3}, {"sinumerik", 30, 14}, {"linuxcnc", 0, 1}, {"heidenhain", 0, 1}};
+  for (const Expect& e : expectations) {
+    EXPECT_EQ(FindPost(e.dialect)->ProbeResultCapacity(o), e.capacity) << e.dialect;
+    const auto batches = PostProbingBatches(plan, e.dialect, o);
+    ASSERT_TRUE(batches.ok()) << e.dialect << ": " << batches.status().ToString();
+    ASSERT_EQ(batches->size(), e.programs) << e.dialect;
+    for (int id = 1; id <= 400; ++id) {
+      int seen = 0;
+      for (const std::string& text : *batches) seen += CountPointId(text, id);
+      EXPECT_EQ(seen, 1) << e.dialect << " point " << id;
+    }
+    if (e.programs == 1) {
+      EXPECT_EQ(batches->front(), *PostProbing(plan, e.dialect, o)) << e.dialect;
+    }
+  }
+  const auto fanuc = PostProbingBatches(plan, "fanuc", o);
+  EXPECT_NE((*fanuc)[0].find("#997=#5063"), std::string::npos) << "166 points fill #500-#997";
+  EXPECT_EQ((*fanuc)[0].find("#998"), std::string::npos);
+  EXPECT_NE((*fanuc)[2].find("BATCH 3 OF 3, POINTS 333-400"), std::string::npos) << (*fanuc)[2].substr(0, 300);
+  // A lower base: #100-#199 holds 33 points.
+  o.fanuc_result_base = 100;
+  EXPECT_EQ(PostProbingBatches(plan, "fanuc", o)->size(), 13u);
 }
 
 }  // namespace

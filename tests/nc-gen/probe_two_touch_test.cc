@@ -17,6 +17,7 @@
 
 #include "metrology/probe.h"
 #include "nc-gen/probe_program.h"
+#include "tests/support/rs274.h"
 
 namespace formloop::nc {
 namespace {
@@ -105,7 +106,7 @@ TEST(ProbeTwoTouchTest, OptionsThatCannotWorkAreRefusedNamingTheField) {
 }
 
 TEST(ProbeTwoTouchTest, LinuxCncInterpreterAcceptsItWithTwoProbesPerPoint) {
-  if (std::system("command -v rs274 >/dev/null 2>&1") != 0) {
+  if (!testing::Rs274Installed()) {
     GTEST_SKIP() << "rs274 not found: LinuxCNC's interpreter is not installed (Debian linuxcnc-uspace)";
   }
   const auto text = PostLinuxCncProbing(TwoPoints(), TwoTouches());
@@ -114,14 +115,13 @@ TEST(ProbeTwoTouchTest, LinuxCncInterpreterAcceptsItWithTwoProbesPerPoint) {
       std::filesystem::temp_directory_path() / ("formloop-two-touch-" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
   std::ofstream(dir / "p.ngc") << *text;
-  const std::string command = "cd " + dir.string() + " && rs274 -g p.ngc canon.txt </dev/null >console.txt 2>&1";
-  const int code = std::system(command.c_str());
-  std::ifstream canon(dir / "canon.txt");
-  int probes = 0;
-  for (std::string line; std::getline(canon, line);) probes += line.find("STRAIGHT_PROBE") != std::string::npos;
-  std::ifstream console(dir / "console.txt");
-  const std::string said((std::istreambuf_iterator<char>(console)), {});
+  // With the probe tool in rs274's tool table (tests/support/rs274.h): the program changes to it.
+  int code = 0;
+  std::string said;
+  const std::string canon = testing::RunRs274(dir / "p.ngc", &code, &said);
   std::filesystem::remove_all(dir);
+  int probes = 0;
+  for (const testing::CanonMove& m : testing::ParseCanon(canon).moves) probes += m.kind == testing::CanonKind::kProbe;
   EXPECT_EQ(code, 0) << said;
   EXPECT_EQ(probes, 4);
 }

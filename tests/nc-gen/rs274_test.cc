@@ -1,14 +1,19 @@
 // Acceptance by LinuxCNC's own interpreter (issue: "LinuxCNC programs are accepted by LinuxCNC's own
 // interpreter"): a cutting program (PlanRaster on a B-spline fit of franke, BuildMoveList, Post "linuxcnc")
 // and a probing program (PostProbing "linuxcnc") are run through `rs274 -g` (Debian linuxcnc-uspace, the
-// standalone interpreter with its built-in default tool table; the programs use no tool length offset, so
-// the canonical positions are the programmed tip / ball-centre positions in the part frame, mm). Its
-// canonical commands are parsed and compared, move by move, with formloop's moves:
+// standalone interpreter) with a tool table whose tools have non-zero lengths (tests/support/rs274.h). The
+// interpreter's canonical positions are the controlled point, the tool tip (cutting) or stylus-ball centre
+// (probing) in the part frame, mm; the spindle's gauge line is that point plus the active tool length
+// offset (USE_TOOL_LENGTH_OFFSET). Its canonical commands are parsed and compared, move by move, with
+// formloop's moves:
 //   rapid ↔ STRAIGHT_TRAVERSE, feed ↔ STRAIGHT_FEED, probe ↔ STRAIGHT_PROBE, same count and order;
 //   every axis known to formloop within half a unit of the last printed decimal of both outputs
 //   (0.5·10^-4 for formloop's 4 decimals + 0.5·10^-d for rs274's d decimals);
 //   the modal feed (last SET_FEED_RATE) at every feed and probe move equal to formloop's feed;
-//   the length units millimetres throughout.
+//   the length units millimetres throughout;
+//   at every motion the tool in the spindle is the program's tool (the probe for probing) and the active
+//   tool length offset is that tool's length from the table (G43 H<tool>): without it the tip would land a
+//   tool length lower than programmed (issue 17 item 3).
 // Skipped, with the message, only where rs274 is not installed.
 
 #include <algorithm>
@@ -47,6 +52,7 @@ using testing::Canon;
 using testing::CanonMove;
 using testing::ParseCanon;
 using testing::Rs274Installed;
+using testing::Rs274ToolLengthsMm;
 using testing::RunRs274;
 using Kind = testing::CanonKind;
 
@@ -149,6 +155,26 @@ Comparison Compare(const std::vector<ExpectedMove>& expected, const Canon& canon
   return c;
 }
 
+// The motions that do not run with `tool` in the spindle and its length offset active, and the first of them.
+struct ToolCheck {
+  std::size_t wrong = 0;
+  std::string first;
+};
+ToolCheck CheckToolLengthOffset(const Canon& canon, int tool) {
+  const double length = Rs274ToolLengthsMm().at(tool);
+  ToolCheck check;
+  for (const CanonMove& m : canon.moves) {
+    if (m.tool == tool && std::abs(m.tool_length_z - length) <= 1e-3) continue;
+    if (check.wrong++ == 0) {
+      check.first = "canon line " + std::to_string(m.line) + ": tool " + std::to_string(m.tool) +
+                    " with length offset " + std::to_string(m.tool_length_z) + " mm; expected tool " +
+                    std::to_string(tool) + " with its " + std::to_string(length) + " mm (G43 H" +
+                    std::to_string(tool) + ")";
+    }
+  }
+  return check;
+}
+
 void Report(const std::string& name, const Comparison& c) {
   std::printf(
       "[rs274] %-8s %zu motions compared (%zu STRAIGHT_TRAVERSE, %zu STRAIGHT_FEED, %zu STRAIGHT_PROBE)"
@@ -197,6 +223,7 @@ TEST_F(Rs274Test, CuttingProgramCanonicalMovesMatchTheMoveList) {
   options.scallop_um = 200.0;  // coarse: about 10,000 moves
   options.chord_tolerance_um = 1000.0;
   options.max_point_spacing_mm = 4.0;
+  options.tool.number = 3;
   const auto path = PlanRaster(Franke(), options);
   ASSERT_TRUE(path.ok()) << path.status().message();
   const auto list = BuildMoveList(*path);
@@ -217,6 +244,12 @@ TEST_F(Rs274Test, CuttingProgramCanonicalMovesMatchTheMoveList) {
   EXPECT_EQ(c.compared, expected.size());
   EXPECT_EQ(c.feeds, path->points.size()) << "every CL point is one STRAIGHT_FEED (plus the plunges)";
   EXPECT_EQ(c.probes, 0u);
+  const ToolCheck tool = CheckToolLengthOffset(canon, 3);
+  EXPECT_EQ(tool.wrong, 0u) << tool.first;
+  std::printf("[rs274] cutting  tool 3, length offset %.4f mm active at all %zu motions: the tip at the "
+              "programmed point, the gauge line %.4f mm above it\n",
+              canon.moves.empty() ? 0.0 : canon.moves.front().tool_length_z, canon.moves.size(),
+              Rs274ToolLengthsMm().at(3));
 }
 
 TEST_F(Rs274Test, ProbingProgramCanonicalMovesMatchThePlan) {
@@ -238,6 +271,23 @@ TEST_F(Rs274Test, ProbingProgramCanonicalMovesMatchThePlan) {
   Report("probing", c);
   EXPECT_EQ(c.compared, expected.size());
   EXPECT_EQ(c.probes, plan->points.size());
+  const ToolCheck tool = CheckToolLengthOffset(canon, options.probe_tool);
+  EXPECT_EQ(tool.wrong, 0u) << tool.first;
+}
+
+// The check can fail: the same program without its G43 (as formloop wrote it before issue 17) runs with
+// no length offset, and a program activating another tool's offset runs with that tool's length.
+TEST_F(Rs274Test, ToolLengthCheckCatchesAMissingOrWrongOffset) {
+  const std::string program =
+      "%\n(t)\nG21 G90 G17 G94 G40 G49 G80\nT3 M6\nG0 G43 H3 Z10.0000\nG1 X1.0000 Y2.0000 Z-1.0000 F100\nM30\n%\n";
+  Canon canon = Run("ok.ngc", program);
+  EXPECT_EQ(CheckToolLengthOffset(canon, 3).wrong, 0u) << CheckToolLengthOffset(canon, 3).first;
+  ASSERT_EQ(canon.moves.size(), 2u);
+  EXPECT_NEAR(canon.moves[1].p.z(), -1.0, 1e-9) << "the canonical position is the programmed tip";
+  canon = Run("none.ngc", std::string(program).replace(program.find("G43 H3 "), 7, ""));
+  EXPECT_EQ(CheckToolLengthOffset(canon, 3).wrong, 2u) << "without G43 both motions run with no offset";
+  canon = Run("other.ngc", std::string(program).replace(program.find("H3 "), 3, "H2 "));
+  EXPECT_EQ(CheckToolLengthOffset(canon, 3).wrong, 2u) << "with H2 both motions run with tool 2's length";
 }
 
 // The comparison itself catches a wrong move: a shifted, a missing and a mistyped motion all fail.

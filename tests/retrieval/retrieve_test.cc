@@ -15,15 +15,19 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <functional>
 #include <map>
 #include <memory>
 #include <set>
 #include <string>
 #include <vector>
 
+#include <unistd.h>
+
 #include <gtest/gtest.h>
 
 #include "core/json_io.h"
+#include "kb/schema.h"
 #include "reconstruction/surface_family.h"
 #include "retrieval/retrieve.h"
 #include "retrieval/starter.h"
@@ -329,6 +333,64 @@ TEST(DescriptorTransform, MagnitudesLogarithmicFractionsLinearAndStoredExactly) 
   ASSERT_FALSE(refused.ok());
   EXPECT_NE(refused.status().ToString().find("descriptor_transform.eps"), std::string::npos);
   EXPECT_FALSE(DescriptorTransform::FromJson(t.ToJson(), kDescriptorCount - 1).ok());
+}
+
+}  // namespace
+}  // namespace formloop::retrieval
+
+namespace formloop::retrieval {
+namespace {
+
+// Issue 17 item 4: a case retrieval cannot use is refused at `kb add`/`kb import` and found by `kb check`,
+// naming the case uid and the field.
+TEST(CaseCheck, StarterAndExampleCasesPassBadConceptsAndDescriptorsAreRefusedNamingTheCase) {
+  const auto tax = FacetTaxonomies::Load(kData / "taxonomies");
+  ASSERT_TRUE(tax.ok()) << tax.status().ToString();
+  for (const kb::CaseRecord& c : Shared().cases) ASSERT_TRUE(CheckCaseForRetrieval(c, *tax).ok()) << c.uid;
+  const auto example = kb::ReadCaseFile(kData / "kb" / "example_case.json");
+  ASSERT_TRUE(example.ok()) << example.status().ToString();
+  ASSERT_TRUE(CheckCaseForRetrieval(*example, *tax).ok()) << CheckCaseForRetrieval(*example, *tax).message();
+
+  auto refused = [&](const std::function<void(kb::CaseRecord*)>& change, std::vector<std::string> mentions) {
+    kb::CaseRecord c = *example;
+    change(&c);
+    const Status s = CheckCaseForRetrieval(c, *tax);
+    EXPECT_EQ(s.code(), StatusCode::kBadInput) << mentions.front();
+    mentions.push_back("example-blade-001");
+    for (const std::string& m : mentions) EXPECT_NE(s.message().find(m), std::string::npos) << m << ": " << s.message();
+  };
+  refused([](kb::CaseRecord* c) { c->concepts["material"] = "h13 "; },
+          {"concepts.material", "'h13 '", "did you mean 'H13'"});
+  refused([](kb::CaseRecord* c) { c->concepts["shape"] = "teapot"; }, {"concepts.shape", "teapot", "shape.txt"});
+  refused([](kb::CaseRecord* c) { c->concepts.erase("machine_tool"); }, {"concepts.machine_tool", "missing"});
+  refused([](kb::CaseRecord* c) { c->concepts["colour"] = "red"; }, {"concepts.colour", "not a facet"});
+  refused([](kb::CaseRecord* c) { c->descriptor = std::vector<double>(10, 1.0); }, {"descriptor", "10 values", "24"});
+  refused([](kb::CaseRecord* c) { (*c->descriptor)[3] = std::nan(""); }, {"descriptor[3]", "finite"});
+}
+
+TEST(CaseCheck, RetrievalProblemsFindsACaseStoredBeforeTheCheck) {
+  const auto tax = FacetTaxonomies::Load(kData / "taxonomies");
+  ASSERT_TRUE(tax.ok());
+  const auto dir = std::filesystem::temp_directory_path() / ("formloop-casecheck-" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  {
+    ASSERT_TRUE(kb::InitLibrary(dir / "cases.db").ok());
+    auto library = kb::Library::Open(dir / "cases.db");
+    ASSERT_TRUE(library.ok()) << library.status().ToString();
+    for (int i = 0; i < 3; ++i) ASSERT_TRUE((*library)->AddCase(Shared().cases[static_cast<std::size_t>(i)]).ok());
+    auto clean = RetrievalProblems(**library, *tax);
+    ASSERT_TRUE(clean.ok()) << clean.status().ToString();
+    EXPECT_TRUE(clean->empty()) << clean->front();
+    kb::CaseRecord bad = Shared().cases[3];
+    bad.concepts["material"] = "h13 ";  // as an older formloop stored it without the check
+    ASSERT_TRUE((*library)->AddCase(bad).ok());
+    auto found = RetrievalProblems(**library, *tax);
+    ASSERT_TRUE(found.ok()) << found.status().ToString();
+    ASSERT_EQ(found->size(), 1u);
+    EXPECT_NE(found->front().find("case '" + bad.uid + "'"), std::string::npos) << found->front();
+    EXPECT_NE(found->front().find("did you mean 'H13'"), std::string::npos) << found->front();
+  }
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

@@ -1,7 +1,8 @@
 #pragma once
 // Test support: LinuxCNC's standalone interpreter `rs274 -g` (Debian linuxcnc-uspace) as the reference
-// reader of RS274NGC programs, and a parser of its canonical commands written here, independent of
-// formloop's G-code reader (nc-gen/gcode_reader.h), so the two can be compared:
+// reader of RS274NGC programs, run with a tool table as a machine would run them, and a parser of its
+// canonical commands written here, independent of formloop's G-code reader (nc-gen/gcode_reader.h), so the
+// two can be compared:
 //
 //   STRAIGHT_TRAVERSE(x, y, z, a, b, c)      G0
 //   STRAIGHT_FEED(x, y, z, a, b, c)          G1
@@ -11,7 +12,17 @@
 //       YZ first = Y, second = Z, axis = X. rotation > 0 counter-clockwise in (first, second),
 //       < 0 clockwise; |rotation| − 1 extra full turns.
 //
-// Positions are in the program's units and its current work coordinate system (as rs274 prints them).
+// Positions are in the program's units and its current work coordinate system (as rs274 prints them):
+// the controlled point, without the tool length offset, which rs274 reports apart
+// (USE_TOOL_LENGTH_OFFSET). The parser keeps the tool in the spindle (SELECT_TOOL, CHANGE_TOOL) and the
+// active length offset at every motion.
+//
+// The tool table (Rs274ToolLengthsMm) gives every tool formloop's tests use a different, non-zero length,
+// so a program that does not activate the length offset of the tool in the spindle (G43 H<tool>) is
+// caught (tests/nc-gen/rs274_test.cc): the offset at its moves is then 0 or another tool's. Without a table
+// rs274 knows tools 1-3 with length 0; this table holds those and the probe's default number 99. The
+// standalone interpreter reads the table in its machine units, inches (a Z of 3.0 becomes 76.2 mm in its
+// millimetre output), so the lengths are written in inches and stated here in mm.
 
 #include <algorithm>
 #include <array>
@@ -22,6 +33,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <map>
 #include <numbers>
 #include <sstream>
 #include <string>
@@ -38,19 +50,37 @@ namespace formloop::testing {
 
 inline bool Rs274Installed() { return std::system("command -v rs274 >/dev/null 2>&1") == 0; }
 
-// Runs `rs274 -g program` and returns the canonical commands; *exit_code and *console receive the exit
-// status and what rs274 printed. rs274 keeps its tool table in shared memory, so two of them running at
-// once disturb each other ("Requested tool 1 not found", bus errors): runs from parallel ctest processes
-// take turns through an exclusive lock on a file in the temp directory. The canonical output goes to
-// the temp directory, never next to the program (which may sit in read-only reference data).
+// Tool number -> length in mm (a whole number of tenths of an inch, so the inch table is exact).
+inline const std::map<int, double>& Rs274ToolLengthsMm() {
+  static const std::map<int, double> lengths = {{1, 63.5}, {2, 71.12}, {3, 76.2}, {99, 114.3}};
+  return lengths;
+}
+
+// Runs `rs274 -t table -g program` with the tool table above and returns the canonical commands (empty
+// when rs274 wrote none); *exit_code and *console receive the exit status and what rs274 printed. rs274
+// keeps its tool table in shared memory, so two of them running at once disturb each other ("Requested
+// tool 1 not found", bus errors): runs from parallel ctest processes take turns through an exclusive lock
+// on a file in the temp directory. The table and the canonical output go to the temp directory, never
+// next to the program (which may sit in read-only reference data).
 inline std::string RunRs274(const std::filesystem::path& program, int* exit_code, std::string* console) {
   const std::filesystem::path lock_path = std::filesystem::temp_directory_path() / "formloop-rs274.lock";
   const int lock = ::open(lock_path.c_str(), O_RDWR | O_CREAT, 0666);
   if (lock >= 0) ::flock(lock, LOCK_EX);
-  const std::filesystem::path canon =
-      std::filesystem::temp_directory_path() /
-      ("formloop-rs274-" + std::to_string(::getpid()) + "-" + program.filename().string() + ".canon");
-  const std::string command = "rs274 -g " + program.string() + " " + canon.string() + " </dev/null 2>&1";
+  const std::string stem = (std::filesystem::temp_directory_path() /
+                            ("formloop-rs274-" + std::to_string(::getpid()) + "-" + program.filename().string()))
+                               .string();
+  const std::filesystem::path canon = stem + ".canon", table = stem + ".tbl";
+  {
+    std::ofstream out(table);
+    int pocket = 1;
+    for (const auto& [tool, length_mm] : Rs274ToolLengthsMm()) {
+      char line[96];
+      std::snprintf(line, sizeof line, "T%d P%d Z%.4f D0.25 ;formloop test tool\n", tool, pocket++, length_mm / 25.4);
+      out << line;
+    }
+  }
+  const std::string command =
+      "rs274 -t " + table.string() + " -g " + program.string() + " " + canon.string() + " </dev/null 2>&1";
   FILE* pipe = ::popen(command.c_str(), "r");
   std::array<char, 4096> buffer{};
   std::size_t n;
@@ -62,6 +92,7 @@ inline std::string RunRs274(const std::filesystem::path& program, int* exit_code
   std::ifstream in(canon);
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   std::filesystem::remove(canon);
+  std::filesystem::remove(table);
   if (lock >= 0) ::close(lock);  // releases the lock
   return text;
 }
@@ -91,6 +122,8 @@ struct CanonMove {
   double feed = 0;                                  // modal SET_FEED_RATE when the move was issued
   long line = 0;                                    // line of the canon output
   std::string n_word;                               // "N0240" or "N....."
+  int tool = 0;              // tool in the spindle (SELECT_TOOL before the last CHANGE_TOOL), 0 for none
+  double tool_length_z = 0;  // active tool length offset along Z (USE_TOOL_LENGTH_OFFSET), program units
   // Arcs: plane axes (u, v, w) as indices into X, Y, Z, centre (u, v), turns and direction.
   int u = 0, v = 1, w = 2;
   Eigen::Vector2d centre = Eigen::Vector2d::Zero();
@@ -140,7 +173,8 @@ inline Canon ParseCanon(const std::string& text) {
   std::istringstream in(text);
   std::string line;
   long number = 0;
-  double feed = 0;
+  double feed = 0, tool_length_z = 0;
+  int selected = 0, spindle = 0;
   int u = 0, v = 1, w = 2;
   Eigen::Vector3d position = Eigen::Vector3d::Zero();
   while (std::getline(in, line)) {
@@ -162,6 +196,8 @@ inline Canon ParseCanon(const std::string& text) {
       m.feed = feed;
       m.line = number;
       m.n_word = n_word;
+      m.tool = spindle;
+      m.tool_length_z = tool_length_z;
       position = m.p;
       out.moves.push_back(m);
     };
@@ -196,6 +232,14 @@ inline Canon ParseCanon(const std::string& text) {
       } else {
         u = 0, v = 1, w = 2;
       }
+    } else if (name == "SELECT_TOOL" && !args.empty()) {
+      selected = std::atoi(args[0].c_str());
+    } else if (name == "CHANGE_TOOL") {
+      spindle = selected;
+    } else if (name == "USE_TOOL_LENGTH_OFFSET" && !args.empty()) {
+      std::istringstream offset(args[0]);  // "x y z" of the offset, then other fields
+      double x = 0, y = 0;
+      offset >> x >> y >> tool_length_z;
     } else if (name == "SET_FEED_RATE" && !args.empty()) {
       feed = std::strtod(args[0].c_str(), nullptr);
     } else if (name == "STRAIGHT_TRAVERSE" || name == "STRAIGHT_FEED" || name == "STRAIGHT_PROBE") {

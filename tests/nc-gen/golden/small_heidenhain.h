@@ -1,6 +1,6 @@
 0 BEGIN PGM FORMLOOP MM
 1 ; formloop small test path (2 passes)
-2 ; ball-end tool T2 radius 3.000 mm; programmed point = ball tip; 2 passes
+2 ; ball-end tool T2 radius 3.000 mm; programmed point = ball tip [TOOL CALL: length L of the tool table to the ball tip]; 2 passes
 3 TOOL CALL 2 Z S12000
 4 L Z+10.000 R0 FMAX M3
 5 ; cut
