@@ -47,9 +47,9 @@ Result<kb::CaseRecord> MakeRetainedCase(const RetainInput& in) {
                         {"standard_error", e.std_errors.empty() ? 0.0 : e.std_errors[k]}});
       }
     }
-    nlohmann::json entry = {{"machine", part.machine_name}, {"tool", tool},       {"material", part.material},
-                            {"effects", rows},              {"model", in.learned->ToJson()},
-                            {"provenance", in.learned_provenance}};
+    nlohmann::json entry = {{"machine", part.machine_name},  {"tool", tool},
+                            {"material", part.material},     {"effects", rows},
+                            {"model", in.learned->ToJson()}, {"provenance", in.learned_provenance}};
     nlohmann::json models = record.simulation.value("effect_models", nlohmann::json::array());
     if (!models.is_array()) models = nlohmann::json::array();
     bool replaced = false;
@@ -66,7 +66,9 @@ Result<kb::CaseRecord> MakeRetainedCase(const RetainInput& in) {
   const auto& p = in.plan;
   record.manufacturing = {
       {"machine", part.machine_name},
-      {"tools", nlohmann::json::array({{{"type", "ball-end"}, {"number", p.tool.number}, {"radius_mm", p.tool.radius_mm},
+      {"tools", nlohmann::json::array({{{"type", "ball-end"},
+                                        {"number", p.tool.number},
+                                        {"radius_mm", p.tool.radius_mm},
                                         {"flutes", part.flutes}}})},
       {"strategy",
        {{"pattern", p.zigzag ? "raster zig-zag" : "raster one-way"},

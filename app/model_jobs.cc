@@ -63,8 +63,11 @@ Status StoreLearnedModel(const DiagnoseArgs& args, const RunFolder& run, const s
                           {"effects", rows},
                           {"model", diagnosis.extended.ToJson()},
                           {"provenance",
-                           {{"measured", args.measured}, {"run", args.run}, {"baseline", args.baseline},
-                            {"points", diagnosis.n}, {"heldout_rms_before_um", diagnosis.heldout_rms_before_um},
+                           {{"measured", args.measured},
+                            {"run", args.run},
+                            {"baseline", args.baseline},
+                            {"points", diagnosis.n},
+                            {"heldout_rms_before_um", diagnosis.heldout_rms_before_um},
                             {"heldout_rms_after_um", diagnosis.heldout_rms_after_um}}}};
   nlohmann::json& models = record.simulation["effect_models"];
   if (!models.is_array()) models = nlohmann::json::array();
@@ -135,7 +138,8 @@ Status RunSimulate(const SimulateArgs& args) {
 }
 
 Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
-  if (args.out.empty()) return Status::BadInput(Where{.field = "--out"}, "is required", "give a folder for the diagnosis");
+  if (args.out.empty())
+    return Status::BadInput(Where{.field = "--out"}, "is required", "give a folder for the diagnosis");
   if (args.measured.empty() == args.features.empty()) {
     return Status::BadInput(Where{.field = "--measured/--features"}, "give exactly one of them");
   }
@@ -151,9 +155,9 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
   // DIR.partial and renamed into place at the end, replacing only a folder formloop wrote.
   const fs::path dir(args.out);
   const std::vector<NamedPath> inputs = {
-      {"--measured", args.measured}, {"--features", args.features},   {"--run", args.run},
+      {"--measured", args.measured}, {"--features", args.features},           {"--run", args.run},
       {"--plan", args.plan},         {"--probe-profile", args.probe_profile}, {"--baseline", args.baseline},
-      {"--validate", args.validate}, {"--validate-run", args.validate_run}, {"--validate-plan", args.validate_plan},
+      {"--validate", args.validate}, {"--validate-run", args.validate_run},   {"--validate-plan", args.validate_plan},
       {"--library", args.library}};
   StagedOutputFolder folder;
   FL_RETURN_IF_ERROR(folder.Open(dir, "--out", "diagnose", inputs));
@@ -210,33 +214,38 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
       const sim::ProbeDataInput in2 = ProbeInputOf(run2, plan2, log2);
       FL_ASSIGN_OR_RETURN(const double before, sim::PredictionRms(in2, baseline));
       FL_ASSIGN_OR_RETURN(const double after, sim::PredictionRms(in2, diagnosis.extended));
-      second_part = {{"log", args.validate}, {"run", args.validate_run}, {"rms_before_um", before}, {"rms_after_um", after}};
+      second_part = {
+          {"log", args.validate}, {"run", args.validate_run}, {"rms_before_um", before}, {"rms_after_um", after}};
     }
   }
   nlohmann::json out = diagnosis.ToJson();
   out["gain"]["second_part"] = second_part;
   FL_RETURN_IF_ERROR(MakeDirectories(staging / "inputs"));
-  for (const auto& [from, name] : std::vector<std::pair<std::string, std::string>>{
-           {args.measured, "measured.csv"}, {args.features, "features.csv"}, {args.baseline, "baseline.json"},
-           {args.plan, "plan" + fs::path(args.plan).extension().string()}, {args.validate, "validate.csv"},
-           {args.probe_profile, "probe_profile.json"}}) {
+  for (const auto& [from, name] :
+       std::vector<std::pair<std::string, std::string>>{{args.measured, "measured.csv"},
+                                                        {args.features, "features.csv"},
+                                                        {args.baseline, "baseline.json"},
+                                                        {args.plan, "plan" + fs::path(args.plan).extension().string()},
+                                                        {args.validate, "validate.csv"},
+                                                        {args.probe_profile, "probe_profile.json"}}) {
     if (!from.empty()) FL_RETURN_IF_ERROR(CopyInto(from, staging / "inputs" / name));
   }
-  nlohmann::json args_json = {{"measured", args.measured}, {"features", args.features}, {"run", args.run},
-                              {"plan", args.plan}, {"probe_profile", args.probe_profile}, {"baseline", args.baseline},
-                              {"validate", args.validate},
-                              {"validate_run", args.validate_run}};
+  nlohmann::json args_json = {
+      {"measured", args.measured}, {"features", args.features},           {"run", args.run},
+      {"plan", args.plan},         {"probe_profile", args.probe_profile}, {"baseline", args.baseline},
+      {"validate", args.validate}, {"validate_run", args.validate_run}};
   FL_RETURN_IF_ERROR(WriteJsonFile(staging / "inputs" / "arguments.json", args_json));
   FL_RETURN_IF_ERROR(WriteJsonFile(staging / "diagnosis.json", out));
   FL_RETURN_IF_ERROR(sim::WriteModel(staging / "model.json", diagnosis.extended));
-  if (!residuals.points.empty()) FL_RETURN_IF_ERROR(WritePoints(staging / "residuals.csv", residuals, {.precision = 6}));
+  if (!residuals.points.empty())
+    FL_RETURN_IF_ERROR(WritePoints(staging / "residuals.csv", residuals, {.precision = 6}));
   FL_RETURN_IF_ERROR(folder.Commit());
   log::Info("{}", diagnosis.Summary());
   if (stored_run.has_value()) {
     const Status stored = StoreLearnedModel(args, *stored_run, diagnosis);
     if (!stored.ok()) {
-      return Status(stored.code(), "the diagnosis is in '" + dir.string() + "', but storing the learned model failed: " +
-                                       stored.message());
+      return Status(stored.code(), "the diagnosis is in '" + dir.string() +
+                                       "', but storing the learned model failed: " + stored.message());
     }
     out["stored_in_library"] = {{"library", args.library}, {"case", args.case_uid}};
   }

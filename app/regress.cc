@@ -127,7 +127,8 @@ Result<RegressResult> RunRegress(const RegressOptions& options) {
   for (const auto& entry : fs::directory_iterator(options.parts, ec)) {
     if (entry.path().extension() == ".json") files.push_back(entry.path());
   }
-  if (ec) return Status::BadInput(Where{.file = options.parts.string()}, "cannot list the reference parts: " + ec.message());
+  if (ec)
+    return Status::BadInput(Where{.file = options.parts.string()}, "cannot list the reference parts: " + ec.message());
   std::sort(files.begin(), files.end());
   if (files.empty()) return Status::BadInput(Where{.file = options.parts.string()}, "no reference parts (*.json)");
 
@@ -135,7 +136,8 @@ Result<RegressResult> RunRegress(const RegressOptions& options) {
     const bool known = std::any_of(files.begin(), files.end(), [&](const fs::path& f) { return f.stem() == name; });
     if (!known) {
       return Status::BadInput(Where{.file = options.parts.string(), .field = "--only"},
-                              "no reference part '" + name + "'", "name parts as their files are named (without .json)");
+                              "no reference part '" + name + "'",
+                              "name parts as their files are named (without .json)");
     }
   }
   // A fresh starter library: the regression must not depend on what earlier runs stored. The old folder

@@ -9,9 +9,9 @@
 #include <optional>
 #include <sstream>
 
+#include <fmt/format.h>
 #include <Eigen/QR>
 #include <boost/math/distributions/fisher_f.hpp>
-#include <fmt/format.h>
 
 #include "metrology/deviations.h"
 #include "metrology/morans_i.h"
@@ -28,7 +28,8 @@ std::string SeparateHint(std::string_view effect) {
       {"tool_radius", "a constant offset along n: measure the tool (tool setter) or probe a datum"},
       {"tool_wear", "grows with cutting path length: probe regions cut early and late, or cut in another order"},
       {"tool_deflection", "grows with wall steepness and engagement: probe steep and flat regions"},
-      {"thermal_drift_z", "saturates over cutting time and acts on n_z: include pauses or a longer cut, probe inclined regions"},
+      {"thermal_drift_z",
+       "saturates over cutting time and acts on n_z: include pauses or a longer cut, probe inclined regions"},
       {"axis_scale_x", "grows with x: probe across the whole x range"},
       {"axis_scale_y", "grows with y: probe across the whole y range"},
       {"axis_scale_z", "grows with z: probe across the whole z range"},
@@ -48,14 +49,14 @@ std::string SeparateHint(std::string_view effect) {
 
 // The observations the engine fits: residual r, design blocks per effect, spatial structure.
 struct Problem {
-  Eigen::VectorXd r;                            // µm
-  Eigen::MatrixXd xy;                           // n × 2 positions for CV blocks
-  Eigen::MatrixXd pos;                          // n × d positions the k-NN lists were built from
-  std::vector<std::vector<int>> neighbours;     // for Moran's I
+  Eigen::VectorXd r;                         // µm
+  Eigen::MatrixXd xy;                        // n × 2 positions for CV blocks
+  Eigen::MatrixXd pos;                       // n × d positions the k-NN lists were built from
+  std::vector<std::vector<int>> neighbours;  // for Moran's I
   std::function<bool(const Effect*)> applicable;
   // n × p Jacobian of effect e at θ.
   std::function<Eigen::MatrixXd(const Effect*, const std::vector<double>&)> jacobian;
-  double time_scale_s = 1;                      // for the τ search range
+  double time_scale_s = 1;  // for the τ search range
   int n() const { return static_cast<int>(r.size()); }
 };
 
@@ -63,7 +64,7 @@ struct Fit {
   Eigen::VectorXd beta;  // over [X, J]
   Eigen::VectorXd residual;
   double rss = 0;
-  Eigen::MatrixXd cov;   // σ² (AᵀA)⁻¹
+  Eigen::MatrixXd cov;  // σ² (AᵀA)⁻¹
   int rank = 0;
 };
 
@@ -89,9 +90,9 @@ Fit LeastSquares(const Eigen::MatrixXd& a, const Eigen::VectorXd& r) {
 
 struct EffectFit {
   const Effect* effect = nullptr;
-  std::vector<double> theta;       // fitted parameters
-  Eigen::MatrixXd columns;         // n × p linear(ised) columns at theta (linear parameters only for profiling)
-  Fit fit;                         // of [X, columns]
+  std::vector<double> theta;  // fitted parameters
+  Eigen::MatrixXd columns;    // n × p linear(ised) columns at theta (linear parameters only for profiling)
+  Fit fit;                    // of [X, columns]
   std::vector<double> std_errors;
 };
 
@@ -202,18 +203,20 @@ double BlockCvRms(const Problem& prob, const Eigen::MatrixXd& design, int blocks
   const int n = prob.n();
   if (design.cols() == 0) return std::sqrt(prob.r.squaredNorm() / n);
   const std::vector<int> block = metrology::GridBlocks(prob.xy.col(0), prob.xy.col(1), blocks);
-  return metrology::SpatialBlockCv(block, blocks * blocks, prob.r, [&](const std::vector<int>& train) {
-           Eigen::MatrixXd a(train.size(), design.cols());
-           Eigen::VectorXd y(train.size());
-           for (std::size_t t = 0; t < train.size(); ++t) {
-             a.row(t) = design.row(train[t]);
-             y[t] = prob.r[train[t]];
-           }
-           Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(a);
-           qr.setThreshold(1e-10);
-           const Eigen::VectorXd beta = qr.solve(y);
-           return std::optional<metrology::HeldOutPredictor>([&design, beta](int i) { return design.row(i).dot(beta); });
-         })
+  return metrology::SpatialBlockCv(block, blocks * blocks, prob.r,
+                                   [&](const std::vector<int>& train) {
+                                     Eigen::MatrixXd a(train.size(), design.cols());
+                                     Eigen::VectorXd y(train.size());
+                                     for (std::size_t t = 0; t < train.size(); ++t) {
+                                       a.row(t) = design.row(train[t]);
+                                       y[t] = prob.r[train[t]];
+                                     }
+                                     Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(a);
+                                     qr.setThreshold(1e-10);
+                                     const Eigen::VectorXd beta = qr.solve(y);
+                                     return std::optional<metrology::HeldOutPredictor>(
+                                         [&design, beta](int i) { return design.row(i).dot(beta); });
+                                   })
       .rms;
 }
 
@@ -304,8 +307,8 @@ Result<Diagnosis> SelectCauses(const Problem& prob, const Model& baseline, const
     cause.z_after = MoranZ(chosen.fit.residual, a, w);
     cause.variance_explained = rss0 > 0 ? (current.rss - chosen.fit.rss) / rss0 : 0.0;
     // Confounding: how well each other candidate reproduces this effect's contribution.
-    const Eigen::VectorXd contribution = chosen.columns * Eigen::Map<const Eigen::VectorXd>(chosen.theta.data(),
-                                                                                              chosen.theta.size());
+    const Eigen::VectorXd contribution =
+        chosen.columns * Eigen::Map<const Eigen::VectorXd>(chosen.theta.data(), chosen.theta.size());
     for (std::size_t i = 0; i < candidates.size(); ++i) {
       if (candidates[i] == e) continue;
       const Eigen::MatrixXd cols = fits[i].columns;
@@ -412,8 +415,8 @@ Result<Diagnosis> SelectCauses(const Problem& prob, const Model& baseline, const
       }
     }
   }
-  out.extended.provenance = {{"baseline", baseline.provenance}, {"diagnosed_points", n},
-                             {"named", nlohmann::json::array()}};
+  out.extended.provenance = {
+      {"baseline", baseline.provenance}, {"diagnosed_points", n}, {"named", nlohmann::json::array()}};
   for (const auto& c : out.causes) out.extended.provenance["named"].push_back(c.effect);
   return out;
 }
@@ -531,7 +534,8 @@ Result<Diagnosis> RunEngine(const Problem& prob, const Model& baseline, const Di
                                    {"peak_residual_um", peak},
                                    {"peak_xy_mm", {peak_xy.x(), peak_xy.y()}},
                                    {"causes_named_before_setting_it_aside", nlohmann::json::array()}});
-  for (const Cause& c : first.causes) out.unexplained_where.back()["causes_named_before_setting_it_aside"].push_back(c.effect);
+  for (const Cause& c : first.causes)
+    out.unexplained_where.back()["causes_named_before_setting_it_aside"].push_back(c.effect);
   return out;
 }
 
@@ -559,7 +563,8 @@ Result<Problem> Subset(const Problem& prob, const std::vector<int>& keep, int kn
   return sub;
 }
 
-Eigen::MatrixXd ProbeJacobian(const std::vector<PointContext>& contexts, const Effect* e, const std::vector<double>& theta) {
+Eigen::MatrixXd ProbeJacobian(const std::vector<PointContext>& contexts, const Effect* e,
+                              const std::vector<double>& theta) {
   const int p = e->parameter_count();
   Eigen::MatrixXd j(contexts.size(), p);
   std::vector<double> row(p);
@@ -570,7 +575,6 @@ Eigen::MatrixXd ProbeJacobian(const std::vector<PointContext>& contexts, const E
   return j;
 }
 
-
 }  // namespace
 
 Status DiagnoseOptions::Validate() const {
@@ -580,7 +584,8 @@ Status DiagnoseOptions::Validate() const {
   if (cv_blocks < 2) return Status::BadInput(Where{.field = "cv_blocks"}, "must be >= 2");
   for (const auto& c : candidates) {
     if (FindEffect(c) == nullptr) {
-      return Status::BadInput(Where{.field = "candidates"}, "unknown effect '" + c + "'", "use one of " + EffectNames());
+      return Status::BadInput(Where{.field = "candidates"}, "unknown effect '" + c + "'",
+                              "use one of " + EffectNames());
     }
   }
   return Status::Ok();
@@ -740,7 +745,8 @@ Result<std::vector<FeaturePosition>> ReadFeatures(const std::string& path) {
       continue;
     }
     if (cells.size() < col.size()) {
-      return Status::BadInput(Where{.file = path, .line = line_no}, "expected " + std::to_string(col.size()) + " cells");
+      return Status::BadInput(Where{.file = path, .line = line_no},
+                              "expected " + std::to_string(col.size()) + " cells");
     }
     FeaturePosition f;
     f.id = cells[col["id"]];
@@ -750,7 +756,8 @@ Result<std::vector<FeaturePosition>> ReadFeatures(const std::string& path) {
       char* end = nullptr;
       *value = std::strtod(s.c_str(), &end);
       if (s.empty() || end != s.c_str() + s.size() || !std::isfinite(*value)) {
-        return Status::BadInput(Where{.file = path, .line = line_no, .field = name}, "'" + s + "' is not a finite number");
+        return Status::BadInput(Where{.file = path, .line = line_no, .field = name},
+                                "'" + s + "' is not a finite number");
       }
       return Status::Ok();
     };
@@ -882,8 +889,9 @@ nlohmann::json Diagnosis::ToJson() const {
           {"causes", causes_json},
           {"unexplained", unexplained_json},
           {"confounded", confounded_json},
-          {"not_screened", {{"effects", not_screened},
-                            {"reason", not_screened.empty() ? "" : "needs the tool path (give the run folder)"}}},
+          {"not_screened",
+           {{"effects", not_screened},
+            {"reason", not_screened.empty() ? "" : "needs the tool path (give the run folder)"}}},
           {"gain",
            {{"rms_before_um", rms_before_um},
             {"rms_after_um", rms_after_um},
@@ -900,7 +908,8 @@ std::string Diagnosis::Summary() const {
   for (const auto& c : causes) {
     s += fmt::format("  cause: {} (", c.effect);
     for (std::size_t k = 0; k < c.parameter_names.size(); ++k) {
-      s += fmt::format("{}{} = {:.4g} +- {:.2g}", k ? ", " : "", c.parameter_names[k], c.parameters[k], c.std_errors[k]);
+      s +=
+          fmt::format("{}{} = {:.4g} +- {:.2g}", k ? ", " : "", c.parameter_names[k], c.parameters[k], c.std_errors[k]);
     }
     s += fmt::format("); explains {:.0f}% of the residual variance; Moran z {:.2f} -> {:.2f}\n",
                      100 * c.variance_explained, c.z_before, c.z_after);
@@ -909,7 +918,8 @@ std::string Diagnosis::Summary() const {
     s += fmt::format("  confounded: {} with {} (correlation {:.3f}); to separate: {}\n", c.named, c.other,
                      c.correlation, c.separate_by);
   }
-  if (unexplained) s += fmt::format("  unexplained systematic residual (Moran z {:.2f} after the named causes)\n", z_after);
+  if (unexplained)
+    s += fmt::format("  unexplained systematic residual (Moran z {:.2f} after the named causes)\n", z_after);
   s += fmt::format("  gain: rms {:.2f} -> {:.2f} um; held-out (block CV) {:.2f} -> {:.2f} um\n", rms_before_um,
                    rms_after_um, heldout_rms_before_um, heldout_rms_after_um);
   return s;

@@ -39,26 +39,26 @@
 namespace formloop::sim {
 
 struct DiagnoseOptions {
-  double alpha = 0.01;                 // family-wise level of the F test per step (spec: 0.01)
-  double z_critical = 2.326;           // residual Moran's z above which the residual is "systematic" (α = 0.01)
-  double min_share = 0.3;              // of the systematic variance an effect must explain to be named (see above)
+  double alpha = 0.01;        // family-wise level of the F test per step (spec: 0.01)
+  double z_critical = 2.326;  // residual Moran's z above which the residual is "systematic" (α = 0.01)
+  double min_share = 0.3;     // of the systematic variance an effect must explain to be named (see above)
   double confounded_correlation = 0.95;
-  int knn = 8;                         // Moran's I weights
+  int knn = 8;  // Moran's I weights
   int max_causes = 4;
-  int cv_blocks = 4;                   // block CV: cv_blocks × cv_blocks contiguous blocks over x-y
-  std::vector<std::string> candidates; // empty = the whole catalogue (minus the baseline's effects)
-  bool toolpath_known = true;          // false: effects that need the tool path are not screened (reported)
+  int cv_blocks = 4;                    // block CV: cv_blocks × cv_blocks contiguous blocks over x-y
+  std::vector<std::string> candidates;  // empty = the whole catalogue (minus the baseline's effects)
+  bool toolpath_known = true;           // false: effects that need the tool path are not screened (reported)
   Status Validate() const;
 };
 
 struct ScreenedEffect {
   std::string effect;
   std::vector<double> parameters, std_errors;
-  double rss_drop = 0;    // µm²
+  double rss_drop = 0;  // µm²
   double f = 0, p_value = 1;
   double delta_bic = 0;
-  double share = 0;       // of the systematic variance of the residual it was fitted to
-  double z_after = 0;     // residual Moran's z with it added
+  double share = 0;    // of the systematic variance of the residual it was fitted to
+  double z_after = 0;  // residual Moran's z with it added
   bool significant = false;
 };
 

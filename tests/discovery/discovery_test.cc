@@ -41,14 +41,15 @@ TEST_P(SingleEffect, IsNamedFirstWithItsParameterAndAHeldOutGain) {
         if (err <= 1.96 * d->causes.front().std_errors[j]) ++in_interval;
       }
     } else {
-      std::printf("  miss: seed %llu %s n %d snr %.1f -> %s\n", static_cast<unsigned long long>(seed), s.surface.c_str(),
-                  s.points, s.snr, d->causes.empty() ? "(none)" : d->causes.front().effect.c_str());
+      std::printf("  miss: seed %llu %s n %d snr %.1f -> %s\n", static_cast<unsigned long long>(seed),
+                  s.surface.c_str(), s.points, s.snr, d->causes.empty() ? "(none)" : d->causes.front().effect.c_str());
     }
     if (d->heldout_rms_before_um - d->heldout_rms_after_um >= 0.5 * s.effect_rms_um) ++gain_ok;
   }
-  std::printf("%-16s scenarios %d  named first %.0f%%  parameters in 95%% interval %.0f%%  held-out gain >= 50%%: %.0f%%\n",
-              effect.c_str(), kPerEffect, 100.0 * named_first / kPerEffect, 100.0 * in_interval / parameters,
-              100.0 * gain_ok / kPerEffect);
+  std::printf(
+      "%-16s scenarios %d  named first %.0f%%  parameters in 95%% interval %.0f%%  held-out gain >= 50%%: %.0f%%\n",
+      effect.c_str(), kPerEffect, 100.0 * named_first / kPerEffect, 100.0 * in_interval / parameters,
+      100.0 * gain_ok / kPerEffect);
   EXPECT_GE(named_first, 0.95 * kPerEffect);
   // 20 draws cannot pin a 95 % coverage per effect (P(≤ 17 of 20) is 7.5 % at exactly 95 %); this is
   // the per-effect sanity bound, the ≥ 90 % requirement is asserted pooled in ParametersLie... below.
@@ -76,7 +77,8 @@ TEST(DiscoveryTest, ParametersLieInTheirReported95PercentIntervals) {
         continue;
       }
       for (std::size_t j = 0; j < truth->values.size(); ++j) {
-        if (std::abs(d->causes.front().parameters[j] - truth->values[j]) <= 1.96 * d->causes.front().std_errors[j]) ++in_e;
+        if (std::abs(d->causes.front().parameters[j] - truth->values[j]) <= 1.96 * d->causes.front().std_errors[j])
+          ++in_e;
       }
     }
     std::printf("%-16s parameters %3d inside %5.1f%%\n", effect.c_str(), p_e, 100.0 * in_e / p_e);
@@ -95,8 +97,10 @@ TEST(DiscoveryTest, NoiseOnlyNamesNoCause) {
     const Scenario s = DrawScenario(5000 + k, {}, false);
     const auto d = DiagnoseScenario(s);
     ASSERT_TRUE(d.ok()) << d.status().message();
-    if (d->causes.empty()) ++quiet;
-    else std::printf("  false cause: seed %d %s -> %s\n", 5000 + k, s.surface.c_str(), d->causes.front().effect.c_str());
+    if (d->causes.empty())
+      ++quiet;
+    else
+      std::printf("  false cause: seed %d %s -> %s\n", 5000 + k, s.surface.c_str(), d->causes.front().effect.c_str());
   }
   std::printf("noise only: no cause named in %d of %d\n", quiet, kScenarios);
   EXPECT_GE(quiet, 0.95 * kScenarios);
@@ -116,8 +120,10 @@ TEST(DiscoveryTest, TwoInjectedEffectsAreBothNamed) {
     ASSERT_TRUE(d.ok()) << d.status().message();
     std::vector<std::string> named;
     for (const auto& c : d->causes) named.push_back(c.effect);
-    const bool ok = std::count(named.begin(), named.end(), effects[a]) && std::count(named.begin(), named.end(), effects[b]);
-    if (ok) ++both;
+    const bool ok =
+        std::count(named.begin(), named.end(), effects[a]) && std::count(named.begin(), named.end(), effects[b]);
+    if (ok)
+      ++both;
     else {
       std::printf("  pair %s + %s (seed %d, %s, snr %.1f): named", effects[a].c_str(), effects[b].c_str(), 6000 + k,
                   s.surface.c_str(), s.snr);
@@ -136,9 +142,11 @@ TEST(DiscoveryTest, ABumpOutsideTheCatalogueIsReportedUnexplainedNotMislabelled)
     const Scenario s = DrawScenario(7000 + k, {}, true);
     const auto d = DiagnoseScenario(s);
     ASSERT_TRUE(d.ok()) << d.status().message();
-    if (d->unexplained && d->causes.empty()) ++right;
+    if (d->unexplained && d->causes.empty())
+      ++right;
     else {
-      std::printf("  bump seed %d %s snr %.1f: unexplained %d, named", 7000 + k, s.surface.c_str(), s.snr, d->unexplained);
+      std::printf("  bump seed %d %s snr %.1f: unexplained %d, named", 7000 + k, s.surface.c_str(), s.snr,
+                  d->unexplained);
       for (const auto& c : d->causes) std::printf(" %s(%.2f)", c.effect.c_str(), c.variance_explained);
       std::printf("\n");
     }
@@ -157,9 +165,9 @@ namespace {
 // held-out RMS on part 2 falls by ≥ 50 % against the baseline.
 TEST(DiscoveryTest, AModelLearnedOnOnePartPredictsAnother) {
   sim::Model machine;
-  ASSERT_TRUE(machine.Set("tool_wear", {0.8}).ok());                      // µm/m
-  ASSERT_TRUE(machine.Set("thermal_drift_z", {6.0, 120.0}).ok());         // µm, s (saturates within the cut)
-  ASSERT_TRUE(machine.Set("setup_offset", {4.0, -3.0, 2.0}).ok());        // µm
+  ASSERT_TRUE(machine.Set("tool_wear", {0.8}).ok());                // µm/m
+  ASSERT_TRUE(machine.Set("thermal_drift_z", {6.0, 120.0}).ok());   // µm, s (saturates within the cut)
+  ASSERT_TRUE(machine.Set("setup_offset", {4.0, -3.0, 2.0}).ok());  // µm
   Rng rng1(4242), rng2(4343);
   const Scenario part1 = MakeScenario(rng1, "saddle", 1500, 0, {}, false, &machine);
   const Scenario part2 = MakeScenario(rng2, "egg_box", 1200, 0, {}, false, &machine);
