@@ -299,7 +299,7 @@ void Residual(std::string& html, const Json& d) {
     const double z_after = causes.is_array() && !causes.empty() && Member(causes.back(), "z_after").is_number()
                                ? causes.back()["z_after"].get<double>()
                                : std::nan("");
-    html += "<p>No spatially clustered residual was detected after the named causes";
+    html += "<p>No spatially clustered residual was detected after the findings above";
     html += std::isfinite(z_after) ? " (residual Moran z = " + FormatFixed(z_after, 2) + ")" : std::string();
     html += ": the remaining RMS is " + Quantity(Member(gain, "rms_after_um"), "µm") +
             " against an estimated noise level of σ ≈ " + Quantity(Member(residual, "noise_sigma_um"), "µm") +
@@ -308,7 +308,7 @@ void Residual(std::string& html, const Json& d) {
   } else {
     html += "<p class=\"caveat\">An unexplained systematic residual remains";
     if (Member(unexplained, "z").is_number()) html += " (Moran z = " + Num(Member(unexplained, "z"), 2) + ")";
-    html += ": some of the deviation follows a pattern none of the named causes accounts for.</p>\n";
+    html += ": some of the deviation follows a pattern none of the findings above accounts for.</p>\n";
     const Json& where = Member(unexplained, "where");
     if (where.is_array() && !where.empty() && where.front().is_object()) {
       html += RowsTable(where, "Where the unexplained residual clusters");
@@ -324,7 +324,7 @@ void Residual(std::string& html, const Json& d) {
   const Json& ha = Member(gain, "heldout_rms_after_um");
   if (hb.is_number() && ha.is_number() && hb.get<double>() > 0) {
     html += fmt::format(
-        "<p>On points the fit did not see, the model of the named causes lowers the RMS by {} "
+        "<p>On points the fit did not see, the model of the findings above lowers the RMS by {} "
         "(from {} to {} µm).</p>\n",
         Percent(1 - ha.get<double>() / hb.get<double>()), Num(hb, 2), Num(ha, 2));
   }
@@ -368,9 +368,11 @@ void DiagnosisSection(std::string& html, const RunData& run) {
         {effect, share_cell, Parameters(c), Num(Member(c, "z_before"), 2) + " → " + Num(Member(c, "z_after"), 2)});
   }
   if (rows.empty()) {
-    html +=
-        "<p>No effect of the catalogue was named: none explains the systematic deviation significantly and "
-        "identifiably.</p>\n";
+    const bool groups = Member(d, "alias_groups").is_array() && !Member(d, "alias_groups").empty();
+    html += std::string(
+                "<p>No single effect of the catalogue was named: none explains the systematic deviation "
+                "significantly and identifiably on its own") +
+            (groups ? " (the alias groups below do, together)." : ".") + "</p>\n";
   } else {
     html += Table({"Cause", "Share of the residual variance", "Parameters (value ± std. error, interval)",
                    "Moran z before → after"},

@@ -321,13 +321,20 @@ TEST_F(ReportTest, DiagnosisWithAliasGroupsSaysWhatTheDataCannotSeparate) {
     EXPECT_NE(html->find(what), std::string::npos) << what;
   }
   EXPECT_EQ(html->find("None: the causes above account"), std::string::npos);
+  // Nothing named on its own: the alias groups carry the explanation, and the report says so.
+  Json only_groups = diagnosis;
+  only_groups["causes"] = Json::array();
+  std::ofstream(run_ / "loop-0" / "diagnosis" / "diagnosis.json") << only_groups.dump();
+  html = RenderRunReport(run_);
+  ASSERT_TRUE(html.ok());
+  EXPECT_NE(html->find("on its own (the alias groups below do, together)."), std::string::npos);
 }
 
 TEST_F(ReportTest, DiagnosisWithoutUnexplainedResidualIsNotAVerdict) {
   formloop::testing::WriteRunFixture(run_);
   Result<std::string> html = RenderRunReport(run_);
   ASSERT_TRUE(html.ok()) << html.status().ToString();
-  EXPECT_NE(html->find("No spatially clustered residual was detected after the named causes"), std::string::npos);
+  EXPECT_NE(html->find("No spatially clustered residual was detected after the findings above"), std::string::npos);
   EXPECT_NE(html->find("not proof that nothing else acts"), std::string::npos);
   EXPECT_NE(html->find("≈95 % interval [1.7, 2.1] (±1.96 std. errors)"), std::string::npos);
   EXPECT_EQ(html->find("Unexplained residual</h3>\n<p>None"), std::string::npos);
