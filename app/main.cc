@@ -6,6 +6,7 @@
 
 #include "app/command.h"
 #include "core/log.h"
+#include "core/parallel.h"
 #include "core/progress.h"
 #include "core/version.h"
 #include "core/work_estimate.h"
@@ -30,6 +31,13 @@ int main(int argc, char** argv) {
                "go ahead with a job above formloop's stated size limits (more than 20 million points, 4 GB of memory, "
                "8 h on the machine or 2 GB of output, estimated before it starts); never above what this computer "
                "can hold");
+
+  int threads = 0;
+  app.add_option("--threads", threads,
+                 "worker threads of the parallel stages (k-NN weights, ...); 0 = all cores. Every output is the "
+                 "same bytes for any count")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
 
   app::CommandAction action;
   app::AddRunCommand(app, &action);
@@ -63,6 +71,7 @@ int main(int argc, char** argv) {
   log::SetLevel(parsed.value());
   if (quiet) Progress::SetEnabled(false);
   SetLargeWorkConfirmed(yes);
+  SetThreadCount(threads);
   if (!action) {
     std::cerr << app.help();
     return 2;

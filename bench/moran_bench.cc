@@ -14,6 +14,13 @@
 //
 //   ./build/bench/formloop_bench_moran [n ...]          (default 25000 50000 100000)
 //   ./build/bench/formloop_bench_moran --dense N        (dense reference only; default run uses 1000, 2000)
+//   ./build/bench/formloop_bench_moran --knn N          (k-NN weights + global Moran's I beside numpy + SciPy)
+//
+// --knn: k = 8 row-standardised weights and the global Moran's I with its normality and randomisation
+// tests on N uniform points, wall and CPU time (best of 5) on one thread and on all cores, beside
+// bench/knn_moran_peer.py (scipy.spatial.cKDTree with workers = 1 and −1, scipy.sparse CSR, numpy moments)
+// through /usr/bin/python3 on the same points in the same run (skipped with a message when absent). It
+// checks the neighbour lists are the same as SciPy's and I, E[I] and both variances agree.
 
 #include <sys/resource.h>
 #include <sys/wait.h>
@@ -23,11 +30,15 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <string>
 #include <vector>
 
 #include <Eigen/Dense>
 
+#include "core/parallel.h"
 #include "core/random.h"
 #include "metrology/morans_i.h"
 #include "metrology/spatial_weights.h"
@@ -155,6 +166,115 @@ int RunDense(int n) {
   return 0;
 }
 
+struct Timed {
+  double wall_s = 1e300, cpu_s = 1e300;
+  void Keep(double wall, double cpu) {
+    wall_s = std::min(wall_s, wall);
+    cpu_s = std::min(cpu_s, cpu);
+  }
+};
+
+// A number from the peer's one-line JSON ("key": value), NaN when absent.
+double JsonNumber(const std::string& line, const std::string& key) {
+  const auto at = line.find("\"" + key + "\":");
+  return at == std::string::npos ? std::nan("") : std::strtod(line.c_str() + at + key.size() + 3, nullptr);
+}
+
+int RunKnn(int n) {
+  Rng rng(2026);
+  Eigen::MatrixXd uv(2, n);
+  Eigen::VectorXd y(n);
+  for (int i = 0; i < n; ++i) {
+    const double u = rng.Uniform(), v = rng.Uniform();
+    uv.col(i) << u, v;
+    y[i] = std::sin(9 * u) * std::cos(7 * v) + rng.Normal(0, 0.5);
+  }
+  std::printf("k-NN weights (k = %d, W style) + global Moran's I, %d uniform points; best of 5\n", kNeighbours, n);
+  std::printf("%-40s %10s %10s %10s %10s %10s\n", "", "weights", "(CPU)", "Moran I", "(CPU)", "total");
+  metrology::SpatialWeights w;
+  metrology::MoranResult r;
+  for (int threads : {1, 0}) {
+    SetThreadCount(threads);
+    Timed tw, ti;
+    for (int rep = 0; rep < 5; ++rep) {
+      auto t0 = std::chrono::steady_clock::now();
+      double c0 = CpuSeconds();
+      auto weights = metrology::KnnWeights(uv, kNeighbours, metrology::WeightStyle::kRowStandardised);
+      tw.Keep(Seconds(t0), CpuSeconds() - c0);
+      t0 = std::chrono::steady_clock::now();
+      c0 = CpuSeconds();
+      auto moran = metrology::MoranI(y, *weights);
+      ti.Keep(Seconds(t0), CpuSeconds() - c0);
+      if (!weights.ok() || !moran.ok()) return 1;
+      w = *std::move(weights);
+      r = *moran;
+    }
+    const std::string label =
+        "formloop (" + std::to_string(ThreadCount()) + " thread" + (ThreadCount() > 1 ? "s)" : ")");
+    std::printf("%-40s %8.3f s %8.3f s %8.3f s %8.3f s %8.3f s\n", label.c_str(), tw.wall_s, tw.cpu_s, ti.wall_s,
+                ti.cpu_s, tw.wall_s + ti.wall_s);
+  }
+  SetThreadCount(0);
+  if (std::system("/usr/bin/python3 -c 'import scipy.spatial' >/dev/null 2>&1") != 0) {
+    std::printf("peer skipped: /usr/bin/python3 with SciPy (Debian's python3-scipy) is not available\n");
+    return 0;
+  }
+  char dir_template[] = "/tmp/formloop_knn_bench_XXXXXX";
+  if (!mkdtemp(dir_template)) return 1;
+  const std::string points = std::string(dir_template) + "/points.bin";
+  {
+    std::ofstream out(points, std::ios::binary);
+    for (int i = 0; i < n; ++i) {
+      const double row[3] = {uv(0, i), uv(1, i), y[i]};
+      out.write(reinterpret_cast<const char*>(row), sizeof row);
+    }
+  }
+  int failures = 0;
+  for (int workers : {1, -1}) {
+    const std::string command = "/usr/bin/python3 " + std::string(FORMLOOP_SOURCE_DIR) + "/bench/knn_moran_peer.py " +
+                                points + " " + std::to_string(n) + " " + std::to_string(kNeighbours) + " 5 " +
+                                std::to_string(workers);
+    FILE* pipe = ::popen(command.c_str(), "r");
+    std::string line;
+    char buffer[4096];
+    while (pipe && std::fgets(buffer, sizeof buffer, pipe)) line += buffer;
+    if (!pipe || ::pclose(pipe) != 0) {
+      std::printf("peer failed: %s\n", command.c_str());
+      ++failures;
+      continue;
+    }
+    const double pw = JsonNumber(line, "weights_s"), pi = JsonNumber(line, "moran_s");
+    const std::string label = std::string("numpy + SciPy cKDTree (workers ") + (workers == 1 ? "1)" : "-1)");
+    std::printf("%-40s %8.3f s %8.3f s %8.3f s %8.3f s %8.3f s\n", label.c_str(), pw, JsonNumber(line, "weights_cpu_s"),
+                pi, JsonNumber(line, "moran_cpu_s"), pw + pi);
+    if (workers != 1) continue;
+    // The neighbour lists and the statistics, compared.
+    std::ifstream rows(points + ".rows", std::ios::binary);
+    std::vector<std::int32_t> theirs(static_cast<std::size_t>(n) * kNeighbours);
+    rows.read(reinterpret_cast<char*>(theirs.data()), static_cast<std::streamsize>(theirs.size() * 4));
+    long differing = 0;
+    for (int i = 0; i < n; ++i) {
+      const int* ours = w.w.innerIndexPtr() + w.w.outerIndexPtr()[i];
+      for (int m = 0; m < kNeighbours; ++m) {
+        if (ours[m] != theirs[static_cast<std::size_t>(i) * kNeighbours + static_cast<std::size_t>(m)]) {
+          ++differing;
+          break;
+        }
+      }
+    }
+    auto rel = [](double a, double b) { return std::abs(a - b) / std::max(std::abs(b), 1e-300); };
+    std::printf(
+        "  same data: rows whose neighbours differ from SciPy's %ld of %d; rel. diff I %.1e, E[I] %.1e, "
+        "Var_N %.1e, Var_R %.1e\n",
+        differing, n, rel(r.i, JsonNumber(line, "i")), rel(r.expected, JsonNumber(line, "expected")),
+        rel(r.variance_normality, JsonNumber(line, "variance_normality")),
+        rel(r.variance_randomisation, JsonNumber(line, "variance_randomisation")));
+    if (differing > 0) ++failures;
+  }
+  std::filesystem::remove_all(dir_template);
+  return failures == 0 ? 0 : 1;
+}
+
 // Runs f(n) in a child process so each row's peak RSS is its own.
 int InChild(int (*f)(int), int n) {
   std::fflush(stdout);
@@ -174,20 +294,24 @@ int InChild(int (*f)(int), int n) {
 
 int main(int argc, char** argv) {
   using namespace formloop;
-  std::vector<int> sizes, dense_sizes;
+  std::vector<int> sizes, dense_sizes, knn_sizes;
   for (int a = 1; a < argc; ++a) {
     const std::string arg = argv[a];
     if (arg == "--dense" && a + 1 < argc) {
       dense_sizes.push_back(std::atoi(argv[++a]));
+    } else if (arg == "--knn" && a + 1 < argc) {
+      knn_sizes.push_back(std::atoi(argv[++a]));
     } else {
       sizes.push_back(std::atoi(arg.c_str()));
     }
   }
+  int failures = 0;
+  for (int n : knn_sizes) failures += InChild(RunKnn, n) != 0;
+  if (!knn_sizes.empty() && sizes.empty() && dense_sizes.empty()) return failures == 0 ? 0 : 1;
   if (sizes.empty() && dense_sizes.empty()) {
     sizes = {25000, 50000, 100000};
     dense_sizes = {1000, 2000};
   }
-  int failures = 0;
   if (!sizes.empty()) {
     std::printf("Residual Moran, k = %d (W style), p = %d, points uniform in the unit square, Eigen single-threaded\n",
                 kNeighbours, (kDegree + 1) * (kDegree + 1));

@@ -135,7 +135,8 @@ struct CentredValues {
   Eigen::VectorXd z;
   double sum_z2 = 0;
   // The kept weights and the number of kept values, as the statistics use them.
-  const RowSparse& w() const { return resolved.weights.w; }
+  const RowSparse& w() const { return unchanged ? *unchanged : resolved.weights.w; }
+  const RowSparse* unchanged = nullptr;  // the caller's weights when there was no island to resolve (no copy)
   double n() const { return static_cast<double>(z.size()); }
 };
 
@@ -146,7 +147,14 @@ Result<CentredValues> CentreValues(const Eigen::VectorXd& values, const SpatialW
     return Status::BadInput(Where{.field = "permutations"}, "must be >= 0", "use e.g. 999, or 0 for none");
   }
   CentredValues out;
-  FL_ASSIGN_OR_RETURN(out.resolved, ResolveIslands(weights, islands));
+  if (weights.islands == 0) {
+    out.resolved.policy = islands;
+    out.resolved.kept.resize(static_cast<std::size_t>(weights.n()));
+    std::iota(out.resolved.kept.begin(), out.resolved.kept.end(), 0);
+    out.unchanged = &weights.w;
+  } else {
+    FL_ASSIGN_OR_RETURN(out.resolved, ResolveIslands(weights, islands));
+  }
   const Eigen::VectorXd y = out.resolved.dropped.empty() ? values : SelectRows(values, out.resolved.kept);
   FL_RETURN_IF_ERROR(CheckCount(y.size()));
   out.z = y.array() - y.mean();

@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdint>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <sstream>
 #include <utility>
@@ -11,10 +13,10 @@
 #include <CGAL/Delaunay_triangulation_2.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Triangulation_vertex_base_with_info_2.h>
-#include <pcl/kdtree/kdtree_flann.h>
-#include <pcl/point_types.h>
+#include <nanoflann.hpp>
 
 #include "core/atomic_file.h"
+#include "core/parallel.h"
 
 namespace formloop::metrology {
 namespace {
@@ -25,18 +27,204 @@ std::string Lower(std::string_view text) {
   return out;
 }
 
-// Centred float cloud for PCL (FLANN works in float; centring keeps the rounding relative to the extent).
-pcl::PointCloud<pcl::PointXYZ>::Ptr CentredCloud(const Eigen::MatrixXd& points) {
-  const int n = static_cast<int>(points.cols());
-  const Eigen::VectorXd centre = points.rowwise().mean();
-  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
-  cloud->resize(static_cast<std::size_t>(n));
-  for (int i = 0; i < n; ++i) {
-    const Eigen::VectorXd p = points.col(i) - centre;
-    (*cloud)[static_cast<std::size_t>(i)] = pcl::PointXYZ(static_cast<float>(p[0]), static_cast<float>(p[1]),
-                                                          points.rows() == 3 ? static_cast<float>(p[2]) : 0.f);
+// nanoflann's view of the columns of a 2 × n or 3 × n matrix (no copy; the search runs in double).
+struct ColumnCloud {
+  const Eigen::MatrixXd* points;
+  std::size_t kdtree_get_point_count() const { return static_cast<std::size_t>(points->cols()); }
+  double kdtree_get_pt(std::size_t i, std::size_t d) const {
+    return (*points)(static_cast<Eigen::Index>(d), static_cast<Eigen::Index>(i));
   }
-  return cloud;
+  template <class Box>
+  bool kdtree_get_bbox(Box& /*box*/) const {
+    return false;
+  }
+};
+template <int Dim>
+using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, ColumnCloud>, ColumnCloud, Dim,
+                                                   std::uint32_t>;
+constexpr std::size_t kLeafSize = 16;
+constexpr long kChunk = 4096;  // points per parallel chunk (fixed: the same rows for any thread count)
+
+// The squared distance that decides neighbours (the tree's own is only a candidate filter).
+double SquaredDistance(const Eigen::MatrixXd& points, long i, long j) {
+  return (points.col(j) - points.col(i)).squaredNorm();
+}
+
+// Row i of k-NN weights: the k points j ≠ i smallest in (‖p_j − p_i‖², j), ascending by index, into
+// columns[i·k, (i+1)·k). The tree returns k + 5 candidates (self, k, spares for ties); when the k-th
+// exact distance is not strictly below the farthest candidate, points at that distance may have been
+// left out, and a radius search at it (inclusive, a hair wider) brings every one of them in.
+template <int Dim>
+void KnnRows(const Eigen::MatrixXd& points, int k, int* columns) {
+  const ColumnCloud cloud{&points};
+  const KdTree<Dim> tree(Dim, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(kLeafSize));
+  const long n = points.cols();
+  const std::size_t query = static_cast<std::size_t>(std::min<long>(n, k + 5));
+  ParallelFor(n, kChunk, [&](long begin, long end) {
+    std::vector<std::uint32_t> found(query);
+    std::vector<double> tree_d2(query);
+    std::vector<std::pair<double, int>> candidates;
+    std::vector<std::pair<std::uint32_t, double>> within;
+    double q[Dim];
+    for (long i = begin; i < end; ++i) {
+      for (int d = 0; d < Dim; ++d) q[d] = points(d, i);
+      const std::size_t m = tree.knnSearch(q, query, found.data(), tree_d2.data());
+      candidates.clear();
+      double farthest = 0;
+      for (std::size_t s = 0; s < m; ++s) {
+        farthest = std::max(farthest, tree_d2[s]);
+        if (found[s] != static_cast<std::uint32_t>(i)) {
+          candidates.emplace_back(SquaredDistance(points, i, found[s]), static_cast<int>(found[s]));
+        }
+      }
+      std::sort(candidates.begin(), candidates.end());
+      const double kth = candidates[static_cast<std::size_t>(k - 1)].first;
+      if (static_cast<long>(m) < n && !(kth < farthest * (1 - 1e-12))) {
+        const double radius = std::max(kth * (1 + 1e-9), std::numeric_limits<double>::denorm_min());
+        tree.radiusSearch(q, radius, within, nanoflann::SearchParams(32, 0, false));
+        candidates.clear();
+        for (const auto& [j, unused] : within) {
+          if (j != static_cast<std::uint32_t>(i)) {
+            candidates.emplace_back(SquaredDistance(points, i, j), static_cast<int>(j));
+          }
+        }
+        std::sort(candidates.begin(), candidates.end());
+      }
+      int* row = columns + i * k;
+      for (int m2 = 0; m2 < k; ++m2) row[m2] = candidates[static_cast<std::size_t>(m2)].second;
+      std::sort(row, row + k);
+    }
+  });
+}
+
+// The same rows for 2-D points from a uniform grid of square cells (about `per_cell` points each): the
+// candidates come ring by ring around the point's cell, kept as the k smallest (d², j); the search stops
+// once the k-th is strictly closer than anything outside the rings searched can be (less a margin for the
+// rounding of the cell assignment). False when the points are too clustered for a grid (the caller then
+// uses the kd-tree): every answer is the same exact set either way.
+bool KnnRowsGrid(const Eigen::MatrixXd& points, int k, int* columns) {
+  const long n = points.cols();
+  const double x0 = points.row(0).minCoeff(), y0 = points.row(1).minCoeff();
+  const double wx = points.row(0).maxCoeff() - x0, wy = points.row(1).maxCoeff() - y0;
+  const double per_cell = std::max(2.0, 0.75 * (k + 1));
+  const double h = std::sqrt(wx * wy * per_cell / static_cast<double>(n));
+  if (!(h > 0) || !std::isfinite(h)) return false;  // collinear or coincident points
+  const long gx = std::min<long>(static_cast<long>(wx / h) + 1, 1L << 15);
+  const long gy = std::min<long>(static_cast<long>(wy / h) + 1, 1L << 15);
+  if (gx * gy > 4 * n + 16) return false;
+  auto cell_of = [&](double value, double origin, long count) {
+    return std::clamp(static_cast<long>((value - origin) / h), 0L, count - 1);
+  };
+  // Counting sort of the points by cell (stable: ascending index within a cell).
+  std::vector<int> start(static_cast<std::size_t>(gx * gy + 1), 0);
+  std::vector<int> cell(static_cast<std::size_t>(n));
+  for (long i = 0; i < n; ++i) {
+    cell[static_cast<std::size_t>(i)] =
+        static_cast<int>(cell_of(points(1, i), y0, gy) * gx + cell_of(points(0, i), x0, gx));
+    ++start[static_cast<std::size_t>(cell[static_cast<std::size_t>(i)]) + 1];
+  }
+  int fullest = 0;
+  for (std::size_t c = 1; c < start.size(); ++c) {
+    fullest = std::max(fullest, start[c]);
+    start[c] += start[c - 1];
+  }
+  if (fullest > 16 * per_cell + 64) return false;
+  std::vector<double> xs(static_cast<std::size_t>(n)), ys(static_cast<std::size_t>(n));
+  std::vector<int> ids(static_cast<std::size_t>(n));
+  {
+    std::vector<int> next(start.begin(), start.end() - 1);
+    for (long i = 0; i < n; ++i) {
+      const auto at = static_cast<std::size_t>(next[static_cast<std::size_t>(cell[static_cast<std::size_t>(i)])]++);
+      xs[at] = points(0, i);
+      ys[at] = points(1, i);
+      ids[at] = static_cast<int>(i);
+    }
+  }
+  const double margin = 1e-9 * h;
+  ParallelFor(n, kChunk, [&](long begin, long end) {
+    std::vector<std::pair<double, int>> best(static_cast<std::size_t>(k) + 1);
+    for (long i = begin; i < end; ++i) {
+      const double px = points(0, i), py = points(1, i);
+      const long cx = cell_of(px, x0, gx), cy = cell_of(py, y0, gy);
+      int found = 0;
+      // Insertion into the sorted k best by (d², j).
+      auto offer = [&](double d2, int j) {
+        if (found == k) {
+          const auto& worst = best[static_cast<std::size_t>(k - 1)];
+          if (d2 > worst.first || (d2 == worst.first && j > worst.second)) return;
+        }
+        int at = found < k ? found++ : k - 1;
+        while (at > 0 && std::make_pair(d2, j) < best[static_cast<std::size_t>(at - 1)]) {
+          best[static_cast<std::size_t>(at)] = best[static_cast<std::size_t>(at - 1)];
+          --at;
+        }
+        best[static_cast<std::size_t>(at)] = {d2, j};
+      };
+      // Cells ix0..ix1 of row iy: one contiguous run of the sorted points.
+      auto scan = [&](long ix0, long ix1, long iy) {
+        const std::size_t c = static_cast<std::size_t>(iy * gx);
+        for (int s = start[c + static_cast<std::size_t>(ix0)]; s < start[c + static_cast<std::size_t>(ix1) + 1]; ++s) {
+          const int j = ids[static_cast<std::size_t>(s)];
+          if (j == i) continue;
+          const double dx = xs[static_cast<std::size_t>(s)] - px, dy = ys[static_cast<std::size_t>(s)] - py;
+          offer(dx * dx + dy * dy, j);
+        }
+      };
+      for (long r = 0;; ++r) {
+        const long lx = cx - r, hx = cx + r, ly = cy - r, hy = cy + r;
+        if (r == 0) {
+          scan(cx, cx, cy);
+        } else {
+          const long from = std::max(lx, 0L), to = std::min(hx, gx - 1);
+          if (ly >= 0) scan(from, to, ly);
+          if (hy < gy) scan(from, to, hy);
+          for (long iy = std::max(ly + 1, 0L); iy <= std::min(hy - 1, gy - 1); ++iy) {
+            if (lx >= 0) scan(lx, lx, iy);
+            if (hx < gx) scan(hx, hx, iy);
+          }
+        }
+        if (lx <= 0 && ly <= 0 && hx >= gx - 1 && hy >= gy - 1) break;  // every cell searched
+        if (found == k) {
+          // Nothing outside the searched square is closer than its nearest open side.
+          double reach = std::numeric_limits<double>::infinity();
+          if (lx > 0) reach = std::min(reach, px - (x0 + static_cast<double>(lx) * h));
+          if (hx < gx - 1) reach = std::min(reach, x0 + static_cast<double>(hx + 1) * h - px);
+          if (ly > 0) reach = std::min(reach, py - (y0 + static_cast<double>(ly) * h));
+          if (hy < gy - 1) reach = std::min(reach, y0 + static_cast<double>(hy + 1) * h - py);
+          reach -= margin;
+          if (reach > 0 && best[static_cast<std::size_t>(k - 1)].first < reach * reach) break;
+        }
+      }
+      int* row = columns + i * k;
+      for (int m = 0; m < k; ++m) row[m] = best[static_cast<std::size_t>(m)].second;
+      std::sort(row, row + k);
+    }
+  });
+  return true;
+}
+
+// Rows of distance-band neighbours: j ≠ i with ‖p_j − p_i‖² ≤ radius² decided in double; the tree's
+// search is a hair wider (its strict "<" and its own summation order must not lose a point on the band).
+template <int Dim>
+void BandRows(const Eigen::MatrixXd& points, double radius, std::vector<std::vector<int>>* neighbours) {
+  const ColumnCloud cloud{&points};
+  const KdTree<Dim> tree(Dim, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(kLeafSize));
+  const double r2 = radius * radius;
+  const double search = std::max(r2 * (1 + 1e-9), std::numeric_limits<double>::denorm_min());
+  ParallelFor(points.cols(), kChunk, [&](long begin, long end) {
+    std::vector<std::pair<std::uint32_t, double>> within;
+    double q[Dim];
+    for (long i = begin; i < end; ++i) {
+      for (int d = 0; d < Dim; ++d) q[d] = points(d, i);
+      tree.radiusSearch(q, search, within, nanoflann::SearchParams(32, 0, false));
+      auto& row = (*neighbours)[static_cast<std::size_t>(i)];
+      for (const auto& [j, unused] : within) {
+        if (j != static_cast<std::uint32_t>(i) && SquaredDistance(points, i, j) <= r2) {
+          row.push_back(static_cast<int>(j));
+        }
+      }
+    }
+  });
 }
 
 Status CheckPoints(const Eigen::MatrixXd& points, const char* what, bool two_d_only) {
@@ -94,28 +282,32 @@ std::vector<std::vector<int>> SpatialWeights::Neighbours() const {
 
 Result<SpatialWeights> WeightsFromNeighbours(const std::vector<std::vector<int>>& neighbours, WeightStyle style) {
   const int n = static_cast<int>(neighbours.size());
-  std::vector<Eigen::Triplet<double>> triplets;
   SpatialWeights result;
   result.style = style;
+  // Compressed row storage filled directly: rows in order, each sorted and de-duplicated.
+  std::vector<int> outer(static_cast<std::size_t>(n) + 1, 0);
+  std::vector<int> inner;
+  std::vector<double> values;
+  std::vector<int> row;
   for (int i = 0; i < n; ++i) {
-    std::vector<int> row = neighbours[static_cast<std::size_t>(i)];
+    row = neighbours[static_cast<std::size_t>(i)];
     std::sort(row.begin(), row.end());
     row.erase(std::unique(row.begin(), row.end()), row.end());
     row.erase(std::remove(row.begin(), row.end(), i), row.end());
     if (row.empty()) {
       ++result.islands;
       result.island_indices.push_back(i);
-      continue;
     }
     const double value = style == WeightStyle::kBinary ? 1.0 : 1.0 / static_cast<double>(row.size());
     for (int j : row) {
       if (j < 0 || j >= n) return Status::Internal("neighbour index " + std::to_string(j) + " out of range");
-      triplets.emplace_back(i, j, value);
+      inner.push_back(j);
+      values.push_back(value);
     }
+    outer[static_cast<std::size_t>(i) + 1] = static_cast<int>(inner.size());
   }
-  result.w.resize(n, n);
-  result.w.setFromTriplets(triplets.begin(), triplets.end());
-  result.w.makeCompressed();
+  result.w = Eigen::Map<const Eigen::SparseMatrix<double, Eigen::RowMajor>>(
+      n, n, static_cast<Eigen::Index>(inner.size()), outer.data(), inner.data(), values.data());
   return result;
 }
 
@@ -128,28 +320,27 @@ Result<SpatialWeights> KnnWeights(const Eigen::MatrixXd& points, int k, WeightSt
                             "use fewer neighbours or more points");
   }
   FL_RETURN_IF_ERROR(CheckPoints(points, "k-NN weights", false));
-  const auto cloud = CentredCloud(points);
-  pcl::KdTreeFLANN<pcl::PointXYZ> tree;
-  tree.setSortedResults(true);
-  tree.setInputCloud(cloud);
-  std::vector<std::vector<int>> neighbours(static_cast<std::size_t>(n));
-  const int query = std::min(n, k + 4);  // a few spare for self and ties
-  pcl::Indices found;
-  std::vector<float> unused;
-  for (int i = 0; i < n; ++i) {
-    tree.nearestKSearch(static_cast<pcl::index_t>(i), query, found, unused);
-    // Exact double distances, ties broken by index: deterministic whatever FLANN returned first.
-    std::vector<std::pair<double, int>> candidates;
-    for (const auto j : found) {
-      if (j == i) continue;
-      candidates.emplace_back((points.col(j) - points.col(i)).squaredNorm(), static_cast<int>(j));
-    }
-    std::sort(candidates.begin(), candidates.end());
-    for (int m = 0; m < k && m < static_cast<int>(candidates.size()); ++m) {
-      neighbours[static_cast<std::size_t>(i)].push_back(candidates[static_cast<std::size_t>(m)].second);
-    }
+  if (static_cast<double>(n) * k > std::numeric_limits<int>::max()) {
+    return Status::BadInput(
+        Where{.field = "k"},
+        std::to_string(n) + " points × " + std::to_string(k) + " neighbours exceed the sparse matrix's 2^31 entries",
+        "use fewer neighbours or thin the points");
   }
-  return WeightsFromNeighbours(neighbours, style);
+  // Every row has exactly k entries: the compressed rows are written in place, no triplets, no copy.
+  SpatialWeights result;
+  result.style = style;
+  result.w.resize(n, n);
+  result.w.resizeNonZeros(static_cast<Eigen::Index>(n) * k);
+  int* columns = result.w.innerIndexPtr();
+  if (points.rows() == 2) {
+    if (!KnnRowsGrid(points, k, columns)) KnnRows<2>(points, k, columns);
+  } else {
+    KnnRows<3>(points, k, columns);
+  }
+  for (int i = 0; i <= n; ++i) result.w.outerIndexPtr()[i] = i * k;
+  const double value = style == WeightStyle::kBinary ? 1.0 : 1.0 / static_cast<double>(k);
+  std::fill(result.w.valuePtr(), result.w.valuePtr() + result.w.nonZeros(), value);
+  return result;
 }
 
 namespace {
@@ -298,22 +489,11 @@ Result<SpatialWeights> DistanceBandWeights(const Eigen::MatrixXd& points, double
   }
   const int n = static_cast<int>(points.cols());
   if (n < 2) return Status::BadInput("distance-band weights need at least 2 points, got " + std::to_string(n));
-  const auto cloud = CentredCloud(points);
-  // Search a little wider in float, then decide the band exactly in double.
-  const double extent = (points.rowwise().maxCoeff() - points.rowwise().minCoeff()).norm();
-  const float search = static_cast<float>(radius * (1.0 + 1e-6) + 1e-6 * extent);
-  pcl::KdTreeFLANN<pcl::PointXYZ> tree;
-  tree.setInputCloud(cloud);
   std::vector<std::vector<int>> neighbours(static_cast<std::size_t>(n));
-  const double r2 = radius * radius;
-  pcl::Indices found;
-  std::vector<float> unused;
-  for (int i = 0; i < n; ++i) {
-    tree.radiusSearch(static_cast<pcl::index_t>(i), search, found, unused);
-    auto& row = neighbours[static_cast<std::size_t>(i)];
-    for (const auto j : found) {
-      if (j != i && (points.col(j) - points.col(i)).squaredNorm() <= r2) row.push_back(static_cast<int>(j));
-    }
+  if (points.rows() == 2) {
+    BandRows<2>(points, radius, &neighbours);
+  } else {
+    BandRows<3>(points, radius, &neighbours);
   }
   return WeightsFromNeighbours(neighbours, style);
 }

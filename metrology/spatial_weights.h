@@ -52,8 +52,10 @@ struct SpatialWeights {
   std::vector<std::vector<int>> Neighbours() const;
 };
 
-// k nearest neighbours of each point among the others (ties broken by index), 2-D or 3-D points
-// as columns of `points` (2 × n or 3 × n). Uses PCL's kd-tree (FLANN), distances re-checked in double.
+// k nearest neighbours of each point among the others, 2-D or 3-D points as columns of `points`
+// (2 × n or 3 × n): the k smallest (‖p_j − p_i‖², j) in double, so ties are broken by index. A
+// nanoflann kd-tree in double gives the candidates (with a radius search when equidistant points may
+// reach past them); the compressed rows are written directly, points searched on both cores.
 Result<SpatialWeights> KnnWeights(const Eigen::MatrixXd& points, int k, WeightStyle style);
 
 // Delaunay neighbours of 2-D points (2 × n, e.g. (u, v)): i and j are neighbours when the Delaunay
@@ -63,7 +65,7 @@ Result<SpatialWeights> KnnWeights(const Eigen::MatrixXd& points, int k, WeightSt
 Result<SpatialWeights> DelaunayWeights(const Eigen::MatrixXd& uv, WeightStyle style);
 
 // Distance band: j is a neighbour of i when 0 < j ≠ i and ‖p_j − p_i‖ ≤ radius (inclusive, as
-// libpysal's DistanceBand), 2-D or 3-D points as columns. PCL kd-tree radius search, with the band
+// libpysal's DistanceBand), 2-D or 3-D points as columns. nanoflann radius search, with the band
 // decided in double precision. Points farther than `radius` from every other become islands.
 Result<SpatialWeights> DistanceBandWeights(const Eigen::MatrixXd& points, double radius, WeightStyle style);
 

@@ -1,8 +1,11 @@
 // Spatial weights: Delaunay (CGAL) against a brute-force empty-circumcircle triangulation, distance
-// band against brute force, GAL write/read round trip, island policies.
+// band against brute force, k nearest neighbours against brute force (ties broken by index: lattices,
+// coincident and collinear points, clusters, 3-D; the grid and the kd-tree paths), the same weights for
+// 1 and 2 threads, GAL write/read round trip, island policies.
 
 #include <algorithm>
 #include <filesystem>
+#include <map>
 #include <set>
 #include <utility>
 
@@ -11,6 +14,7 @@
 #include <gtest/gtest.h>
 #include <Eigen/Dense>
 
+#include "core/parallel.h"
 #include "core/random.h"
 #include "metrology/spatial_weights.h"
 
@@ -161,6 +165,101 @@ TEST(SpatialWeightsTest, DistanceBandIsInclusiveOnALattice) {
   EXPECT_EQ(queen->w.nonZeros(), 2 * (2 * 4 * 3 + 2 * 3 * 3));  // + 18 diagonal pairs
   EXPECT_EQ(rook->Neighbours()[5], (std::vector<int>{1, 4, 6, 9}));
   EXPECT_EQ(DistanceBandWeights(p, 0, WeightStyle::kBinary).status().code(), StatusCode::kBadInput);
+}
+
+// k-NN rows by definition: the k smallest (‖p_j − p_i‖², j), j ≠ i, as the weights list them (ascending),
+// for every k in `ks` from one ordering of each row (the first k of a total order are the k smallest).
+std::map<int, std::vector<std::vector<int>>> BruteForceKnn(const Eigen::MatrixXd& p, const std::vector<int>& ks) {
+  const int n = static_cast<int>(p.cols());
+  const int most = *std::max_element(ks.begin(), ks.end());
+  std::map<int, std::vector<std::vector<int>>> rows;
+  for (int k : ks) rows[k].resize(static_cast<std::size_t>(n));
+  std::vector<std::pair<double, int>> all;
+  for (int i = 0; i < n; ++i) {
+    all.clear();
+    for (int j = 0; j < n; ++j) {
+      if (j != i) all.emplace_back((p.col(j) - p.col(i)).squaredNorm(), j);
+    }
+    std::partial_sort(all.begin(), all.begin() + most, all.end());
+    for (int k : ks) {
+      auto& row = rows[k][static_cast<std::size_t>(i)];
+      for (int m = 0; m < k; ++m) row.push_back(all[static_cast<std::size_t>(m)].second);
+      std::sort(row.begin(), row.end());
+    }
+  }
+  return rows;
+}
+
+void ExpectKnnIsBruteForce(const Eigen::MatrixXd& p, const std::string& what) {
+  const std::vector<int> ks = {1, 3, 5, 8, 12};
+  const auto expected = BruteForceKnn(p, ks);
+  for (int k : ks) {
+    const auto w = KnnWeights(p, k, WeightStyle::kRowStandardised);
+    ASSERT_TRUE(w.ok()) << what << ": " << w.status().ToString();
+    EXPECT_EQ(w->w.nonZeros(), static_cast<long>(p.cols()) * k) << what;
+    EXPECT_EQ(w->islands, 0) << what;
+    const auto got = w->Neighbours();
+    long wrong = 0;
+    for (std::size_t i = 0; i < got.size(); ++i) wrong += got[i] != expected.at(k)[i];
+    EXPECT_EQ(wrong, 0) << what << ", k = " << k << ": rows differing from brute force";
+    for (int i = 0; i < w->n(); ++i) EXPECT_DOUBLE_EQ(w->w.row(i).sum(), 1.0);
+  }
+}
+
+TEST(SpatialWeightsTest, KnnMatchesBruteForceWithTiesBrokenByIndex) {
+  Rng rng(11);
+  Eigen::MatrixXd uniform(2, 2000);
+  for (int i = 0; i < uniform.cols(); ++i) uniform.col(i) << rng.Uniform(), rng.Uniform();
+  // A lattice: every point has 4 neighbours at 1, 4 at √2, 4 at 2, 8 at √5 (ties across any k).
+  Eigen::MatrixXd lattice(2, 40 * 30);
+  for (int i = 0; i < 40 * 30; ++i) lattice.col(i) << i % 40, i / 40;
+  // Coincident points (each site three times) and points on one line (the grid cannot be used).
+  Eigen::MatrixXd coincident(2, 600);
+  for (int i = 0; i < 600; ++i) coincident.col(i) << (i % 200) % 17, (i % 200) / 17;
+  Eigen::MatrixXd collinear(2, 500);
+  for (int i = 0; i < 500; ++i) collinear.col(i) << 0.5 * (i % 250), 2.0 * (i % 250);
+  // Two tight clusters far apart and a thin strip (cells far from uniform).
+  Eigen::MatrixXd clusters(2, 1000);
+  for (int i = 0; i < 1000; ++i) {
+    const double c = i < 900 ? 0 : 1000;
+    clusters.col(i) << c + 1e-3 * rng.Uniform(), c + 1e-3 * rng.Uniform();
+  }
+  Eigen::MatrixXd strip(2, 1000);
+  for (int i = 0; i < 1000; ++i) strip.col(i) << 100 * rng.Uniform(), 1e-4 * rng.Uniform();
+  Eigen::MatrixXd space(3, 1000);
+  for (int i = 0; i < space.cols(); ++i) space.col(i) << rng.Uniform(), rng.Uniform(), rng.Uniform();
+  Eigen::MatrixXd cube(3, 6 * 6 * 6);
+  for (int i = 0; i < 216; ++i) cube.col(i) << i % 6, (i / 6) % 6, i / 36;
+  ExpectKnnIsBruteForce(uniform, "uniform");
+  ExpectKnnIsBruteForce(lattice, "lattice");
+  ExpectKnnIsBruteForce(coincident, "coincident");
+  ExpectKnnIsBruteForce(collinear, "collinear");
+  ExpectKnnIsBruteForce(clusters, "clusters");
+  ExpectKnnIsBruteForce(strip, "strip");
+  ExpectKnnIsBruteForce(space, "3-D uniform");
+  ExpectKnnIsBruteForce(cube, "3-D lattice");
+}
+
+TEST(SpatialWeightsTest, KnnAndBandWeightsAreTheSameForOneAndTwoThreads) {
+  Rng rng(5);
+  Eigen::MatrixXd p(2, 20000);
+  for (int i = 0; i < p.cols(); ++i) p.col(i) << rng.Uniform(), rng.Uniform();
+  SetThreadCount(1);
+  const auto knn1 = KnnWeights(p, 8, WeightStyle::kRowStandardised);
+  const auto band1 = DistanceBandWeights(p, 0.01, WeightStyle::kBinary);
+  SetThreadCount(2);
+  const auto knn2 = KnnWeights(p, 8, WeightStyle::kRowStandardised);
+  const auto band2 = DistanceBandWeights(p, 0.01, WeightStyle::kBinary);
+  SetThreadCount(0);
+  ASSERT_TRUE(knn1.ok() && knn2.ok() && band1.ok() && band2.ok());
+  for (const auto* pair : {&knn1, &band1}) {
+    const auto& a = (*pair)->w;
+    const auto& b = (pair == &knn1 ? knn2 : band2)->w;
+    ASSERT_EQ(a.nonZeros(), b.nonZeros());
+    EXPECT_TRUE(std::equal(a.outerIndexPtr(), a.outerIndexPtr() + a.rows() + 1, b.outerIndexPtr()));
+    EXPECT_TRUE(std::equal(a.innerIndexPtr(), a.innerIndexPtr() + a.nonZeros(), b.innerIndexPtr()));
+    EXPECT_TRUE(std::equal(a.valuePtr(), a.valuePtr() + a.nonZeros(), b.valuePtr()));
+  }
 }
 
 TEST(SpatialWeightsTest, GalRoundTripKeepsAsymmetricNeighboursAndIslands) {
