@@ -284,11 +284,17 @@ Status CompensateProgram(const CompensateArgs& args) {
   }
   nc::CompensationOptions options;
   options.max_offset_um = args.max_offset_um;
+  // A large job evaluates the tabulated field (nc-gen/deviation_field.h), its measured error in the source.
+  double table_error_um = -1;
+  const nc::SystematicField systematic = field.AsSystematicField(path.points.size(), &table_error_um);
   const std::string source =
-      "systematic field " + args.field + " (thin-plate, lambda " + FormatExact(args.lambda) + ")";
+      "systematic field " + args.field + " (thin-plate, lambda " + FormatExact(args.lambda) +
+      (table_error_um >= 0 ? "; tabulated, within " + FormatSignificant(table_error_um, 2) + " um of the direct sum"
+                           : "") +
+      ")";
   FL_ASSIGN_OR_RETURN(const nc::Compensation compensation,
-                      nc::WriteCompensatedProgram(path, nominal, field.AsSystematicField(), source, options, post,
-                                                  args.out, args.side, args.machine.dialect));
+                      nc::WriteCompensatedProgram(path, nominal, systematic, source, options, post, args.out, args.side,
+                                                  args.machine.dialect));
   nlohmann::json summary = {{"program", args.out},
                             {"side_file", args.side},
                             {"dialect", args.machine.dialect},
@@ -394,7 +400,7 @@ Status CheckPrograms(const CheckArgs& args) {
   if (!args.field.empty()) {
     FL_ASSIGN_OR_RETURN(nc::DeviationField f, nc::ReadDeviationField(args.field, {.smoothing = args.lambda}));
     fitted = std::move(f);
-    field = fitted->AsSystematicField();
+    field = fitted->AsSystematicField(side.entries.size());
   }
   nc::CheckReport report;
   if (side.has_lambda) {  // a program formloop did not write (`nc compensate --program`)

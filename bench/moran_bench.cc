@@ -38,6 +38,7 @@
 
 #include <Eigen/Dense>
 
+#include "bench/bench_support.h"
 #include "core/parallel.h"
 #include "core/random.h"
 #include "metrology/morans_i.h"
@@ -55,13 +56,8 @@ double PeakRssMb() {
   return static_cast<double>(usage.ru_maxrss) / 1024.0;  // KiB on Linux
 }
 
-// User + system CPU time of this process: the figure to trust when other jobs share the cores.
-double CpuSeconds() {
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
-  return static_cast<double>(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) +
-         1e-6 * static_cast<double>(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
-}
+using bench::CpuSeconds;
+using bench::JsonNumber;
 
 double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
@@ -174,12 +170,6 @@ struct Timed {
   }
 };
 
-// A number from the peer's one-line JSON ("key": value), NaN when absent.
-double JsonNumber(const std::string& line, const std::string& key) {
-  const auto at = line.find("\"" + key + "\":");
-  return at == std::string::npos ? std::nan("") : std::strtod(line.c_str() + at + key.size() + 3, nullptr);
-}
-
 int RunKnn(int n) {
   Rng rng(2026);
   Eigen::MatrixXd uv(2, n);
@@ -234,11 +224,8 @@ int RunKnn(int n) {
     const std::string command = "/usr/bin/python3 " + std::string(FORMLOOP_SOURCE_DIR) + "/bench/knn_moran_peer.py " +
                                 points + " " + std::to_string(n) + " " + std::to_string(kNeighbours) + " 5 " +
                                 std::to_string(workers);
-    FILE* pipe = ::popen(command.c_str(), "r");
     std::string line;
-    char buffer[4096];
-    while (pipe && std::fgets(buffer, sizeof buffer, pipe)) line += buffer;
-    if (!pipe || ::pclose(pipe) != 0) {
+    if (!bench::RunPeer(command, &line)) {
       std::printf("peer failed: %s\n", command.c_str());
       ++failures;
       continue;

@@ -30,6 +30,7 @@
 #include <Eigen/Dense>
 #include <nlohmann/json.hpp>
 
+#include "bench/bench_support.h"
 #include "core/atomic_file.h"
 #include "tests/support/bounded_lsq_check.h"
 #include "tests/support/tuning_scenarios.h"
@@ -39,12 +40,7 @@
 namespace formloop {
 namespace {
 
-double CpuSeconds() {
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
-  return static_cast<double>(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) +
-         1e-6 * static_cast<double>(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
-}
+using bench::CpuSeconds;
 
 double Median(std::vector<double> v) {
   std::sort(v.begin(), v.end());

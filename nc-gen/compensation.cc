@@ -370,15 +370,34 @@ Result<Compensation> WriteCompensatedProgram(const Toolpath& nominal, const std:
                                              const CompensationOptions& options, const PostOptions& post,
                                              const std::filesystem::path& program_path,
                                              const std::filesystem::path& side_path, std::string_view dialect) {
-  FL_ASSIGN_OR_RETURN(Compensation compensation, CompensateToolpath(nominal, systematic, source, options));
+  // The field is evaluated once per CL point: the check recomputes −d_s·n from the values the compensation
+  // took, in the same order (a point whose (u, v) differs from the recorded one is evaluated afresh).
+  struct Taken {
+    double u, v, ds_mm;
+  };
+  std::vector<Taken> taken;
+  taken.reserve(nominal.points.size());
+  const SystematicField recording = [&](double u, double v) {
+    const double ds_mm = systematic(u, v);
+    taken.push_back({u, v, ds_mm});
+    return ds_mm;
+  };
+  std::size_t replayed = 0;
+  const SystematicField replaying = [&](double u, double v) {
+    if (replayed < taken.size() && taken[replayed].u == u && taken[replayed].v == v) return taken[replayed++].ds_mm;
+    return systematic(u, v);
+  };
+  FL_ASSIGN_OR_RETURN(Compensation compensation, CompensateToolpath(nominal, recording, source, options));
   FL_ASSIGN_OR_RETURN(const MoveList list, BuildMoveList(compensation.path));
   FL_ASSIGN_OR_RETURN(std::string program, Post(list, dialect, post));
   FL_ASSIGN_OR_RETURN(std::vector<ProgramMove> nominal_moves, ReadProgram(nominal_program, dialect, "nominal program"));
   FL_ASSIGN_OR_RETURN(std::vector<ProgramMove> moves, ReadProgram(program, dialect, "compensated program"));
   FL_RETURN_IF_ERROR(AssignProgramLines(nominal_moves, moves, &compensation));
-  SideFile side{.source = source, .entries = compensation.entries, .has_field_points = true};
-  FL_ASSIGN_OR_RETURN(CheckReport report,
-                      CheckCompensation(nominal_moves, moves, side, systematic, {.program_decimals = post.decimals}));
+  // The entries move into the side-file view for the check and back (no copy of a million rows).
+  SideFile side{.source = source, .entries = std::move(compensation.entries), .has_field_points = true};
+  auto checked = CheckCompensation(nominal_moves, moves, side, replaying, {.program_decimals = post.decimals});
+  compensation.entries = std::move(side.entries);
+  FL_ASSIGN_OR_RETURN(CheckReport report, std::move(checked));
   if (!report.ok()) {
     return Status::Internal("compensated program fails its own check: " + report.disagreeing.front().Describe() +
                             "; nothing was written");

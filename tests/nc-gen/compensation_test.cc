@@ -13,6 +13,7 @@
 
 #include "core/atomic_file.h"
 #include "core/number_text.h"
+#include "core/parallel.h"
 #include "nc-gen/compensation.h"
 #include "nc-gen/deviation_field.h"
 #include "nc-gen/post.h"
@@ -92,6 +93,52 @@ TEST(DeviationFieldTest, ReproducesLinearFieldsExactlyForAnySmoothing) {
     }
     EXPECT_NEAR(field->AsSystematicField()(4.7, 2.2), 1e-3 * Linear(4.7, 2.2), 1e-11);
   }
+}
+
+// The tabulated field against the direct sum: within its tolerance everywhere (random points, the data
+// points themselves, cell corners and centres), the direct sum itself off the grid, the same numbers for
+// 1 and 2 threads, and chosen by AsSystematicField only for large jobs.
+TEST(DeviationFieldTest, TabulatedFieldStaysWithinItsToleranceOfTheDirectSum) {
+  std::vector<DeviationSample> samples;
+  for (int a = 0; a < 24; ++a) {
+    for (int b = 0; b < 24; ++b) {
+      const double u = 10.0 * a / 23 + 0.05 * std::sin(7.0 * b), v = 5.0 * b / 23 + 0.05 * std::cos(3.0 * a);
+      // Wavy plus a deterministic "noise" that makes the weights large.
+      samples.push_back({u, v, Wavy(u, v) + 0.8 * std::sin(97.0 * a + 31.0 * b), a * 24 + b + 2});
+    }
+  }
+  const auto field = DeviationField::Fit(samples, {});
+  ASSERT_TRUE(field.ok()) << field.status().message();
+  SetThreadCount(1);
+  const auto one = field->Tabulate();
+  SetThreadCount(2);
+  const auto two = field->Tabulate();
+  SetThreadCount(0);
+  ASSERT_TRUE(one.ok() && two.ok()) << one.status().message();
+  EXPECT_LE(one->measured_error_um(), kTabulatedToleranceUm);
+  EXPECT_EQ(one->measured_error_um(), two->measured_error_um());
+  std::vector<std::pair<double, double>> points;
+  for (int i = 0; i < 4000; ++i) {
+    points.emplace_back(10.0 * std::fmod(0.6180339887 * (i + 1), 1.0), 5.0 * std::fmod(0.7548776662 * (i + 1), 1.0));
+  }
+  for (const auto& s : samples) points.emplace_back(s.u, s.v);
+  double worst = 0;
+  for (const auto& [u, v] : points) {
+    const double direct = field->EvaluateUm(u, v), tabulated = one->EvaluateUm(u, v);
+    worst = std::max(worst, std::abs(tabulated - direct));
+    EXPECT_EQ(tabulated, two->EvaluateUm(u, v));
+  }
+  EXPECT_LE(worst, kTabulatedToleranceUm);
+  EXPECT_GT(worst, 0);  // it is an approximation, and the test can see it
+  // Far outside the samples' box: the direct sum, exactly.
+  EXPECT_EQ(one->EvaluateUm(40.0, -30.0), field->EvaluateUm(40.0, -30.0));
+  // Small jobs keep the direct sum (the same bytes as before); large ones get the table.
+  double error_um = 0;
+  EXPECT_EQ(field->AsSystematicField(1000, &error_um)(3.3, 1.1), field->EvaluateMm(3.3, 1.1));
+  EXPECT_EQ(error_um, -1);
+  const SystematicField large = field->AsSystematicField(10'000'000, &error_um);
+  EXPECT_EQ(error_um, one->measured_error_um());
+  EXPECT_EQ(large(3.3, 1.1), one->EvaluateMm(3.3, 1.1));
 }
 
 TEST(DeviationFieldTest, RefusesDegenerateAndOversizedInput) {
