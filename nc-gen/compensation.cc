@@ -94,6 +94,9 @@ Status AssignProgramLines(const std::vector<ProgramMove>& nominal, const std::ve
 }
 
 Status WriteSideFile(const std::filesystem::path& path, const Compensation& compensation) {
+  // Streamed row by row into the temporary file (a million rows are ~180 MB of text, never held whole).
+  AtomicFile file(path);
+  FL_RETURN_IF_ERROR(file.open_status());
   std::string text =
       "# formloop compensation side file: per CL point, the nominal tip, the applied offset, its source\n";
   text += "# source: " + compensation.source + "\n";
@@ -102,6 +105,10 @@ Status WriteSideFile(const std::filesystem::path& path, const Compensation& comp
       "u,v,nx,ny,nz,kind";
   text += compensation.program_mapped ? ",lambda\n" : "\n";
   for (const auto& e : compensation.entries) {
+    if (text.size() > (1 << 16)) {
+      file.stream() << text;
+      text.clear();
+    }
     text += std::to_string(e.cl_index) + "," + std::to_string(e.pass) + "," + std::to_string(e.nominal_line) + "," +
             std::to_string(e.compensated_line);
     for (int a = 0; a < 3; ++a) text += "," + FormatFixed(e.nominal_tip[a], 6);
@@ -112,7 +119,8 @@ Status WriteSideFile(const std::filesystem::path& path, const Compensation& comp
     text += std::string(",") + ClKindName(e.kind);
     text += compensation.program_mapped ? "," + FormatExact(e.lambda) + "\n" : "\n";
   }
-  return WriteFileAtomic(path, text);
+  file.stream() << text;
+  return file.Commit();
 }
 
 Result<double> VerifyCompensation(const std::vector<ProgramMove>& nominal, const std::vector<ProgramMove>& compensated,
