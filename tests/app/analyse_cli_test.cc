@@ -1,8 +1,10 @@
 // `formloop analyse moran` through the binary: the PySAL St Louis case, the weight kinds, the LISA
 // table, residual Moran, and bad input (missing column, non-numeric cell, GAL id not in the data).
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -136,6 +138,37 @@ TEST_F(AnalyseCliTest, KnnDelaunayAndBandWeights) {
     EXPECT_LT(dropped["n"].get<int>(), 78);
     EXPECT_EQ(dropped["islands"]["dropped_ids"].size(), static_cast<std::size_t>(78 - dropped["n"].get<int>()));
   }
+}
+
+// The global --threads: k-NN weights, Moran's I and the LISA table of 20,000 points (several parallel
+// chunks) are the same bytes on one thread and on two; a negative count is a usage error.
+TEST_F(AnalyseCliTest, OneAndTwoThreadsGiveTheSameBytes) {
+  std::ostringstream text;
+  text << "id,u,v,z\n";
+  Rng rng(26);
+  for (int i = 0; i < 20000; ++i) {
+    const double u = rng.Uniform(0, 100), v = rng.Uniform(0, 100);
+    text << i << "," << u << "," << v << "," << std::sin(u / 9) * std::cos(v / 7) + rng.Normal(0, 0.3) << "\n";
+  }
+  const std::string csv = Write("points.csv", text.str());
+  std::string outputs[2], tables[2];
+  for (int threads : {1, 2}) {
+    const std::string lisa = (dir_ / "lisa.csv").string();  // one name: stdout names it
+    std::string err;
+    const int code =
+        testing::RunFormloop("--threads " + std::to_string(threads) + " analyse moran --points " + csv +
+                                 " --value z --coords u,v --knn 8 --style W --lisa " + lisa + " --lisa-permutations 0",
+                             &outputs[threads - 1], &err);
+    ASSERT_EQ(code, 0) << err;
+    std::ifstream in(lisa);
+    tables[threads - 1] = std::string(std::istreambuf_iterator<char>(in), {});
+  }
+  EXPECT_EQ(outputs[0], outputs[1]);
+  EXPECT_EQ(tables[0], tables[1]);
+  EXPECT_GT(tables[0].size(), 20000u);
+  EXPECT_EQ(nlohmann::json::parse(outputs[0])["weights"]["nonzero"], 20000 * 8);
+  std::string out, err;
+  EXPECT_EQ(testing::RunFormloop("--threads -1 analyse moran --points " + csv + " --value z --knn 8", &out, &err), 2);
 }
 
 TEST_F(AnalyseCliTest, BadInputNamesFileLineColumnAndFix) {
