@@ -151,6 +151,20 @@ Result<PlanChoice> ChoosePlan(const PlanRequest& request) {
     c.flag_engineer = true;
   }
   c.report["source"] = c.source;
+  // What the run uses, beside the GA's candidate: the same tool and radius as plan.json and the programs.
+  const char* decision = corrected.defects_before.empty()
+                             ? "the case's plan, kept: it has no predicted defect on this part (nothing to correct)"
+                         : corrected.corrected
+                             ? "the GA's candidate: it removes every predicted defect"
+                             : "the case's plan, kept and flagged for an engineer: the correction could not remove "
+                               "every predicted defect (the GA's candidate is not used)";
+  corrected.applied = {{"decision", decision},
+                       {"tool_number", c.plan.tool.number},
+                       {"tool_radius_mm", c.plan.tool.radius_mm},
+                       {"scallop_um", c.plan.scallop_um},
+                       {"feed_mm_per_min", c.plan.feed_mm_per_min},
+                       {"spindle_rpm", c.plan.spindle_rpm},
+                       {"precompensation_scale", c.precompensation_scale}};
   c.report["sim_correction"] = {{"defects_before", corrected.defects_before.size()},
                                 {"defects_after", corrected.defects_after.size()},
                                 {"corrected", corrected.corrected},

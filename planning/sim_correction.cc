@@ -382,6 +382,14 @@ Result<SimCorrectionResult> RunSimulationCorrection(const SimCorrectionInput& in
   FL_ASSIGN_OR_RETURN(const CheckResult before, FullCheck(input, pb, input.case_plan, 0.0));
   res.defects_before = before.defects;
   res.predicted_form_error_before_um = before.e_pred_mm * 1000;
+  if (before.defects.empty()) {
+    // Nothing to correct: the case's plan stands (the caller keeps it). The GA is not run, so no candidate is
+    // reported that the part would never be cut with (issue 17: reg-blade-a's report named the GA's tool 7,
+    // r = 6 mm, while the program used the case's tool 3, r = 2 mm).
+    res.corrected = true;
+    res.predicted_form_error_after_um = res.predicted_form_error_before_um;
+    return res;
+  }
 
   SurrogateInputs sur = InitialSurrogate(input, pb, before);
   std::vector<Defect> remaining = before.defects;
@@ -479,15 +487,16 @@ nlohmann::json SimCorrectionResult::ToJson() const {
   return {{"corrected", corrected},
           {"defects_before", list(defects_before)},
           {"defects_after", list(defects_after)},
-          {"chosen", has_plan ? chosen.ToJson() : nlohmann::json(nullptr)},
-          {"plan", !has_plan ? nlohmann::json(nullptr)
-                             : nlohmann::json{{"tool_number", plan.tool.number},
-                                              {"tool_radius_mm", plan.tool.radius_mm},
-                                              {"scallop_um", plan.scallop_um},
-                                              {"feed_mm_per_min", plan.feed_mm_per_min},
-                                              {"spindle_rpm", plan.spindle_rpm},
-                                              {"max_point_spacing_mm", plan.max_point_spacing_mm},
-                                              {"raster_angle_deg", plan.raster_angle_deg}}},
+          {"applied", applied},
+          {"candidate", has_plan ? chosen.ToJson() : nlohmann::json(nullptr)},
+          {"candidate_plan", !has_plan ? nlohmann::json(nullptr)
+                                       : nlohmann::json{{"tool_number", plan.tool.number},
+                                                        {"tool_radius_mm", plan.tool.radius_mm},
+                                                        {"scallop_um", plan.scallop_um},
+                                                        {"feed_mm_per_min", plan.feed_mm_per_min},
+                                                        {"spindle_rpm", plan.spindle_rpm},
+                                                        {"max_point_spacing_mm", plan.max_point_spacing_mm},
+                                                        {"raster_angle_deg", plan.raster_angle_deg}}},
           {"predicted_form_error_before_um", predicted_form_error_before_um},
           {"predicted_form_error_after_um", predicted_form_error_after_um},
           {"precompensation_scale", precompensation_scale},

@@ -4,7 +4,8 @@
 // The retrieved case is close but not equal: its plan and its learned model are tried on the NEW part in
 // the virtual machine, the defects are predicted, and the plan is corrected by the plan GA of
 // spec/process-optimization.md §4 (AGA of §1.6 on a fast surrogate, §4.3) until the full simulation
-// shows no defect, or the result says exactly why not.
+// shows no defect, or the result says exactly why not. A case plan with no predicted defect is not
+// corrected at all (no GA round, no candidate): it stands as it is.
 //
 // Defects of a plan (the "full check"):
 //   gouge       the planner lifted CL points (a concave radius below the ball): that region is left uncut;
@@ -101,8 +102,13 @@ struct SimCorrectionInput {
 struct SimCorrectionResult {
   bool corrected = false;
   std::vector<Defect> defects_before, defects_after;
-  PlanGenes chosen;          // the last plan the GA chose (null in JSON when none: PLAN-NO-TOOL)
-  nc::ToolpathOptions plan;  // ready for nc::PlanRaster
+  // The GA's candidate: the last plan it proposed (null in JSON when none: PLAN-NO-TOOL). It is the plan the
+  // part is cut with only when `corrected`; otherwise the caller keeps the case's plan (see `applied`).
+  PlanGenes chosen;
+  nc::ToolpathOptions plan;  // the candidate, ready for nc::PlanRaster
+  // Set by the caller (planning::ChoosePlan): the plan the run actually uses and why, so the written result
+  // never shows the candidate as the plan when the case's plan was kept. Null until set.
+  nlohmann::json applied;
   double predicted_form_error_before_um = 0, predicted_form_error_after_um = 0;
   double precompensation_scale = 0;  // c_pc applied to the model's predicted field before the first cut
   int rounds = 0;

@@ -193,7 +193,7 @@ TEST(SimCorrectionLoop, NoGougeFreeToolIsPlanNoTool) {
   EXPECT_NE(r->why_not.find("PLAN-NO-TOOL"), std::string::npos) << r->why_not;
   EXPECT_NE(r->why_not.find("{4.00, 6.00, 8.00}"), std::string::npos) << r->why_not;
   EXPECT_NE(r->why_not.find("smallest concave radius 3."), std::string::npos) << r->why_not;
-  EXPECT_TRUE(r->ToJson()["plan"].is_null());
+  EXPECT_TRUE(r->ToJson()["candidate_plan"].is_null());
 }
 
 TEST(SimCorrectionLoop, ImpossibleToleranceEscalatesAfterThreeRounds) {
@@ -221,6 +221,26 @@ TEST(SimCorrectionLoop, ImpossibleToleranceEscalatesAfterThreeRounds) {
   std::printf("surrogate vs simulation e_pred gap: round 1 %.3f um, round 3 %.3f um\n", gap_um(1), gap_um(3));
   EXPECT_GT(gap_um(1), 5.0);
   EXPECT_LT(gap_um(3), 0.5);
+}
+
+// A case plan with no predicted defect is kept as it is: no GA round and no candidate that could be taken for
+// the plan (issue 17 item 9: the report named the GA's tool while the program used the case's).
+TEST(SimCorrectionLoop, NoPredictedDefectKeepsTheCasePlanWithoutACandidate) {
+  SimCorrectionInput in = BaseInput(2.0);  // gouge-free at ρ ≈ 3.2 mm
+  in.model = SmallModel(2, 0);             // 2 µm of tool radius error
+  in.tolerance_mm = 0.050;                 // far above it
+  const auto r = RunSimulationCorrection(in);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  Print("no defect", *r);
+  ASSERT_TRUE(r->defects_before.empty()) << "the case's plan must have no predicted defect here";
+  EXPECT_TRUE(r->corrected);
+  EXPECT_EQ(r->rounds, 0);
+  EXPECT_TRUE(r->defects_after.empty());
+  EXPECT_EQ(r->predicted_form_error_after_um, r->predicted_form_error_before_um);
+  const auto json = r->ToJson();
+  EXPECT_TRUE(json["candidate"].is_null());
+  EXPECT_TRUE(json["candidate_plan"].is_null());
+  EXPECT_FALSE(json.contains("chosen")) << "the GA's candidate is named as such, never as the chosen plan";
 }
 
 TEST(SimCorrectionLoop, TravelLimitIsReportedAndNotCorrectable) {
