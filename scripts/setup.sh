@@ -32,6 +32,7 @@ PACKAGES=(
   chromium          # headless browser: the report tests render report.html (charts, 3-D view, width, errors)
   libjs-three       # three.js + OrbitControls, inlined into report.html for its 3-D view (no network)
   linuxcnc-uspace   # rs274 checks our LinuxCNC programs; the controller itself runs them (tests/linuxcnc)
+  clang-14 libclang-rt-14-dev llvm-14  # scripts/fuzz.sh and sanitize.sh: libFuzzer, ASan/UBSan, llvm-symbolizer
 )
 
 log() { printf '[setup] %s\n' "$*" >&2; }
