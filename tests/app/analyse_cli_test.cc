@@ -21,7 +21,7 @@ namespace formloop::app {
 namespace {
 
 namespace fs = std::filesystem;
-const std::string kData = std::string(FORMLOOP_SHARED_DIR) + "/data/moran-pysal/";
+const std::string kData = std::string(FORMLOOP_REFERENCE_DIR) + "/moran-pysal/";
 
 class AnalyseCliTest : public ::testing::Test {
  protected:

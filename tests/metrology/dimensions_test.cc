@@ -59,8 +59,7 @@ double Value(const DimensionDefinition& d, const std::vector<RolePoints>& roles)
 }
 
 TEST(FeatureFit, GanderGolubStrebelGeometricCircle) {
-  std::ifstream in(std::string(FORMLOOP_SOURCE_DIR) +
-                   "/data/reference/circle-fit-gander/gander_golub_strebel_6pts.csv");
+  std::ifstream in(std::string(FORMLOOP_REFERENCE_DIR) + "/circle-fit-gander/gander_golub_strebel_6pts.csv");
   ASSERT_TRUE(in.good());
   std::string line;
   std::getline(in, line);  // header x,y

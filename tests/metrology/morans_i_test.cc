@@ -16,7 +16,7 @@
 namespace formloop::metrology {
 namespace {
 
-const std::string kData = std::string(FORMLOOP_SHARED_DIR) + "/data/moran-pysal/";
+const std::string kData = std::string(FORMLOOP_REFERENCE_DIR) + "/moran-pysal/";
 
 // Reads column `column` (0-based) of a comma-separated file after `skip` header lines; ids from column 0.
 void ReadTable(const std::string& path, int skip, int column, std::vector<std::string>* ids, std::vector<double>* y) {

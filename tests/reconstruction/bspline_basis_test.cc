@@ -1,5 +1,5 @@
 // B-spline basis (Piegl–Tiller A2.1–A2.3), Gram matrices and the 1-D least-squares core, checked
-// against the NIST StRD linear least-squares reference data (../shared/data/nist-strd-lls).
+// against the NIST StRD linear least-squares reference data (data/reference/nist-strd-lls).
 //
 // Measured (Release, GCC 12, x86-64), LRE = −log10(|estimate − certified| / |certified|):
 //   Wampler1, degree 5, every knot vector below: max |residual| / max |y| ≤ 3e-16 (zero residual).
@@ -32,7 +32,7 @@ struct Xy {
 
 // Reads a NIST StRD CSV with header "y,x".
 Xy ReadStrd(const std::string& name) {
-  const std::string path = std::string(FORMLOOP_SHARED_DIR) + "/data/nist-strd-lls/" + name;
+  const std::string path = std::string(FORMLOOP_REFERENCE_DIR) + "/nist-strd-lls/" + name;
   std::ifstream in(path);
   EXPECT_TRUE(in.good()) << "cannot open " << path;
   Xy data;

@@ -18,7 +18,7 @@
 namespace formloop::tuning {
 namespace {
 
-const std::string kReference = std::string(FORMLOOP_SOURCE_DIR) + "/data/reference/";
+const std::string kReference = std::string(FORMLOOP_REFERENCE_DIR) + "/";
 
 // NASA milling: VB against time per case; rows without VB are skipped; cases with < 3 measurements left out.
 std::vector<WearSeries> ReadNasa() {
