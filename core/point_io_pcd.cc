@@ -9,10 +9,13 @@
 #include <pcl/console/print.h>
 #include <pcl/io/pcd_io.h>
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <exception>
+#include <fstream>
 #include <limits>
 #include <string>
 #include <vector>
@@ -127,6 +130,198 @@ std::string FixCheckPcd() {
          "export it again";
 }
 
+// The PCD v0.7 header (https://pointclouds.org/documentation/tutorials/pcd_file_format.html), checked before PCL
+// sees the file: pcl::PCDReader trusts the header and crashes on some malformed ones (a line that only starts with
+// a keyword, no DATA line, entry counts that disagree: found by fuzz/fuzz_points_pcd). Every line up to DATA is a
+// '#' comment or one of the keywords, in order, with its entries: FIELDS, SIZE (1, 2, 4 or 8), TYPE (I, U or F;
+// F of size 4 or 8), COUNT (optional, ≥ 1) with one entry per field, WIDTH, HEIGHT and POINTS (WIDTH × HEIGHT)
+// positive, VIEWPOINT seven numbers, DATA ascii, binary or binary_compressed.
+// What the body of a checked header must hold.
+struct PcdLayout {
+  long header_lines = 0;             // lines up to and including DATA
+  std::size_t values_per_point = 0;  // the sum of COUNT
+  unsigned long long points = 0;
+  std::string data;  // ascii, binary or binary_compressed
+};
+
+// `file_size` bounds POINTS: an ascii point takes at least 2 bytes, a compressed one more than 1/100 byte (LZF).
+Status CheckPcdHeader(const std::string& file, const std::string& text, std::uintmax_t file_size, PcdLayout* layout) {
+  static const char* const kOrder[] = {"VERSION", "FIELDS", "SIZE",      "TYPE",   "COUNT",
+                                       "WIDTH",   "HEIGHT", "VIEWPOINT", "POINTS", "DATA"};
+  constexpr int kKeys = static_cast<int>(std::size(kOrder));
+  const std::string fix =
+      "write the header as PCD v0.7 defines it (VERSION, FIELDS, SIZE, TYPE, COUNT, WIDTH, "
+      "HEIGHT, VIEWPOINT, POINTS, DATA, one per line) or export the point cloud again";
+  std::vector<std::vector<std::string>> entries(kKeys);
+  bool seen[kKeys] = {};
+  int last = -1;
+  long line_number = 0;
+  std::size_t pos = 0;
+  auto positive = [](const std::string& t, unsigned long long max) {
+    if (t.empty() || t.size() > 12 || t.find_first_not_of("0123456789") != std::string::npos) return false;
+    const unsigned long long v = std::stoull(t);
+    return v >= 1 && v <= max;
+  };
+  while (pos < text.size()) {
+    const std::size_t end = std::min(text.find('\n', pos), text.size());
+    std::string line = text.substr(pos, end - pos);
+    pos = end + 1;
+    ++line_number;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.empty() || line[0] == '#') continue;
+    std::vector<std::string> tokens;
+    for (std::size_t i = 0; i < line.size();) {
+      while (i < line.size() && (line[i] == ' ' || line[i] == '\t')) ++i;
+      std::size_t j = i;
+      while (j < line.size() && line[j] != ' ' && line[j] != '\t') ++j;
+      if (j > i) tokens.push_back(line.substr(i, j - i));
+      i = j;
+    }
+    if (tokens.empty()) continue;
+    const Where where{.file = file, .line = line_number, .field = tokens[0]};
+    int key = -1;
+    for (int k = 0; k < kKeys; ++k) {
+      if (tokens[0] == kOrder[k]) key = k;
+    }
+    if (key < 0) {
+      return Status::BadInput(where, "not a PCD header line: '" + line.substr(0, 60) + "'", fix);
+    }
+    if (seen[key] || key < last) {
+      return Status::BadInput(where, std::string(kOrder[key]) + " is repeated or out of order", fix);
+    }
+    seen[key] = true;
+    last = key;
+    entries[key].assign(tokens.begin() + 1, tokens.end());
+    if (entries[key].empty()) return Status::BadInput(where, "has no value", fix);
+    if (tokens[0] == "DATA") {
+      layout->header_lines = line_number;
+      break;
+    }
+  }
+  auto index = [&](const char* name) {
+    for (int k = 0; k < kKeys; ++k) {
+      if (std::string(kOrder[k]) == name) return k;
+    }
+    return 0;
+  };
+  for (const char* required : {"FIELDS", "SIZE", "TYPE", "WIDTH", "POINTS", "DATA"}) {
+    if (!seen[index(required)]) {
+      return Status::BadInput(Where{.file = file, .field = required},
+                              std::string("the header has no ") + required + " line", fix);
+    }
+  }
+  const auto& fields = entries[index("FIELDS")];
+  const auto& sizes = entries[index("SIZE")];
+  const auto& types = entries[index("TYPE")];
+  const auto& counts = entries[index("COUNT")];
+  if (sizes.size() != fields.size() || types.size() != fields.size() ||
+      (seen[index("COUNT")] && counts.size() != fields.size())) {
+    return Status::BadInput(Where{.file = file, .field = "FIELDS"},
+                            std::to_string(fields.size()) + " fields, but " + std::to_string(sizes.size()) + " SIZE, " +
+                                std::to_string(types.size()) + " TYPE and " + std::to_string(counts.size()) +
+                                " COUNT entries",
+                            "give SIZE, TYPE and COUNT one entry per field");
+  }
+  for (std::size_t f = 0; f < fields.size(); ++f) {
+    const std::string& size = sizes[f];
+    const std::string& type = types[f];
+    const bool size_ok = size == "1" || size == "2" || size == "4" || size == "8";
+    const bool type_ok = type == "I" || type == "U" || (type == "F" && (size == "4" || size == "8"));
+    if (!size_ok || !type_ok || (seen[index("COUNT")] && !positive(counts[f], 1u << 20))) {
+      return Status::BadInput(Where{.file = file, .field = fields[f]},
+                              "field '" + fields[f] + "' has SIZE " + size + ", TYPE " + type +
+                                  (seen[index("COUNT")] ? ", COUNT " + counts[f] : std::string()),
+                              "SIZE is 1, 2, 4 or 8 bytes, TYPE I, U or F (F of 4 or 8 bytes), COUNT at least 1");
+    }
+  }
+  const auto& width = entries[index("WIDTH")];
+  const auto& points = entries[index("POINTS")];
+  const auto& height = entries[index("HEIGHT")];
+  constexpr unsigned long long kMaxPoints = 1ull << 40;
+  if (width.size() != 1 || points.size() != 1 || !positive(width[0], kMaxPoints) || !positive(points[0], kMaxPoints) ||
+      (seen[index("HEIGHT")] && (height.size() != 1 || !positive(height[0], kMaxPoints)))) {
+    return Status::BadInput(Where{.file = file, .field = "WIDTH"},
+                            "WIDTH, HEIGHT and POINTS must each be one positive whole number",
+                            "a PCD file with no point holds nothing to read; export the point cloud again");
+  }
+  const unsigned long long h = seen[index("HEIGHT")] ? std::stoull(height[0]) : 1;
+  if (std::stoull(width[0]) * h != std::stoull(points[0])) {
+    return Status::BadInput(
+        Where{.file = file, .field = "POINTS"},
+        "POINTS " + points[0] + " is not WIDTH × HEIGHT (" + width[0] + " × " + std::to_string(h) + ")", fix);
+  }
+  if (seen[index("VIEWPOINT")] && entries[index("VIEWPOINT")].size() != 7) {
+    return Status::BadInput(Where{.file = file, .field = "VIEWPOINT"}, "needs 7 numbers (tx ty tz qw qx qy qz)", fix);
+  }
+  const auto& data = entries[index("DATA")];
+  if (data.size() != 1 || (data[0] != "ascii" && data[0] != "binary" && data[0] != "binary_compressed")) {
+    return Status::BadInput(Where{.file = file, .field = "DATA"}, "must be ascii, binary or binary_compressed", fix);
+  }
+  const unsigned long long n = std::stoull(points[0]);
+  if ((data[0] == "ascii" && n > file_size / 2) || (data[0] == "binary_compressed" && n / 100 > file_size)) {
+    return Status::BadInput(
+        Where{.file = file, .field = "POINTS"},
+        "declares " + points[0] + " points, more than the file's " + std::to_string(file_size) + " bytes can hold",
+        "the file is truncated or its header wrong; export the point cloud again");
+  }
+  layout->points = n;
+  layout->data = data[0];
+  layout->values_per_point = 0;
+  for (std::size_t f = 0; f < fields.size(); ++f) {
+    layout->values_per_point += seen[index("COUNT")] ? std::stoull(counts[f]) : 1;
+  }
+  return Status::Ok();
+}
+
+// The body of an ascii PCD, checked before PCL reads it (pcl::PCDReader trusted a body that held header lines and
+// allocated terabytes: found by fuzz/fuzz_points_pcd): POINTS lines after DATA, each with one number per value
+// (the sum of COUNT), blank lines aside.
+Status CheckPcdAsciiBody(const std::filesystem::path& path, const PcdLayout& layout) {
+  const std::string file = path.string();
+  std::ifstream in(path, std::ios::binary);
+  std::string line;
+  long line_number = 0;
+  unsigned long long rows = 0;
+  while (std::getline(in, line)) {
+    if (++line_number <= layout.header_lines) continue;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    std::size_t values = 0;
+    bool numbers = true;
+    for (std::size_t i = 0; i < line.size();) {
+      while (i < line.size() && (line[i] == ' ' || line[i] == '\t')) ++i;
+      std::size_t j = i;
+      while (j < line.size() && line[j] != ' ' && line[j] != '\t') ++j;
+      if (j > i) {
+        ++values;
+        const char c = line[i];
+        numbers = numbers && (std::isdigit(static_cast<unsigned char>(c)) || c == '-' || c == '+' || c == '.' ||
+                              c == 'n' || c == 'N' || c == 'i' || c == 'I');
+      }
+      i = j;
+    }
+    if (values == 0) continue;
+    const Where where{.file = file, .line = line_number, .field = ""};
+    if (++rows > layout.points) {
+      return Status::BadInput(where, "more point lines than the header's POINTS " + std::to_string(layout.points),
+                              "make POINTS the number of points, or remove what follows them");
+    }
+    if (values != layout.values_per_point || !numbers) {
+      return Status::BadInput(where,
+                              "a point line needs " + std::to_string(layout.values_per_point) +
+                                  " numbers (one per field and COUNT), found " + std::to_string(values) +
+                                  (numbers ? " values" : " values, not all numbers"),
+                              "check the FIELDS and COUNT lines against the data, or export the point cloud again");
+    }
+  }
+  if (rows != layout.points) {
+    return Status::BadInput(
+        Where{.file = file, .line = line_number, .field = "POINTS"},
+        "the file ends after " + std::to_string(rows) + " of the header's " + std::to_string(layout.points) + " points",
+        "the file is incomplete (interrupted copy or export?); export it again");
+  }
+  return Status::Ok();
+}
+
 Result<PointSet> ReadPcdQuiet(const std::filesystem::path& path) {
   const std::string file = path.string();
   std::error_code ec;
@@ -143,6 +338,16 @@ Result<PointSet> ReadPcdQuiet(const std::filesystem::path& path) {
                             "export the point cloud again; a PCD file starts with a header");
   }
 
+  {
+    // The header is at most a few hundred bytes; 64 KiB leaves room for long comments and many fields.
+    std::ifstream in(path, std::ios::binary);
+    std::string head(std::min<std::uintmax_t>(file_size, 64 * 1024), '\0');
+    in.read(head.data(), static_cast<std::streamsize>(head.size()));
+    head.resize(static_cast<std::size_t>(std::max<std::streamsize>(in.gcount(), 0)));
+    PcdLayout layout;
+    FL_RETURN_IF_ERROR(CheckPcdHeader(file, head, file_size, &layout));
+    if (layout.data == "ascii") FL_RETURN_IF_ERROR(CheckPcdAsciiBody(path, layout));
+  }
   pcl::PCDReader reader;
   pcl::PCLPointCloud2 cloud;
   Eigen::Vector4f origin;

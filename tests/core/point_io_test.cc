@@ -756,6 +756,51 @@ TEST_F(PcdTest, BadFilesAreReportedQuietly) {
   EXPECT_EQ(::testing::internal::GetCapturedStderr(), "");
 }
 
+// Found by fuzz/fuzz_points_pcd: pcl::PCDReader crashed (SEGV) on this header (a line that only starts with
+// FIELDS, no DATA line). The header is now checked before PCL sees the file; each malformed kind is refused
+// naming the file and the header field. The crashing input is kept in fuzz/corpus/fuzz_points_pcd/.
+TEST_F(PcdTest, MalformedHeadersAreRefusedBeforePclReadsThem) {
+  ::testing::internal::CaptureStderr();
+  const std::string fuzz_crash =
+      "# .PCD 60.7 - PoilC tnoud Data fhle formaPCD v0.7 - Point Clot\nVERSION 0.7\nFIELDS x y {\nSIZE 4 4 4\n"
+      "TYPE F F F\nCOUNT 1 1 1\nWIDTH  0 0\nPOINTS 3\nFIELDSscii\n0 0 0\n1 0 0.5\n0 1 0.25\n";
+  ExpectError(ReadPcd(WriteBytes("crash.pcd", fuzz_crash)).status(), StatusCode::kBadInput, {"crash.pcd", "Fix:"});
+  const std::string head = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n";
+  ExpectError(ReadPcd(WriteBytes("nodata.pcd", head + "WIDTH 1\nHEIGHT 1\nPOINTS 1\n1 2 3\n")).status(),
+              StatusCode::kBadInput, {"nodata.pcd", "not a PCD header line"});
+  ExpectError(ReadPcd(WriteBytes("nodata2.pcd", head + "WIDTH 1\nHEIGHT 1\nPOINTS 1\n")).status(),
+              StatusCode::kBadInput, {"nodata2.pcd", "no DATA line"});
+  ExpectError(ReadPcd(WriteBytes("sizes.pcd",
+                                 "FIELDS x y z\nSIZE 4 4\nTYPE F F F\nWIDTH 1\nPOINTS 1\nDATA ascii\n"
+                                 "1 2 3\n"))
+                  .status(),
+              StatusCode::kBadInput, {"sizes.pcd", "3 fields, but 2 SIZE"});
+  ExpectError(ReadPcd(WriteBytes("type.pcd",
+                                 "FIELDS x y z\nSIZE 4 4 2\nTYPE F F F\nWIDTH 1\nPOINTS 1\nDATA ascii\n"
+                                 "1 2 3\n"))
+                  .status(),
+              StatusCode::kBadInput, {"type.pcd", "field 'z'"});
+  ExpectError(ReadPcd(WriteBytes("count.pcd", head + "WIDTH 2\nHEIGHT 1\nPOINTS 3\nDATA ascii\n1 2 3\n")).status(),
+              StatusCode::kBadInput, {"count.pcd", "POINTS 3 is not WIDTH"});
+  ExpectError(ReadPcd(WriteBytes("huge.pcd", head + "WIDTH 100000000\nHEIGHT 1\nPOINTS 100000000\nDATA ascii\n1 2 3\n"))
+                  .status(),
+              StatusCode::kBadInput, {"huge.pcd", "more than the file's"});
+  ExpectError(ReadPcd(WriteBytes("order.pcd",
+                                 "SIZE 4 4 4\nFIELDS x y z\nTYPE F F F\nWIDTH 1\nPOINTS 1\nDATA ascii\n"
+                                 "1 2 3\n"))
+                  .status(),
+              StatusCode::kBadInput, {"order.pcd", "out of order"});
+  // The second finding: a valid header followed by header lines as "data" made PCL allocate terabytes. The ascii
+  // body is checked too: POINTS lines of one number per value.
+  const std::string second = head + "WIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA ascii\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\n";
+  ExpectError(ReadPcd(WriteBytes("body.pcd", second)).status(), StatusCode::kBadInput, {"body.pcd", "not all numbers"});
+  ExpectError(ReadPcd(WriteBytes("short.pcd", head + "WIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA ascii\n1 2 3\n")).status(),
+              StatusCode::kBadInput, {"short.pcd", "ends after 1 of the header's 2 points"});
+  ExpectError(ReadPcd(WriteBytes("wide.pcd", head + "WIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA ascii\n1 2 3 4\n")).status(),
+              StatusCode::kBadInput, {"wide.pcd", "needs 3 numbers"});
+  EXPECT_EQ(::testing::internal::GetCapturedStderr(), "");
+}
+
 TEST_F(PcdTest, WritingNanLeavesNoFile) {
   PointSet sample = MakeSample(10, 20);
   sample.times_s[9] = std::numeric_limits<double>::infinity();
