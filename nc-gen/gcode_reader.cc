@@ -419,6 +419,15 @@ Status GcodeReader::Lex(std::string_view line, Block* block) {
                   "write a decimal number");
     }
     (void)digits_begin;
+    // A word's number is bounded before anything converts it: N, G, M, P, ... become integers, and a number of
+    // 20 digits (found by fuzz/fuzz_gcode: "N0170777...7") overflowed that conversion.
+    if (!(std::abs(value) <= kMaxWordValue)) {
+      return Fail(line_, "E_RANGE",
+                  "the number of word " + std::string(1, letter) + " (" + std::string(line.substr(j, k - j)) +
+                      ") is out of range: at most " + std::to_string(static_cast<long>(kMaxWordValue)) +
+                      " in magnitude",
+                  "check the word; no address of a program takes a number this large");
+    }
     word.value = value;
     word.end = static_cast<std::uint32_t>(k);
     if (letter == 'N') {

@@ -29,7 +29,8 @@
 // Invalid geometry is an error, as in the controller (spec §3): an arc without centre words
 // (E_ARC_NO_CENTRE), start and end radii differing by more than arc_radius_tolerance (E_ARC_RADIUS), an
 // R-form chord longer than 2R (E_ARC_R), an R-form full circle (E_ARC_R_FULLCIRCLE), two motion codes in
-// one block (E_MODAL_GROUP), a word without a number (E_SYNTAX).
+// one block (E_MODAL_GROUP), a word without a number (E_SYNTAX), a word's number beyond ±kMaxWordValue
+// (E_RANGE).
 //
 // Streaming: GcodeReader::Read takes one line at a time and keeps only the modal state, so a program of
 // any length is read in constant memory (LineSource reads a file in chunks).
@@ -50,6 +51,10 @@
 #include "core/status.h"
 
 namespace formloop::nc {
+
+// The largest magnitude of a word's number (nine digits: 1,000 m in 0.001 mm increments; block numbers, codes
+// and parameters are far smaller). Larger numbers are refused (E_RANGE) before any is converted to an integer.
+inline constexpr double kMaxWordValue = 999999999;
 
 enum class GcodeDialect {
   kRs274ngc,   // LinuxCNC: numbers without a point are units; ';' comments; O-words are control flow
