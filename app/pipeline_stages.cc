@@ -215,7 +215,8 @@ Result<Retrieved> Retrieve(const PartSpec& part, const recon::BSplineSurface& q,
   FL_ASSIGN_OR_RETURN(retrieval::RetrievalResult result, model->Retrieve(features, ro));
   r.report = result.ToJson();
   r.report["query"]["concepts"] = features.Concepts();
-  r.report["library"] = options.kb;
+  // The library's file name, not its path: the run folder and its report name no folder (--kb /abs/path).
+  r.report["library"] = fs::path(options.kb).filename().string();
   r.route = result.route;
   r.similarity = result.best_similarity;
   if (!result.ranked.empty()) {
@@ -546,12 +547,15 @@ Result<std::optional<kb::CaseRecord>> PrepareRetain(const PartSpec& part, const 
   }
   if (diagnosis && !diagnosis->extended.effects.empty()) {
     in.learned = diagnosis->extended;
-    in.learned_provenance = {{"part", part.name},
-                             {"run", options.out.string()},
-                             {"data", "loop-0/probe_log.csv"},
-                             {"points", diagnosis->n},
-                             {"heldout_rms_before_um", diagnosis->heldout_rms_before_um},
-                             {"heldout_rms_after_um", diagnosis->heldout_rms_after_um}};
+    in.learned_provenance = {
+        {"part", part.name},
+        // The run folder's name, not its path: the record goes into the library and the
+        // report, which name no folder.
+        {"run", (options.out.has_filename() ? options.out : options.out.parent_path()).filename().string()},
+        {"data", "loop-0/probe_log.csv"},
+        {"points", diagnosis->n},
+        {"heldout_rms_before_um", diagnosis->heldout_rms_before_um},
+        {"heldout_rms_after_um", diagnosis->heldout_rms_after_um}};
   }
   if (retrieved.own) in.existing = &*retrieved.own;
   // A part cut on the virtual machine can be run again (the leave-one-out of app/route_calibration.h); a
@@ -561,7 +565,7 @@ Result<std::optional<kb::CaseRecord>> PrepareRetain(const PartSpec& part, const 
   }
   FL_ASSIGN_OR_RETURN(kb::CaseRecord record, MakeRetainedCase(in));
   FL_RETURN_IF_ERROR(
-      folder.WriteJson("retain.json", {{"library", options.kb},
+      folder.WriteJson("retain.json", {{"library", fs::path(options.kb).filename().string()},
                                        {"action", retrieved.own ? "update" : "add"},
                                        {"uid", record.uid},
                                        {"learned_model", in.learned ? in.learned->ToJson() : json(nullptr)},

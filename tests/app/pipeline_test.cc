@@ -97,6 +97,40 @@ TEST_F(PipelineTest, RetrievesRoutesAndRetainsTheCaseWithTheLearnedModel) {
   EXPECT_EQ(summary->route == "default", summary->flag_engineer);
 }
 
+// Issue 17 item 9: on the simulation route the correction's record names the plan the run cuts with (the
+// tool of plan.json and of the program), never a GA candidate the run does not use; and with --kb given as an
+// absolute path, neither the record nor the report names the library's folder.
+TEST_F(PipelineTest, SimulationCorrectionNamesThePlanTheProgramUsesAndNoFolderOfTheLibrary) {
+  ASSERT_TRUE(kb_.is_absolute());
+  const auto summary = RunPart(Part("reg-blade-a"), Options("blade"));
+  ASSERT_TRUE(summary.ok()) << summary.status().ToString();
+  ASSERT_EQ(summary->route, "simulate") << "reg-blade-a takes the simulation-correction route (its golden)";
+  const fs::path run = dir_ / "blade";
+  const Json plan = ReadJsonFile(run / "plan.json").value();
+  const Json correction = ReadJsonFile(run / "sim_correction.json").value();
+  const Json& applied = correction["applied"];
+  ASSERT_TRUE(applied.is_object()) << correction.dump(1);
+  EXPECT_EQ(applied["tool_number"], plan["toolpath"]["tool_number"]);
+  EXPECT_EQ(applied["tool_radius_mm"], plan["toolpath"]["tool_radius_mm"]);
+  EXPECT_EQ(applied["scallop_um"], plan["toolpath"]["scallop_um"]);
+  EXPECT_FALSE(correction.contains("chosen"));
+  // A candidate is either the applied plan (the GA's plan was taken) or labelled as not used.
+  if (!correction["candidate"].is_null() && correction["candidate"]["tool_number"] != applied["tool_number"]) {
+    EXPECT_NE(applied["decision"].get<std::string>().find("not used"), std::string::npos) << applied.dump();
+  }
+  const std::string tool = "T" + std::to_string(plan["toolpath"]["tool_number"].get<int>()) + " M6";
+  EXPECT_NE(ReadFile(run / "toolpath" / "program.ngc").value().find(tool), std::string::npos) << tool;
+  // The library is named by its file name only, in the run folder's records and in the report.
+  EXPECT_EQ(ReadJsonFile(run / "retrieval.json").value()["library"], "kb.sqlite");
+  EXPECT_EQ(ReadJsonFile(run / "retain.json").value()["library"], "kb.sqlite");
+  // The learned model's provenance names the run folder, not its path (it goes into the library and the report).
+  const Json retained = ReadJsonFile(run / "retain.json").value();
+  EXPECT_EQ(retained.dump().find(dir_.string()), std::string::npos) << "retain.json names the folder " << dir_;
+  const std::string html = ReadFile(run / "report.html").value();
+  EXPECT_EQ(html.find(dir_.string()), std::string::npos) << "the report names the folder " << dir_;
+  EXPECT_NE(html.find(applied["decision"].get<std::string>()), std::string::npos);
+}
+
 // Learning pays: a second part of the same family on the same machine, planned with the model learned
 // from the first (pre-compensation), against the same part planned without it.
 TEST_F(PipelineTest, SecondPartPlannedWithTheLearnedModelHalvesTheFirstCycleError) {
