@@ -169,6 +169,13 @@ Status CheckPcdHeader(const std::string& file, const std::string& text, std::uin
     ++line_number;
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (line.empty() || line[0] == '#') continue;
+    // Header lines are printable ASCII (PCL mis-parsed a field name of 0xff bytes into a use-after-free).
+    for (const char c : line) {
+      if (!(c == '\t' || (c >= 0x20 && c <= 0x7e))) {
+        return Status::BadInput(Where{.file = file, .line = line_number, .field = ""},
+                                "the header line holds a byte that is not printable ASCII", fix);
+      }
+    }
     std::vector<std::string> tokens;
     for (std::size_t i = 0; i < line.size();) {
       while (i < line.size() && (line[i] == ' ' || line[i] == '\t')) ++i;
@@ -211,6 +218,15 @@ Status CheckPcdHeader(const std::string& file, const std::string& text, std::uin
     }
   }
   const auto& fields = entries[index("FIELDS")];
+  for (const std::string& name : fields) {
+    const bool identifier = !std::isdigit(static_cast<unsigned char>(name[0])) &&
+                            std::all_of(name.begin(), name.end(),
+                                        [](char c) { return std::isalnum(static_cast<unsigned char>(c)) || c == '_'; });
+    if (!identifier) {
+      return Status::BadInput(Where{.file = file, .field = "FIELDS"}, "field name '" + name + "' is not a name",
+                              "name each field with letters, digits and '_' (x y z normal_x ...)");
+    }
+  }
   const auto& sizes = entries[index("SIZE")];
   const auto& types = entries[index("TYPE")];
   const auto& counts = entries[index("COUNT")];

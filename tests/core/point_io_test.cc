@@ -796,6 +796,18 @@ TEST_F(PcdTest, MalformedHeadersAreRefusedBeforePclReadsThem) {
   ExpectError(ReadPcd(WriteBytes("body.pcd", second)).status(), StatusCode::kBadInput, {"body.pcd", "not all numbers"});
   ExpectError(ReadPcd(WriteBytes("short.pcd", head + "WIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA ascii\n1 2 3\n")).status(),
               StatusCode::kBadInput, {"short.pcd", "ends after 1 of the header's 2 points"});
+  // The third finding: a field name of 0xff bytes (PCL: heap-use-after-free while reading). Header lines are
+  // printable ASCII and field names are names.
+  ExpectError(ReadPcd(WriteBytes("bytes.pcd",
+                                 "FIELDS x y z n\xff\xffm\nSIZE 4 4 4 4\nTYPE F F F F\nWIDTH 1\n"
+                                 "POINTS 1\nDATA ascii\n1 2 3 4\n"))
+                  .status(),
+              StatusCode::kBadInput, {"bytes.pcd", "not printable ASCII"});
+  ExpectError(ReadPcd(WriteBytes("name.pcd",
+                                 "FIELDS x y z 1st\nSIZE 4 4 4 4\nTYPE F F F F\nWIDTH 1\nPOINTS 1\n"
+                                 "DATA ascii\n1 2 3 4\n"))
+                  .status(),
+              StatusCode::kBadInput, {"name.pcd", "field name '1st'"});
   ExpectError(ReadPcd(WriteBytes("wide.pcd", head + "WIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA ascii\n1 2 3 4\n")).status(),
               StatusCode::kBadInput, {"wide.pcd", "needs 3 numbers"});
   EXPECT_EQ(::testing::internal::GetCapturedStderr(), "");
