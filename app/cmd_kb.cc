@@ -187,7 +187,7 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
     };
   });
 
-  CLI::App* add = PathCommand(kb, "add", "Add one case from a case file (JSON; format in kb/library.h).", args.get());
+  CLI::App* add = PathCommand(kb, "add", "Add one case from a case file (JSON; format: docs/formats.md).", args.get());
   add->add_option("case", args->file, "case file, e.g. blade-017.json")->required();
   add->add_flag("--replace", args->replace, "overwrite a case with the same uid (keeps its created_at)");
   add->add_option("--data", args->data, "data folder whose taxonomies/ the concepts are checked against");

@@ -247,8 +247,10 @@ struct CompensateArgs {
     s.side = side;
     s.max_offset_um = max_offset_um;
     s.dialect = machine.dialect;
-    // A program formloop did not write keeps 4 decimals (0.1 um) unless --decimals is given.
-    s.decimals = machine.decimals != -1 ? machine.decimals : 4;
+    // As formloop's own programs: the dialect's default decimals (Fanuc 3, others 4) unless --decimals is given;
+    // the dialect's limit is enforced when the options are checked (nc::ProgramCompensationOptions::Validate).
+    const nc::PostDialect* post = nc::FindPost(machine.dialect);
+    s.decimals = machine.decimals != -1 ? machine.decimals : post != nullptr ? post->DefaultDecimals() : 4;
     return s;
   }
 };
@@ -386,7 +388,7 @@ struct CheckArgs {
   std::string nominal, compensated, side, field;
   double lambda = 0;
   std::string dialect = "linuxcnc";
-  int decimals = 4;
+  int decimals = -1;  // the dialect's default, as nc post and nc compensate write
 };
 
 // Recomputes every compensated block from the two programs, the side file and (optionally) the
@@ -402,17 +404,19 @@ Status CheckPrograms(const CheckArgs& args) {
     fitted = std::move(f);
     field = fitted->AsSystematicField(side.entries.size());
   }
+  FL_RETURN_IF_ERROR(CheckDialect(args.dialect));
+  const int decimals = args.decimals != -1 ? args.decimals : nc::FindPost(args.dialect)->DefaultDecimals();
   nc::CheckReport report;
   if (side.has_lambda) {  // a program formloop did not write (`nc compensate --program`)
     nc::ReaderOptions reader;
     FL_ASSIGN_OR_RETURN(reader.dialect, nc::ParseGcodeDialect(args.dialect));
     FL_ASSIGN_OR_RETURN(report, nc::CheckProgramCompensation(nominal_text, compensated_text, side, field, reader,
-                                                             {.program_decimals = args.decimals}));
+                                                             {.program_decimals = decimals}));
   } else {
     FL_ASSIGN_OR_RETURN(const auto nominal, nc::ReadProgram(nominal_text, args.dialect, args.nominal));
     FL_ASSIGN_OR_RETURN(const auto compensated, nc::ReadProgram(compensated_text, args.dialect, args.compensated));
     FL_ASSIGN_OR_RETURN(report,
-                        nc::CheckCompensation(nominal, compensated, side, field, {.program_decimals = args.decimals}));
+                        nc::CheckCompensation(nominal, compensated, side, field, {.program_decimals = decimals}));
   }
   std::cout << report.ToJson().dump(2) << "\n";
   std::cout.flush();
@@ -554,7 +558,8 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
   check->add_option("--field", check_args->field, "the systematic field as CSV u,v,ds_um (thin-plate interpolated)");
   check->add_option("--lambda", check_args->lambda, "smoothing of the field (0 = interpolate)")->capture_default_str();
   check->add_option("--dialect", check_args->dialect, "dialect of both programs")->capture_default_str();
-  check->add_option("--decimals", check_args->decimals, "coordinate decimals of the programs")->capture_default_str();
+  check->add_option("--decimals", check_args->decimals,
+                    "coordinate decimals of the programs (default: the dialect's, Fanuc 3, others 4)");
   check->callback([action, check_args] { *action = [check_args] { return CheckPrograms(*check_args); }; });
 }
 

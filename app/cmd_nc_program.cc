@@ -77,7 +77,7 @@ void AddNcDistributeCommand(CLI::App* nc, CommandAction* action) {
   CLI::App* cmd = nc->add_subcommand(
       "distribute",
       "Distribute probed key-point deviations along a program between its M57 (start), M59 P<n> (key point n) and "
-      "M58 (end) markers: every block moves by the deviation interpolated in path length (spec/path-deviation.md). "
+      "M58 (end) markers: every block moves by the deviation interpolated in path length. "
       "Blocks outside the markers are written byte for byte; arcs stay arcs where the deviation is constant over "
       "them, else they are split within the chord tolerance. All or nothing: an error names its code and line.");
   nc::DistributeOptions& o = args->options;
@@ -128,6 +128,7 @@ Status CompensateShopProgram(const ShopProgramArgs& args) {
   options.chord_tolerance_mm = args.chord_tol_mm;
   options.contact_tolerance_mm = args.contact_tol_mm;
   options.decimals_mm = args.decimals;
+  options.decimals_inch = args.decimals + 1;  // the same least input increment class in inch (0.001 mm ~ 0.0001 in)
   options.max_offset_um = args.max_offset_um;
   FL_RETURN_IF_ERROR(options.Validate());
   FL_ASSIGN_OR_RETURN(

@@ -29,10 +29,9 @@ void SetAction(CLI::App* cmd, std::shared_ptr<Args> args, CommandAction* action,
 }  // namespace
 
 void AddOptimiseCommand(CLI::App& root, CommandAction* action) {
-  CLI::App* optimise = root.add_subcommand(
-      "optimise",
-      "Process optimisation (spec/process-optimization.md): cutting parameters by the adaptive GA, fuzzy "
-      "feed control on spindle current, NC blocks adjusted from inspection.");
+  CLI::App* optimise = root.add_subcommand("optimise",
+                                           "Process optimisation: cutting parameters by the adaptive GA, fuzzy "
+                                           "feed control on spindle current, NC blocks adjusted from inspection.");
   optimise->require_subcommand(1);
 
   auto cutting = std::make_shared<OptimiseCuttingArgs>();

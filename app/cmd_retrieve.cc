@@ -132,7 +132,8 @@ void AddRetrieveCommand(CLI::App& root, CommandAction* action) {
       "Retrieve the most similar cases of a case library for a part: A, per-facet similarities and common nodes, and "
       "the route (direct / simulate / default) from the rule-base thresholds. JSON on stdout.");
   cmd->add_option("--library", args->library, "case library file (trained: formloop kb train)")->required();
-  cmd->add_option("--part", args->part, "query part JSON (format in app/cmd_retrieve.cc)");
+  cmd->add_option("--part", args->part,
+                  "query part: a part file, a case file or a retrieval query (formats: docs/formats.md)");
   cmd->add_option("--top", args->top, "number of ranked cases printed")->capture_default_str();
   cmd->add_option("--breadth", args->breadth, "candidates: 0 leaf, 1 + grid neighbours, 2 + the leaf's map, ...")
       ->capture_default_str();

@@ -15,7 +15,7 @@ void AddSimulateCommand(CLI::App& root, CommandAction* action) {
       "Machine a run's tool path on the virtual machine with a model of effects and write the probe log it would "
       "report, to rehearse a job or hide effects for a test.");
   cmd->add_option("--run", args->run, "a `formloop run` folder (Q, tool path, part)")->required();
-  cmd->add_option("--model", args->model, "MODEL.json: effects and parameters (simulation/model.h)")->required();
+  cmd->add_option("--model", args->model, "MODEL.json: effects and parameters (format: docs/formats.md)")->required();
   cmd->add_option("--probe-plan", args->probe_plan,
                   "PLAN.json or PLAN.csv (id,u,v,x,y,z,nx,ny,nz[,ax,ay,az]); default: the run's plan");
   cmd->add_option("--out", args->out, "probe log to write (CSV: id,x,y,z,ax,ay,az,t)")->required();

@@ -121,9 +121,7 @@ Status DistributeOptions::Validate() const {
   if (marker_start == marker_end || marker_start == marker_key || marker_end == marker_key) {
     return Status::BadInput(Where{.field = "markers"}, "the three marker M-codes must differ");
   }
-  if (decimals_mm < 1 || decimals_mm > 6 || decimals_inch < 1 || decimals_inch > 6) {
-    return Status::BadInput(Where{.field = "decimals"}, "must be 1..6");
-  }
+  FL_RETURN_IF_ERROR(internal::CheckWrittenDecimals(reader.dialect, decimals_mm, decimals_inch));
   if (!(chord_tolerance_mm > 0)) return Status::BadInput(Where{.field = "chord_tolerance_mm"}, "must be > 0");
   if (!(max_deviation_mm > 0)) return Status::BadInput(Where{.field = "max_deviation_mm"}, "must be > 0");
   if (!(max_gradient > 0)) return Status::BadInput(Where{.field = "max_gradient"}, "must be > 0");

@@ -71,9 +71,7 @@ Status ProgramCompensationOptions::Validate() const {
   }
   if (!(contact_tolerance_mm > 0)) return Status::BadInput(Where{.field = "contact_tolerance_mm"}, "must be > 0");
   if (!(chord_tolerance_mm > 0)) return Status::BadInput(Where{.field = "--chord-tol"}, "must be > 0");
-  if (decimals_mm < 1 || decimals_mm > 6 || decimals_inch < 1 || decimals_inch > 7) {
-    return Status::BadInput(Where{.field = "--decimals"}, "must be 1..6");
-  }
+  FL_RETURN_IF_ERROR(internal::CheckWrittenDecimals(reader.dialect, decimals_mm, decimals_inch));
   if (!(max_offset_um > 0)) return Status::BadInput(Where{.field = "--max-offset-um"}, "must be > 0");
   return Status::Ok();
 }

@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <string>
+
+#include "nc-gen/post.h"
 
 namespace formloop::nc::internal {
 namespace {
@@ -316,6 +319,26 @@ void ProgramWriter::Split(const BlockRecord& block, const std::vector<Eigen::Vec
   emitted_modal_ = Motion::kLinear;
   changed_modal_ = block.modal_motion != Motion::kLinear;
   residual_ = controller - block.end;
+}
+
+Status CheckWrittenDecimals(GcodeDialect dialect, int decimals_mm, int decimals_inch) {
+  const PostDialect* post = FindPost(GcodeDialectName(dialect));
+  const int max_mm = post != nullptr ? post->MaxDecimals() : 6;
+  const int default_mm = post != nullptr ? post->DefaultDecimals() : 4;
+  const std::string name = GcodeDialectName(dialect);
+  if (decimals_mm < 1 || decimals_mm > max_mm) {
+    return Status::BadInput(Where{.field = "--decimals"},
+                            "a " + name + " program takes 1.." + std::to_string(max_mm) +
+                                " coordinate decimals in mm, got " + std::to_string(decimals_mm),
+                            "use " + std::to_string(default_mm) + " (the dialect's default)");
+  }
+  if (decimals_inch < 1 || decimals_inch > max_mm + 1) {
+    return Status::BadInput(Where{.field = "--decimals-inch"},
+                            "a " + name + " program takes 1.." + std::to_string(max_mm + 1) +
+                                " coordinate decimals in inch, got " + std::to_string(decimals_inch),
+                            "use " + std::to_string(default_mm + 1));
+  }
+  return Status::Ok();
 }
 
 }  // namespace formloop::nc::internal

@@ -100,4 +100,9 @@ class ProgramWriter {
   long lines_ = 0;
 };
 
+// The coordinate decimals a corrected program may be written with on `dialect`'s controller: mm 1..the post's
+// MaxDecimals (Fanuc 4: IS-C; 3 is IS-B), inch one more (the least input increment in inch is a tenth of the
+// mm one's digit count: 0.001 mm ~ 0.0001 in). BadInput naming --decimals / --decimals-inch otherwise.
+Status CheckWrittenDecimals(GcodeDialect dialect, int decimals_mm, int decimals_inch);
+
 }  // namespace formloop::nc::internal

@@ -112,6 +112,13 @@ TEST_F(NcProgramCliTest, CompensateAShopProgramAndCheckIt) {
   EXPECT_NE(err_.find("compensated line " + std::to_string(target + 1)), std::string::npos) << err_;
   const auto report = nlohmann::json::parse(out_);
   ASSERT_EQ(report["disagreeing_blocks"].size(), 1u) << out_;
+  // Fanuc: the dialect's limit on decimals (4 in mm) holds for a shop program too, before anything is read.
+  EXPECT_EQ(Run("nc compensate --program " + Path("shop.ngc") + " --surface " + Path("Q.step") +
+                " --ball-radius-mm 3 --field " + Path("ds.csv") + " --out " + Path("f.nc") + " --side " +
+                Path("f.csv") + " --dialect fanuc --decimals 5"),
+            2);
+  EXPECT_NE(err_.find("--decimals"), std::string::npos) << err_;
+  EXPECT_FALSE(fs::exists(dir_ / "f.nc"));
   // Neither --toolpath nor --program: refused by name.
   EXPECT_EQ(Run("nc compensate --field " + Path("ds.csv") + " --out " + Path("x.ngc") + " --side " + Path("x.csv")), 2);
   EXPECT_NE(err_.find("--program"), std::string::npos) << err_;

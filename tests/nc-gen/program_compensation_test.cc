@@ -17,6 +17,7 @@
 
 #include "core/atomic_file.h"
 #include "nc-gen/deviation_field.h"
+#include "nc-gen/path_deviation.h"
 #include "nc-gen/program_compensation.h"
 #include "reconstruction/analytic_surface.h"
 #include "tests/support/rs274.h"
@@ -126,6 +127,35 @@ class ProgramCompensationTest : public ::testing::Test {
   DeviationField field_;
   ProgramCompensationOptions options_;
 };
+
+// Issue 17 item 7: the decimals a corrected program is written with are the dialect's (Fanuc: at most 4 in mm,
+// IS-C; 5 in inch), for `nc compensate --program` and `nc distribute` alike, refused by option name beyond.
+TEST(CorrectedProgramDecimals, FollowTheDialectsLimits) {
+  ProgramCompensationOptions o;
+  o.ball_radius_mm = 3;
+  o.reader.dialect = GcodeDialect::kFanuc;
+  o.decimals_mm = 4;
+  o.decimals_inch = 5;
+  EXPECT_TRUE(o.Validate().ok()) << o.Validate().ToString();
+  o.decimals_mm = 5;
+  EXPECT_EQ(o.Validate().code(), StatusCode::kBadInput);
+  EXPECT_NE(o.Validate().ToString().find("--decimals"), std::string::npos) << o.Validate().ToString();
+  EXPECT_NE(o.Validate().ToString().find("fanuc program takes 1..4"), std::string::npos) << o.Validate().ToString();
+  o.decimals_mm = 3;
+  o.decimals_inch = 6;
+  EXPECT_NE(o.Validate().ToString().find("--decimals-inch"), std::string::npos) << o.Validate().ToString();
+  o.reader.dialect = GcodeDialect::kRs274ngc;
+  o.decimals_mm = 6;
+  o.decimals_inch = 7;
+  EXPECT_TRUE(o.Validate().ok()) << o.Validate().ToString();
+  o.decimals_mm = 7;
+  EXPECT_EQ(o.Validate().code(), StatusCode::kBadInput);
+  DistributeOptions d;
+  d.reader.dialect = GcodeDialect::kFanuc;
+  EXPECT_TRUE(d.Validate().ok()) << d.Validate().ToString();
+  d.decimals_mm = 5;
+  EXPECT_NE(d.Validate().ToString().find("--decimals"), std::string::npos) << d.Validate().ToString();
+}
 
 TEST_F(ProgramCompensationTest, EveryPointMovesByMinusDsTimesNormal) {
   const ShopProgram shop = MakeProgram();
