@@ -73,7 +73,7 @@ void PlanSection(std::string& html, const RunData& run) {
 
 void SimCorrectionSection(std::string& html, const RunData& run) {
   OpenSection(html, "sim-correction", "Simulation correction",
-              "Defects the virtual machine predicted for the plan before and after correction, the plan chosen and "
+              "Defects the virtual machine predicted for the plan before and after correction, the plan applied and "
               "each round of the search.");
   if (!run.sim_correction.value) {
     NotAvailable(html, "Simulation correction",
@@ -93,7 +93,12 @@ void SimCorrectionSection(std::string& html, const RunData& run) {
        {"Pre-compensation scale", Quantity(Member(s, "precompensation_scale"), "")},
        {"Why not corrected", StringOr(Member(s, "why_not"), "").empty() ? "—" : Esc(Scalar(Member(s, "why_not")))}},
       "Outcome");
-  if (Member(s, "chosen").is_object()) html += ObjectTables(Member(s, "chosen"), "Plan chosen");
+  // The plan the run cuts with (the values of plan.json and the programs), then the GA's candidate, which is that
+  // plan only when the correction succeeded ("chosen" in run folders written before issue 17 item 9).
+  if (Member(s, "applied").is_object()) html += ObjectTables(Member(s, "applied"), "Plan applied");
+  for (const char* key : {"candidate", "chosen"}) {
+    if (Member(s, key).is_object()) html += ObjectTables(Member(s, key), "The GA's candidate");
+  }
   const Json& history = Member(s, "history");
   std::vector<std::vector<std::string>> rows;
   for (const Json& h : history.is_array() ? history : Json::array()) {
