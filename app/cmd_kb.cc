@@ -43,6 +43,7 @@
 #include "core/log.h"
 #include "core/output_folder.h"
 #include "kb/library.h"
+#include "kb/library_url.h"
 #include "kb/schema.h"
 #include "retrieval/retrieve.h"
 #include "retrieval/starter.h"
@@ -83,7 +84,10 @@ retrieval::GhsomOptions TrainOptions(const KbArgs& args) {
 
 CLI::App* PathCommand(CLI::App* kb, const std::string& name, const std::string& help, KbArgs* args) {
   CLI::App* sub = kb->add_subcommand(name, help);
-  sub->add_option("path", args->path, "case library file, e.g. cases.db")->required();
+  sub->add_option("path", args->path,
+                  "case library: a file (cases.db), sqlite:PATH or postgresql://user@host:port/db (password through "
+                  "PGPASSWORD or ~/.pgpass)")
+      ->required();
   return sub;
 }
 
@@ -98,8 +102,9 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
 
   CLI::App* init = PathCommand(
       kb, "init",
-      "Create the case library at PATH (schema version in PRAGMA user_version, foreign keys on, WAL journal), or "
-      "migrate an existing library to the current schema. Prints a JSON report on stdout.",
+      "Create the case library at PATH (SQLite: schema version in PRAGMA user_version, foreign keys on, WAL journal; "
+      "PostgreSQL: the tables in an existing, empty database, version in formloop_schema_version), or migrate an "
+      "existing library to the current schema. Prints a JSON report on stdout.",
       args.get());
   init->add_flag("--starter", args->starter,
                  "fill a new library with the synthetic starter cases (data/starter/families.json), write the starter "
@@ -178,7 +183,7 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
       kb, "migrate", "Migrate an existing case library to this formloop's schema (never downgrades).", args.get());
   migrate->callback([args, action] {
     *action = [args]() -> Status {
-      FL_RETURN_IF_ERROR(kb::ProbeLibraryFile(args->path, /*allow_unversioned=*/false).status());
+      FL_RETURN_IF_ERROR(kb::ProbeLibrary(args->path, /*allow_unversioned=*/false).status());
       FL_ASSIGN_OR_RETURN(kb::InitReport report, kb::InitLibrary(args->path));
       log::Info("case library {}: schema {} -> {}", report.path, report.migration.from_version,
                 report.migration.to_version);
@@ -199,7 +204,7 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
       FL_RETURN_IF_ERROR(retrieval::CheckCaseForRetrieval(record, tax).WithContext(args->file + " (not added)"));
       FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
       FL_ASSIGN_OR_RETURN(const nlohmann::json ghsom, retrieval::AddCaseAndGrowGhsom(*library, record, args->replace));
-      log::Info("added case {} to {}", record.uid, args->path);
+      log::Info("added case {} to {}", record.uid, kb::RedactPassword(args->path));
       Print({{"added", record.uid}, {"replace", args->replace}, {"ghsom", ghsom}});
       return Status::Ok();
     };
@@ -219,7 +224,8 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
       options.replace = args->replace;
       options.check_case = [&tax](const kb::CaseRecord& r) { return retrieval::CheckCaseForRetrieval(r, tax); };
       FL_ASSIGN_OR_RETURN(kb::ImportReport report, library->ImportFile(args->file, options));
-      log::Info("imported {} case(s) into {}", report.cases_added + report.cases_replaced, args->path);
+      log::Info("imported {} case(s) into {}", report.cases_added + report.cases_replaced,
+                kb::RedactPassword(args->path));
       Print(report.ToJson());
       return Status::Ok();
     };
@@ -285,7 +291,7 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
     *action = [args]() -> Status {
       FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
       FL_RETURN_IF_ERROR(library->RemoveCase(args->uid));
-      log::Info("removed case {} from {}", args->uid, args->path);
+      log::Info("removed case {} from {}", args->uid, kb::RedactPassword(args->path));
       Print({{"removed", args->uid}});
       return Status::Ok();
     };
@@ -323,7 +329,7 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
       Print(out);
       if (!report.clean()) {
         return Status::Failed(
-            "case library '" + args->path + "' is not clean: " + report.problems.front() +
+            "case library '" + kb::RedactPassword(args->path) + "' is not clean: " + report.problems.front() +
             (report.problems.size() > 1 ? " (and " + std::to_string(report.problems.size() - 1) + " more)" : ""));
       }
       for (const auto& w : report.warnings) log::Warn("{}", w);
@@ -340,7 +346,7 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
       if (!args->rules.empty()) {
         FL_ASSIGN_OR_RETURN(Json input, ReadJsonFile(args->rules));
         FL_ASSIGN_OR_RETURN(int version, library->SetRules(input, args->rules));
-        log::Info("rule base of {} is now version {}", args->path, version);
+        log::Info("rule base of {} is now version {}", kb::RedactPassword(args->path), version);
       }
       FL_ASSIGN_OR_RETURN(kb::RuleSet set, library->GetRules());
       Print(set.ToJson());

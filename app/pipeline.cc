@@ -185,7 +185,7 @@ Status CheckRunInputs(const PartSpec& part, const RunOptions& options) {
       FL_RETURN_IF_ERROR(ReadMachineProfile(profile, data_dir).status());
     }
   }
-  if (!options.kb.empty()) FL_RETURN_IF_ERROR(kb::ProbeLibraryFile(options.kb, /*allow_unversioned=*/false).status());
+  if (!options.kb.empty()) FL_RETURN_IF_ERROR(kb::ProbeLibrary(options.kb, /*allow_unversioned=*/false).status());
   // The size of the job: a scallop typed in the wrong unit is refused here.
   return CheckPartWork(part, part.toolpath, options.part_source);
 }

@@ -38,16 +38,29 @@ std::string UtcNow() {
 
 // ---------------------------------------------------------------------------------------------- Library
 
-Result<std::unique_ptr<Library>> Library::Open(const std::filesystem::path& path) {
+Result<std::unique_ptr<Library>> Library::Open(const std::string& library) {
+  FL_ASSIGN_OR_RETURN(LibraryUrl url, LibraryUrl::Parse(library));
+  std::unique_ptr<Database> db;
+  if (url.is_postgres()) {
+    FL_ASSIGN_OR_RETURN(db, Database::Open(url, Database::Mode::kOpenExisting));
+    FL_ASSIGN_OR_RETURN(int version, CheckLibrarySchema(db.get(), /*allow_unversioned=*/false));
+    if (version < LatestSchemaVersion()) {
+      return Status::BadInput("case library '" + url.display + "' has schema version " + std::to_string(version) +
+                              ", older than this formloop's " + std::to_string(LatestSchemaVersion()) +
+                              ". Fix: run `formloop kb migrate " + url.display + "`");
+    }
+    return std::unique_ptr<Library>(new Library(std::move(db)));
+  }
+  const std::filesystem::path& path = url.path;
   FL_ASSIGN_OR_RETURN(int version, ProbeLibraryFile(path, /*allow_unversioned=*/false));
   if (version < LatestSchemaVersion()) {
     return Status::BadInput("case library '" + path.string() + "' has schema version " + std::to_string(version) +
                             ", older than this formloop's " + std::to_string(LatestSchemaVersion()) +
                             ". Fix: run `formloop kb migrate " + path.string() + "`");
   }
-  FL_ASSIGN_OR_RETURN(std::unique_ptr<Database> db, Database::Open(path, Database::Mode::kOpenExisting));
+  FL_ASSIGN_OR_RETURN(db, Database::Open(path, Database::Mode::kOpenExisting));
   // The probe read without locks; confirm on the real connection.
-  FL_ASSIGN_OR_RETURN(long long actual, db->QueryInt("PRAGMA user_version;"));
+  FL_ASSIGN_OR_RETURN(long long actual, db->SchemaVersion());
   if (actual != LatestSchemaVersion()) {
     return Status::BadInput("case library '" + path.string() + "' changed to schema version " + std::to_string(actual) +
                             " while being opened; this formloop uses " + std::to_string(LatestSchemaVersion()));
@@ -87,7 +100,7 @@ Status Library::WriteCase(const CaseRecord& record, bool replace, const std::str
   long long id = 0;
   if (exists) {
     if (!replace) {
-      return Status::BadInput("case library '" + db_->path().string() + "': a case with uid '" + record.uid +
+      return Status::BadInput("case library '" + db_->name() + "': a case with uid '" + record.uid +
                               "' exists. Fix: give another uid, or --replace to overwrite it");
     }
     id = find.ColumnInt(0);
@@ -129,7 +142,7 @@ Status Library::WriteCase(const CaseRecord& record, bool replace, const std::str
     FL_RETURN_IF_ERROR(ins.Bind(8, record.manufacturing.dump()));
     FL_RETURN_IF_ERROR(descriptor.empty() ? ins.BindNull(9) : ins.Bind(9, descriptor));
     FL_RETURN_IF_ERROR(ins.Step().status());
-    id = db_->LastInsertRowId();
+    FL_ASSIGN_OR_RETURN(id, db_->LastInsertRowId());
   }
   if (!record.concepts.empty()) {
     FL_ASSIGN_OR_RETURN(Statement con,
@@ -148,11 +161,10 @@ Status Library::WriteCase(const CaseRecord& record, bool replace, const std::str
 
 Status Library::AddCase(const CaseRecord& record, bool replace) {
   FL_RETURN_IF_ERROR(CaseRecord::FromJson(record.ToJson(), Where{.file = record.uid}).status());
-  Transaction transaction(db_.get());
-  FL_RETURN_IF_ERROR(transaction.begin_status());
-  bool replaced = false;
-  FL_RETURN_IF_ERROR(WriteCase(record, replace, "add", /*keep_timestamps=*/false, &replaced));
-  return transaction.Commit();
+  return db_->RunInTransaction([&]() -> Status {
+    bool replaced = false;
+    return WriteCase(record, replace, "add", /*keep_timestamps=*/false, &replaced);
+  });
 }
 
 namespace {
@@ -191,8 +203,8 @@ Result<CaseRecord> Library::GetCase(const std::string& uid) {
   FL_RETURN_IF_ERROR(stmt.Bind(1, uid));
   FL_ASSIGN_OR_RETURN(bool row, stmt.Step());
   if (!row) {
-    return Status::NotFound("case library '" + db_->path().string() + "' has no case with uid '" + uid +
-                            "'. Fix: `formloop kb list " + db_->path().string() + "` shows the uids");
+    return Status::NotFound("case library '" + db_->name() + "' has no case with uid '" + uid +
+                            "'. Fix: `formloop kb list " + db_->name() + "` shows the uids");
   }
   const long long id = stmt.ColumnInt(0);
   FL_ASSIGN_OR_RETURN(CaseRecord record, RowToCase(stmt));
@@ -230,17 +242,16 @@ Result<std::vector<CaseRecord>> Library::ListCases(const std::string& family) {
 }
 
 Status Library::RemoveCase(const std::string& uid) {
-  Transaction transaction(db_.get());
-  FL_RETURN_IF_ERROR(transaction.begin_status());
-  FL_ASSIGN_OR_RETURN(Statement del, db_->Prepare("DELETE FROM cases WHERE uid = ?1;"));
-  FL_RETURN_IF_ERROR(del.Bind(1, uid));
-  FL_RETURN_IF_ERROR(del.Step().status());
-  if (db_->Changes() == 0) {
-    return Status::NotFound("case library '" + db_->path().string() + "' has no case with uid '" + uid + "'");
-  }
-  FL_RETURN_IF_ERROR(BumpChanges());
-  FL_RETURN_IF_ERROR(AuditRow("remove", uid, ""));
-  return transaction.Commit();
+  return db_->RunInTransaction([&]() -> Status {
+    FL_ASSIGN_OR_RETURN(Statement del, db_->Prepare("DELETE FROM cases WHERE uid = ?1;"));
+    FL_RETURN_IF_ERROR(del.Bind(1, uid));
+    FL_RETURN_IF_ERROR(del.Step().status());
+    if (db_->Changes() == 0) {
+      return Status::NotFound("case library '" + db_->name() + "' has no case with uid '" + uid + "'");
+    }
+    FL_RETURN_IF_ERROR(BumpChanges());
+    return AuditRow("remove", uid, "");
+  });
 }
 
 Result<GhsomStatus> Library::Ghsom() {
@@ -261,7 +272,7 @@ Result<GhsomStatus> Library::Ghsom() {
 
 Result<LibraryStats> Library::Stats() {
   LibraryStats stats;
-  FL_ASSIGN_OR_RETURN(long long version, db_->QueryInt("PRAGMA user_version;"));
+  FL_ASSIGN_OR_RETURN(long long version, db_->SchemaVersion());
   stats.schema_version = static_cast<int>(version);
   FL_ASSIGN_OR_RETURN(stats.cases, db_->QueryInt("SELECT COUNT(*) FROM cases;"));
   FL_ASSIGN_OR_RETURN(stats.cases_with_descriptor,
@@ -293,28 +304,15 @@ Result<LibraryStats> Library::Stats() {
 Result<CheckReport> Library::Check() {
   CheckReport report;
   {
-    FL_ASSIGN_OR_RETURN(Statement s, db_->Prepare("PRAGMA integrity_check;"));
-    std::vector<std::string> lines;
-    while (true) {
-      FL_ASSIGN_OR_RETURN(bool row, s.Step());
-      if (!row) break;
-      lines.push_back(s.ColumnText(0));
-    }
-    report.integrity.clear();
+    FL_ASSIGN_OR_RETURN(std::vector<std::string> lines, db_->IntegrityProblems());
+    report.integrity = lines.empty() ? "ok" : "";
     for (std::size_t i = 0; i < lines.size(); ++i) report.integrity += (i > 0 ? "; " : "") + lines[i];
     if (report.integrity != "ok") report.problems.push_back("integrity_check: " + report.integrity);
   }
-  {
-    FL_ASSIGN_OR_RETURN(Statement s, db_->Prepare("PRAGMA foreign_key_check;"));
-    while (true) {
-      FL_ASSIGN_OR_RETURN(bool row, s.Step());
-      if (!row) break;
-      report.foreign_key_violations.push_back(s.ColumnText(0) + " rowid " + s.ColumnText(1) + " -> " + s.ColumnText(2));
-    }
-    if (!report.foreign_key_violations.empty()) {
-      report.problems.push_back(std::to_string(report.foreign_key_violations.size()) +
-                                " foreign-key violation(s), first: " + report.foreign_key_violations.front());
-    }
+  FL_ASSIGN_OR_RETURN(report.foreign_key_violations, db_->ForeignKeyViolations());
+  if (!report.foreign_key_violations.empty()) {
+    report.problems.push_back(std::to_string(report.foreign_key_violations.size()) +
+                              " foreign-key violation(s), first: " + report.foreign_key_violations.front());
   }
   FL_ASSIGN_OR_RETURN(report.orphan_concepts,
                       db_->QueryInt("SELECT COUNT(*) FROM case_concepts WHERE case_id NOT IN (SELECT id FROM cases);"));
@@ -333,8 +331,8 @@ Result<CheckReport> Library::Check() {
                                 " case(s) have no geometric descriptor; the GHSOM cannot place them");
     }
     FL_ASSIGN_OR_RETURN(long long lengths,
-                        db_->QueryInt("SELECT COUNT(DISTINCT json_array_length(descriptor_json)) FROM cases "
-                                      "WHERE descriptor_json IS NOT NULL;"));
+                        db_->QueryInt("SELECT COUNT(DISTINCT " + db_->JsonArrayLength("descriptor_json") +
+                                      ") FROM cases WHERE descriptor_json IS NOT NULL;"));
     if (lengths > 1) report.problems.push_back("descriptors have " + std::to_string(lengths) + " different lengths");
   }
   {
@@ -397,23 +395,24 @@ Result<int> Library::SetRules(const json& input, const std::string& source) {
     for (const auto& p : problems) all += (all.empty() ? "" : "; ") + p;
     return Status::BadInput(Where{.file = source}, "rule set refused: " + all, "fix the rules; nothing was changed");
   }
-  Transaction transaction(db_.get());
-  FL_RETURN_IF_ERROR(transaction.begin_status());
-  FL_ASSIGN_OR_RETURN(long long latest, db_->QueryInt("SELECT coalesce(MAX(version), 0) FROM rules;"));
-  const int version = static_cast<int>(latest) + 1;
-  FL_RETURN_IF_ERROR(db_->Execute("UPDATE rules SET active = 0 WHERE active = 1;"));
-  FL_ASSIGN_OR_RETURN(Statement ins, db_->Prepare("INSERT INTO rules(version, name, condition_json, choice_json, "
-                                                  "active) VALUES (?1, ?2, ?3, ?4, 1);"));
-  for (const Rule& r : rules) {
-    FL_RETURN_IF_ERROR(ins.Reset());
-    FL_RETURN_IF_ERROR(ins.Bind(1, static_cast<long long>(version)));
-    FL_RETURN_IF_ERROR(ins.Bind(2, r.name));
-    FL_RETURN_IF_ERROR(ins.Bind(3, r.condition.dump()));
-    FL_RETURN_IF_ERROR(ins.Bind(4, r.choice.dump()));
-    FL_RETURN_IF_ERROR(ins.Step().status());
-  }
-  FL_RETURN_IF_ERROR(AuditRow("rules.set", "", "version=" + std::to_string(version) + " from " + source));
-  FL_RETURN_IF_ERROR(transaction.Commit());
+  int version = 0;
+  const Status written = db_->RunInTransaction([&]() -> Status {
+    FL_ASSIGN_OR_RETURN(long long latest, db_->QueryInt("SELECT coalesce(MAX(version), 0) FROM rules;"));
+    version = static_cast<int>(latest) + 1;
+    FL_RETURN_IF_ERROR(db_->Execute("UPDATE rules SET active = 0 WHERE active = 1;"));
+    FL_ASSIGN_OR_RETURN(Statement ins, db_->Prepare("INSERT INTO rules(version, name, condition_json, choice_json, "
+                                                    "active) VALUES (?1, ?2, ?3, ?4, 1);"));
+    for (const Rule& r : rules) {
+      FL_RETURN_IF_ERROR(ins.Reset());
+      FL_RETURN_IF_ERROR(ins.Bind(1, static_cast<long long>(version)));
+      FL_RETURN_IF_ERROR(ins.Bind(2, r.name));
+      FL_RETURN_IF_ERROR(ins.Bind(3, r.condition.dump()));
+      FL_RETURN_IF_ERROR(ins.Bind(4, r.choice.dump()));
+      FL_RETURN_IF_ERROR(ins.Step().status());
+    }
+    return AuditRow("rules.set", "", "version=" + std::to_string(version) + " from " + source);
+  });
+  FL_RETURN_IF_ERROR(written);
   return version;
 }
 
@@ -454,52 +453,53 @@ Status DeleteTaxonomy(Database* db, const std::string& taxonomy) {
 }  // namespace
 
 Status Library::SetTaxonomy(const std::string& taxonomy, const std::vector<TaxonomyNode>& nodes) {
-  Transaction transaction(db_.get());
-  FL_RETURN_IF_ERROR(transaction.begin_status());
-  // Nodes may come in any order; the parent references are checked at COMMIT.
-  FL_RETURN_IF_ERROR(db_->Execute("PRAGMA defer_foreign_keys = ON;"));
-  FL_RETURN_IF_ERROR(DeleteTaxonomy(db_.get(), taxonomy));
-  for (TaxonomyNode n : nodes) {
-    n.taxonomy = taxonomy;
-    FL_RETURN_IF_ERROR(InsertTaxonomyNode(db_.get(), n));
-  }
-  FL_RETURN_IF_ERROR(AuditRow("taxonomy.set", "", taxonomy + ": " + std::to_string(nodes.size()) + " nodes"));
-  return transaction.Commit();
+  return db_->RunInTransaction([&]() -> Status {
+    // Nodes may come in any order; the parent references are checked at COMMIT.
+    FL_RETURN_IF_ERROR(db_->DeferForeignKeys());
+    FL_RETURN_IF_ERROR(DeleteTaxonomy(db_.get(), taxonomy));
+    for (TaxonomyNode n : nodes) {
+      n.taxonomy = taxonomy;
+      FL_RETURN_IF_ERROR(InsertTaxonomyNode(db_.get(), n));
+    }
+    return AuditRow("taxonomy.set", "", taxonomy + ": " + std::to_string(nodes.size()) + " nodes");
+  });
 }
 
 // ---------------------------------------------------------------------------------------------- GHSOM
 
-Result<long long> Library::StoreGhsom(GhsomRecord record) {
-  Transaction transaction(db_.get());
-  FL_RETURN_IF_ERROR(transaction.begin_status());
-  if (record.change_counter < 0) {
-    FL_ASSIGN_OR_RETURN(record.change_counter, ChangeCounter());
-  }
-  if (record.case_count < 0) {
-    FL_ASSIGN_OR_RETURN(record.case_count, db_->QueryInt("SELECT COUNT(*) FROM cases;"));
-  }
-  record.created_at = UtcNow();
-  FL_ASSIGN_OR_RETURN(Statement ins, db_->Prepare("INSERT INTO ghsom(created_at, seed, parameters_json, quality_json, "
-                                                  "map_json, case_count, change_counter) "
-                                                  "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7);"));
-  FL_RETURN_IF_ERROR(ins.Bind(1, record.created_at));
-  FL_RETURN_IF_ERROR(ins.Bind(2, record.seed));
-  FL_RETURN_IF_ERROR(ins.Bind(3, record.parameters.dump()));
-  FL_RETURN_IF_ERROR(ins.Bind(4, record.quality.dump()));
-  FL_RETURN_IF_ERROR(ins.Bind(5, record.map.dump()));
-  FL_RETURN_IF_ERROR(ins.Bind(6, record.case_count));
-  FL_RETURN_IF_ERROR(ins.Bind(7, record.change_counter));
-  FL_RETURN_IF_ERROR(ins.Step().status());
-  const long long id = db_->LastInsertRowId();
-  // Only the newest map is ever used: older rows would pile up with every incremental `kb add` (each
-  // holds the whole map), so they go in the same transaction. The audit trail keeps the history.
-  FL_ASSIGN_OR_RETURN(Statement prune, db_->Prepare("DELETE FROM ghsom WHERE id <> ?1;"));
-  FL_RETURN_IF_ERROR(prune.Bind(1, id));
-  FL_RETURN_IF_ERROR(prune.Step().status());
-  FL_RETURN_IF_ERROR(AuditRow("ghsom.store", "",
-                              "id=" + std::to_string(id) + " cases=" + std::to_string(record.case_count) +
-                                  " seed=" + std::to_string(record.seed)));
-  FL_RETURN_IF_ERROR(transaction.Commit());
+Result<long long> Library::StoreGhsom(GhsomRecord given) {
+  long long id = 0;
+  const Status written = db_->RunInTransaction([&]() -> Status {
+    GhsomRecord record = given;  // a rerun starts from what the caller gave
+    if (record.change_counter < 0) {
+      FL_ASSIGN_OR_RETURN(record.change_counter, ChangeCounter());
+    }
+    if (record.case_count < 0) {
+      FL_ASSIGN_OR_RETURN(record.case_count, db_->QueryInt("SELECT COUNT(*) FROM cases;"));
+    }
+    record.created_at = UtcNow();
+    FL_ASSIGN_OR_RETURN(Statement ins,
+                        db_->Prepare("INSERT INTO ghsom(created_at, seed, parameters_json, quality_json, "
+                                     "map_json, case_count, change_counter) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7);"));
+    FL_RETURN_IF_ERROR(ins.Bind(1, record.created_at));
+    FL_RETURN_IF_ERROR(ins.Bind(2, record.seed));
+    FL_RETURN_IF_ERROR(ins.Bind(3, record.parameters.dump()));
+    FL_RETURN_IF_ERROR(ins.Bind(4, record.quality.dump()));
+    FL_RETURN_IF_ERROR(ins.Bind(5, record.map.dump()));
+    FL_RETURN_IF_ERROR(ins.Bind(6, record.case_count));
+    FL_RETURN_IF_ERROR(ins.Bind(7, record.change_counter));
+    FL_RETURN_IF_ERROR(ins.Step().status());
+    FL_ASSIGN_OR_RETURN(id, db_->LastInsertRowId());
+    // Only the newest map is ever used: older rows would pile up with every incremental `kb add` (each
+    // holds the whole map), so they go in the same transaction. The audit trail keeps the history.
+    FL_ASSIGN_OR_RETURN(Statement prune, db_->Prepare("DELETE FROM ghsom WHERE id <> ?1;"));
+    FL_RETURN_IF_ERROR(prune.Bind(1, id));
+    FL_RETURN_IF_ERROR(prune.Step().status());
+    return AuditRow("ghsom.store", "",
+                    "id=" + std::to_string(id) + " cases=" + std::to_string(record.case_count) +
+                        " seed=" + std::to_string(record.seed));
+  });
+  FL_RETURN_IF_ERROR(written);
   return id;
 }
 
@@ -539,14 +539,15 @@ Result<std::vector<AuditEntry>> Library::Audit(const std::string& uid, int limit
 // ---------------------------------------------------------------------------------------------- export / import
 
 Result<std::string> Library::ExportText() {
-  // One read transaction so the snapshot is consistent while other processes write.
-  FL_RETURN_IF_ERROR(db_->Execute("BEGIN;"));
-  struct EndRead {
-    Database* db;
-    ~EndRead() { (void)db->Execute("COMMIT;"); }
-  } end_read{db_.get()};
-  FL_ASSIGN_OR_RETURN(std::vector<CaseRecord> cases, ListCases());
+  // One read snapshot so the export is consistent while other processes write.
   std::string out;
+  FL_RETURN_IF_ERROR(db_->RunInReadSnapshot([&]() -> Status { return ExportSnapshot(&out); }));
+  return out;
+}
+
+Status Library::ExportSnapshot(std::string* text) {
+  std::string& out = *text;
+  FL_ASSIGN_OR_RETURN(std::vector<CaseRecord> cases, ListCases());
   const json header = {{"format", kExportFormatName},
                        {"format_version", kExportFormatVersion},
                        {"schema_version", LatestSchemaVersion()},
@@ -576,7 +577,7 @@ Result<std::string> Library::ExportText() {
       out += line.dump() + "\n";
     }
   }
-  return out;
+  return Status::Ok();
 }
 
 Status Library::ExportToFile(const std::filesystem::path& path) {
@@ -675,40 +676,41 @@ Result<ImportReport> Library::ImportText(const std::string& text, const std::str
   }
 
   ImportReport report;
-  Transaction transaction(db_.get());
-  FL_RETURN_IF_ERROR(transaction.begin_status());
-  FL_RETURN_IF_ERROR(db_->Execute("PRAGMA defer_foreign_keys = ON;"));
-  for (const auto& [case_line, record] : cases) {
-    bool replaced = false;
-    FL_RETURN_IF_ERROR(WriteCase(record, options.replace, "import", /*keep_timestamps=*/true, &replaced)
-                           .WithContext(source + ":" + std::to_string(case_line)));
-    (replaced ? report.cases_replaced : report.cases_added) += 1;
-    if (options.on_case) options.on_case(report.cases_added + report.cases_replaced);
-  }
-  if (!rules.empty()) {
-    FL_RETURN_IF_ERROR(db_->Execute("DELETE FROM rules;"));
-    FL_ASSIGN_OR_RETURN(Statement ins, db_->Prepare("INSERT INTO rules(version, name, condition_json, choice_json, "
-                                                    "active) VALUES (?1, ?2, ?3, ?4, ?5);"));
-    for (const Rule& r : rules) {
-      FL_RETURN_IF_ERROR(ins.Reset());
-      FL_RETURN_IF_ERROR(ins.Bind(1, static_cast<long long>(r.version)));
-      FL_RETURN_IF_ERROR(ins.Bind(2, r.name));
-      FL_RETURN_IF_ERROR(ins.Bind(3, r.condition.dump()));
-      FL_RETURN_IF_ERROR(ins.Bind(4, r.choice.dump()));
-      FL_RETURN_IF_ERROR(ins.Bind(5, static_cast<long long>(r.active ? 1 : 0)));
-      FL_RETURN_IF_ERROR(ins.Step().status().WithContext(source + ": rule " + r.name));
+  const Status written = db_->RunInTransaction([&]() -> Status {
+    report = ImportReport{};
+    FL_RETURN_IF_ERROR(db_->DeferForeignKeys());
+    for (const auto& [case_line, record] : cases) {
+      bool replaced = false;
+      FL_RETURN_IF_ERROR(WriteCase(record, options.replace, "import", /*keep_timestamps=*/true, &replaced)
+                             .WithContext(source + ":" + std::to_string(case_line)));
+      (replaced ? report.cases_replaced : report.cases_added) += 1;
+      if (options.on_case) options.on_case(report.cases_added + report.cases_replaced);
     }
-    report.rules = rules.size();
-  }
-  std::set<std::string> taxonomies;
-  for (const TaxonomyNode& n : nodes) taxonomies.insert(n.taxonomy);
-  for (const std::string& t : taxonomies) FL_RETURN_IF_ERROR(DeleteTaxonomy(db_.get(), t));
-  for (const TaxonomyNode& n : nodes) {
-    FL_RETURN_IF_ERROR(InsertTaxonomyNode(db_.get(), n).WithContext(source + ": taxonomy " + n.taxonomy));
-  }
-  report.taxonomy_nodes = nodes.size();
-  FL_RETURN_IF_ERROR(AuditRow("import", "", source + ": " + report.ToJson().dump()));
-  FL_RETURN_IF_ERROR(transaction.Commit().WithContext("import of " + source));
+    if (!rules.empty()) {
+      FL_RETURN_IF_ERROR(db_->Execute("DELETE FROM rules;"));
+      FL_ASSIGN_OR_RETURN(Statement ins, db_->Prepare("INSERT INTO rules(version, name, condition_json, choice_json, "
+                                                      "active) VALUES (?1, ?2, ?3, ?4, ?5);"));
+      for (const Rule& r : rules) {
+        FL_RETURN_IF_ERROR(ins.Reset());
+        FL_RETURN_IF_ERROR(ins.Bind(1, static_cast<long long>(r.version)));
+        FL_RETURN_IF_ERROR(ins.Bind(2, r.name));
+        FL_RETURN_IF_ERROR(ins.Bind(3, r.condition.dump()));
+        FL_RETURN_IF_ERROR(ins.Bind(4, r.choice.dump()));
+        FL_RETURN_IF_ERROR(ins.Bind(5, static_cast<long long>(r.active ? 1 : 0)));
+        FL_RETURN_IF_ERROR(ins.Step().status().WithContext(source + ": rule " + r.name));
+      }
+      report.rules = rules.size();
+    }
+    std::set<std::string> taxonomies;
+    for (const TaxonomyNode& n : nodes) taxonomies.insert(n.taxonomy);
+    for (const std::string& t : taxonomies) FL_RETURN_IF_ERROR(DeleteTaxonomy(db_.get(), t));
+    for (const TaxonomyNode& n : nodes) {
+      FL_RETURN_IF_ERROR(InsertTaxonomyNode(db_.get(), n).WithContext(source + ": taxonomy " + n.taxonomy));
+    }
+    report.taxonomy_nodes = nodes.size();
+    return AuditRow("import", "", source + ": " + report.ToJson().dump());
+  });
+  FL_RETURN_IF_ERROR(written.WithContext("import of " + source));
   return report;
 }
 

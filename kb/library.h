@@ -1,11 +1,11 @@
 #pragma once
 // The case library (spec/case-library.md §1, §2 storage, §4–§5 rule base): typed access to cases,
 // their facet concepts, the facet taxonomies, the versioned rule base, stored GHSOM trees and the audit
-// trail, over the SQLite schema of kb/schema.h (version 2).
+// trail, over the schema of kb/schema.h (version 2) on SQLite or PostgreSQL (kb/database.h).
 //
-// Every write runs in one BEGIN IMMEDIATE transaction (kb::Transaction) together with its audit row,
-// so a crash leaves either the whole change or none of it. Connections wait up to
-// Database::kBusyTimeoutMs for a concurrent writer instead of failing.
+// Every write runs in one transaction (Database::RunInTransaction: SQLite BEGIN IMMEDIATE, PostgreSQL
+// SERIALIZABLE behind the library's writer lock) together with its audit row, so a crash or a lost
+// server leaves either the whole change or none of it. Writers wait for each other instead of failing.
 //
 // The case file (`formloop kb add PATH CASE.json`), one JSON object:
 //   {
@@ -188,7 +188,9 @@ class Library {
  public:
   // Refuses (BadInput, file untouched) a file that is not SQLite, an SQLite file without formloop's tables,
   // a library newer than this formloop and one older (run `formloop kb migrate`). NotFound when absent.
-  static Result<std::unique_ptr<Library>> Open(const std::filesystem::path& path);
+  // `library` is a name as in kb/library_url.h (a path, sqlite:PATH or postgresql://...). PostgreSQL:
+  // refuses a database without formloop's schema the same way (nothing is written to it).
+  static Result<std::unique_ptr<Library>> Open(const std::string& library);
 
   // Refuses a uid that exists (BadInput) unless `replace`; a replaced case keeps its created_at.
   Status AddCase(const CaseRecord& record, bool replace = false);
@@ -229,8 +231,14 @@ class Library {
   // Newest first; all cases when `uid` is empty.
   Result<std::vector<AuditEntry>> Audit(const std::string& uid = "", int limit = 100);
 
+  // Runs `body` as one transaction (kb/database.h: RunInTransaction): the library's writes inside it
+  // join it, so e.g. a `kb add` and the GHSOM update it triggers commit together, and a PostgreSQL
+  // serialization failure reruns the whole body. `body` must be safe to rerun.
+  Status RunInTransaction(const std::function<Status()>& body) { return db_->RunInTransaction(body); }
+
   Database* db() { return db_.get(); }
-  const std::filesystem::path& path() const { return db_->path(); }
+  // The SQLite path, or the URL without password: for messages.
+  std::filesystem::path path() const { return db_->path(); }
 
  private:
   explicit Library(std::unique_ptr<Database> db) : db_(std::move(db)) {}
@@ -238,6 +246,7 @@ class Library {
                    bool* replaced);
   Status AuditRow(const std::string& action, const std::string& uid, const std::string& detail);
   Status BumpChanges();
+  Status ExportSnapshot(std::string* text);
   std::unique_ptr<Database> db_;
 };
 

@@ -1,9 +1,8 @@
 // The case library's values without the database (kb/library.h): the case record and its checks, the
 // case file, the rule base (parse, problems, thresholds) and the reports' JSON. library.cc holds the
-// SQLite-backed Library over them.
+// Library over them (on SQLite or PostgreSQL).
 
 #include <algorithm>
-#include <cmath>
 #include <filesystem>
 #include <optional>
 #include <set>
@@ -205,8 +204,10 @@ const Rule* FindRule(const std::vector<Rule>& rules, const std::string& name) {
 std::optional<double> Bound(const Rule* rule, const char* op) {
   if (rule == nullptr || !rule->condition.contains("similarity")) return std::nullopt;
   const json& s = rule->condition["similarity"];
-  if (!s.is_object() || !s.contains(op) || !s[op].is_number()) return std::nullopt;
-  return s[op].get<double>();
+  if (!s.is_object()) return std::nullopt;
+  double bound = 0;
+  if (!JsonFields(s, "rule " + rule->name, "similarity.").Number(op, &bound).ok()) return std::nullopt;
+  return bound;
 }
 
 }  // namespace
@@ -245,11 +246,13 @@ std::vector<std::string> RuleSetProblems(const std::vector<Rule>& rules) {
     problems.push_back("rule 'facet.weights' is missing");
   } else {
     double sum = 0;
-    for (const auto& [facet, w] : weights->choice.items()) {
-      if (!w.is_number() || !(w.get<double>() >= 0) || !std::isfinite(w.get<double>())) {
-        problems.push_back("facet weight '" + facet + "' must be a number >= 0");
+    const JsonFields fields(weights->choice, "rule facet.weights");
+    for (const auto& item : weights->choice.items()) {
+      double w = 0;
+      if (!fields.Number(item.key(), &w, {.min = 0}).ok()) {
+        problems.push_back("facet weight '" + item.key() + "' must be a number >= 0");
       } else {
-        sum += w.get<double>();
+        sum += w;
       }
     }
     if (!(sum > 0)) problems.push_back("facet weights must have a positive sum");

@@ -1,7 +1,8 @@
 #pragma once
 // The case library's schema and its migrations (spec/case-library.md §1).
 //
-// The schema version is SQLite's `PRAGMA user_version`. Each migration moves the library from
+// The schema version is SQLite's `PRAGMA user_version`, or PostgreSQL's one-row table
+// formloop_schema_version (kb/database.h: SchemaVersion). Each migration moves the library from
 // version - 1 to version inside one transaction, so a library is always at exactly one version.
 // A library newer than this formloop is refused (never downgraded). Adding a table or column is a
 // new Migration appended to SchemaMigrations(); released migrations are never edited.
@@ -14,13 +15,15 @@
 
 #include "core/status.h"
 #include "kb/database.h"
+#include "kb/library_url.h"
 
 namespace formloop::kb {
 
 struct Migration {
-  int version;              // the user_version after this migration, 1, 2, ...
-  std::string description;  // one line, shown by `kb init`
-  std::string sql;          // statements run inside the migration's transaction
+  int version;               // the user_version after this migration, 1, 2, ...
+  std::string description;   // one line, shown by `kb init`
+  std::string sql;           // statements run inside the migration's transaction (SQLite)
+  std::string postgres_sql;  // the same change in PostgreSQL's dialect
 };
 
 // formloop's migrations, in order.
@@ -42,6 +45,11 @@ Result<MigrationReport> Migrate(Database* db, const std::vector<Migration>& migr
 // newer than LatestSchemaVersion(). `allow_unversioned` accepts an empty, version-0 SQLite file (kb init).
 // Returns the schema version found (0 for an absent or empty file when allowed).
 Result<int> ProbeLibraryFile(const std::filesystem::path& path, bool allow_unversioned);
+// ProbeLibraryFile for any library name (kb/library_url.h): a PostgreSQL database is inspected over a
+// read-only session.
+Result<int> ProbeLibrary(const std::string& library, bool allow_unversioned);
+// The same checks on an open database of either back end.
+Result<int> CheckLibrarySchema(Database* db, bool allow_unversioned);
 
 struct InitReport {
   std::string path;
@@ -53,7 +61,9 @@ struct InitReport {
   nlohmann::json ToJson() const;
 };
 
-// `formloop kb init PATH`: creates the library, or brings an existing one up to date.
-Result<InitReport> InitLibrary(const std::filesystem::path& path);
+// `formloop kb init LIBRARY`: creates the library (an SQLite file, or the tables in an existing, empty
+// PostgreSQL database: formloop creates no databases or roles), or brings an existing one up to date.
+// LIBRARY is a name as in kb/library_url.h.
+Result<InitReport> InitLibrary(const std::string& library);
 
 }  // namespace formloop::kb

@@ -733,12 +733,27 @@ Result<std::vector<std::string>> RetrievalProblems(kb::Library& library, const F
 }
 
 Result<json> AddCaseAndGrowGhsom(kb::Library& library, const kb::CaseRecord& record, bool replace) {
-  FL_ASSIGN_OR_RETURN(long long changes_before, library.ChangeCounter());
-  FL_RETURN_IF_ERROR(library.AddCase(record, replace));
-  auto inserted = InsertCaseIntoGhsom(library, record, changes_before);
-  if (inserted.ok()) return std::move(inserted).value();
-  log::Warn("case {} not inserted into the GHSOM: {}", record.uid, inserted.status().ToString());
-  return json{{"inserted", false}, {"reason", inserted.status().ToString()}};
+  // One transaction: the add and the GHSOM read-modify-write commit together, so concurrent `kb add`s
+  // and `formloop run` retain steps (other processes, other hosts on one PostgreSQL library) cannot
+  // interleave between reading the map and storing it. On a serialization failure it all reruns.
+  json out;
+  const Status written = library.RunInTransaction([&]() -> Status {
+    FL_ASSIGN_OR_RETURN(long long changes_before, library.ChangeCounter());
+    FL_RETURN_IF_ERROR(library.AddCase(record, replace));
+    auto inserted = InsertCaseIntoGhsom(library, record, changes_before);
+    if (inserted.ok()) {
+      out = std::move(inserted).value();
+      return Status::Ok();
+    }
+    // A storage failure aborts the whole transaction (and may be retried); a case the map cannot take
+    // is added without it, the map staying stale until `kb train`.
+    if (inserted.status().code() == StatusCode::kIoError) return inserted.status();
+    log::Warn("case {} not inserted into the GHSOM: {}", record.uid, inserted.status().ToString());
+    out = json{{"inserted", false}, {"reason", inserted.status().ToString()}};
+    return Status::Ok();
+  });
+  FL_RETURN_IF_ERROR(written);
+  return out;
 }
 
 }  // namespace formloop::retrieval

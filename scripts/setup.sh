@@ -20,6 +20,8 @@ PACKAGES=(
   libeigen3-dev libcgal-dev
   libocct-foundation-dev libocct-modeling-data-dev libocct-modeling-algorithms-dev libocct-data-exchange-dev
   libsqlite3-dev libpcl-dev
+  libpqxx-dev       # the case library on PostgreSQL (kb/postgres_database.cc, libpqxx 6.4 over libpq)
+  postgresql        # the tests start a real server of their own (tests/kb/postgres_server.sh: initdb, pg_ctl)
   libboost-dev      # Boost.Math's F distribution for diagnose's screening tests (PCL pulls it in too)
   libgtest-dev libgmock-dev libbenchmark-dev
   nlohmann-json3-dev libcli11-dev libfmt-dev libspdlog-dev

@@ -2,6 +2,7 @@
 // Needs the formloop binary (FORMLOOP_BINARY); skipped when it has not been built.
 
 #include <filesystem>
+#include <map>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -13,6 +14,7 @@
 namespace formloop::kb {
 namespace {
 
+using testing::Backend;
 using testing::KbLibraryTest;
 using testing::ReadBytes;
 using testing::SyntheticCase;
@@ -47,47 +49,67 @@ class KbCliTest : public KbLibraryTest {
   std::string out_, err_;
 };
 
-TEST_F(KbCliTest, InitAddListShowExportImportCheckRemove) {
-  ASSERT_EQ(Run("kb init " + P("a.db")), 0) << err_;
+// The same commands on both back ends (a file, or a PostgreSQL URL: the library names below).
+class KbCliBackendTest : public testing::KbBackendTest {
+ protected:
+  void SetUp() override {
+    if (!fs::exists(FORMLOOP_BINARY)) GTEST_SKIP() << "formloop binary not built: " << FORMLOOP_BINARY;
+    KbBackendTest::SetUp();
+  }
+  std::string P(const std::string& name) const { return (dir_ / name).string(); }
+  // A library's name, quoted for the shell: a file of the test's folder or a fresh PostgreSQL schema.
+  std::string L(const std::string& name) {
+    auto it = libraries_.find(name);
+    if (it == libraries_.end()) it = libraries_.emplace(name, LibraryName(name)).first;
+    return "'" + it->second + "'";
+  }
+  int Run(const std::string& args) { return formloop::testing::RunFormloop(args, &out_, &err_); }
+  nlohmann::json Out() const { return nlohmann::json::parse(out_); }
+  std::map<std::string, std::string> libraries_;
+  std::string out_, err_;
+};
+
+TEST_P(KbCliBackendTest, InitAddListShowExportImportCheckRemove) {
+  ASSERT_EQ(Run("kb init " + L("a.db")), 0) << err_;
   EXPECT_EQ(Out()["schema_version"], 2);
   // The starter library (252 cases, GHSOM trained) is tested in kb_train_cli_test.cc.
   for (int i = 0; i < 4; ++i) {
     WriteBytes(dir_ / "case.json", RetrievableCase(i).ToJson().dump(2));
-    ASSERT_EQ(Run("kb add " + P("a.db") + " " + P("case.json")), 0) << err_;
+    ASSERT_EQ(Run("kb add " + L("a.db") + " " + P("case.json")), 0) << err_;
   }
-  EXPECT_EQ(Run("kb add " + P("a.db") + " " + P("case.json")), 2);  // duplicate uid
+  EXPECT_EQ(Run("kb add " + L("a.db") + " " + P("case.json")), 2);  // duplicate uid
   EXPECT_NE(err_.find("exists"), std::string::npos) << err_;
-  EXPECT_EQ(Run("kb add " + P("a.db") + " " + P("case.json") + " --replace"), 0) << err_;
+  EXPECT_EQ(Run("kb add " + L("a.db") + " " + P("case.json") + " --replace"), 0) << err_;
 
-  ASSERT_EQ(Run("kb list " + P("a.db") + " --json --family freeform"), 0) << err_;
+  ASSERT_EQ(Run("kb list " + L("a.db") + " --json --family freeform"), 0) << err_;
   ASSERT_EQ(Out().size(), 2u);
   EXPECT_EQ(Out()[0]["uid"], "case-00000");
-  ASSERT_EQ(Run("kb show " + P("a.db") + " case-00002"), 0) << err_;
+  ASSERT_EQ(Run("kb show " + L("a.db") + " case-00002"), 0) << err_;
   EXPECT_EQ(Out()["family"], "mould_cavity");
-  EXPECT_EQ(Run("kb show " + P("a.db") + " nope"), 2);
+  EXPECT_EQ(Run("kb show " + L("a.db") + " nope"), 2);
 
-  ASSERT_EQ(Run("kb export " + P("a.db") + " --out " + P("a.jsonl")), 0) << err_;
-  ASSERT_EQ(Run("kb init " + P("b.db")), 0) << err_;
-  ASSERT_EQ(Run("kb import " + P("b.db") + " " + P("a.jsonl")), 0) << err_;
+  ASSERT_EQ(Run("kb export " + L("a.db") + " --out " + P("a.jsonl")), 0) << err_;
+  ASSERT_EQ(Run("kb init " + L("b.db")), 0) << err_;
+  ASSERT_EQ(Run("kb import " + L("b.db") + " " + P("a.jsonl")), 0) << err_;
   EXPECT_EQ(Out()["cases_added"], 4);
-  ASSERT_EQ(Run("kb export " + P("b.db") + " --out " + P("b.jsonl")), 0) << err_;
+  ASSERT_EQ(Run("kb export " + L("b.db") + " --out " + P("b.jsonl")), 0) << err_;
   EXPECT_EQ(ReadBytes(dir_ / "a.jsonl"), ReadBytes(dir_ / "b.jsonl"));
 
-  ASSERT_EQ(Run("kb check " + P("b.db")), 0) << out_ << err_;
+  ASSERT_EQ(Run("kb check " + L("b.db")), 0) << out_ << err_;
   EXPECT_EQ(Out()["clean"], true);
-  ASSERT_EQ(Run("kb stats " + P("b.db")), 0) << err_;
+  ASSERT_EQ(Run("kb stats " + L("b.db")), 0) << err_;
   EXPECT_EQ(Out()["cases"], 4);
-  ASSERT_EQ(Run("kb remove " + P("b.db") + " case-00001"), 0) << err_;
-  EXPECT_EQ(Run("kb remove " + P("b.db") + " case-00001"), 2);
+  ASSERT_EQ(Run("kb remove " + L("b.db") + " case-00001"), 0) << err_;
+  EXPECT_EQ(Run("kb remove " + L("b.db") + " case-00001"), 2);
 
-  ASSERT_EQ(Run("kb rules " + P("b.db")), 0) << err_;
+  ASSERT_EQ(Run("kb rules " + L("b.db")), 0) << err_;
   nlohmann::json rules = Out();
   EXPECT_EQ(rules["version"], 1);
   for (auto& r : rules["rules"]) {
     if (r["name"] == "route.simulate") r["condition"]["similarity"]["ge"] = 0.99;
   }
   WriteBytes(dir_ / "rules.json", rules.dump());
-  EXPECT_EQ(Run("kb rules " + P("b.db") + " --set " + P("rules.json")), 2);
+  EXPECT_EQ(Run("kb rules " + L("b.db") + " --set " + P("rules.json")), 2);
   EXPECT_NE(err_.find("0 < low < high <= 1"), std::string::npos) << err_;
 }
 
@@ -123,6 +145,9 @@ TEST_F(KbCliTest, RefusalsExitNonZeroAndLeaveFilesAlone) {
   ASSERT_EQ(Out()["retrieval_problems"].size(), 1u) << out_;
   EXPECT_NE(Out()["retrieval_problems"][0].get<std::string>().find("retrieval model"), std::string::npos) << out_;
 }
+
+INSTANTIATE_TEST_SUITE_P(Backends, KbCliBackendTest, ::testing::Values(Backend::kSqlite, Backend::kPostgres),
+                         testing::BackendName);
 
 }  // namespace
 }  // namespace formloop::kb

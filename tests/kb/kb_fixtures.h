@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "kb/library.h"
+#include "tests/kb/postgres_server.h"
 #include "tests/support/test_dir.h"
 
 namespace formloop::kb::testing {
@@ -27,9 +28,45 @@ class KbLibraryTest : public ::testing::Test {
   // A fresh library at the current schema.
   std::unique_ptr<Library> NewLibrary(const std::string& name) {
     const fs::path path = dir_ / name;
-    auto init = InitLibrary(path);
+    auto init = InitLibrary(path.string());
     EXPECT_TRUE(init.ok()) << init.status().message();
-    auto lib = Library::Open(path);
+    auto lib = Library::Open(path.string());
+    EXPECT_TRUE(lib.ok()) << lib.status().message();
+    return lib.ok() ? std::move(lib).value() : nullptr;
+  }
+  fs::path dir_;
+};
+
+// The back ends of kb/database.h: the suites parameterised on them run every test on both.
+enum class Backend { kSqlite, kPostgres };
+
+inline std::string BackendName(const ::testing::TestParamInfo<Backend>& info) {
+  return info.param == Backend::kSqlite ? "Sqlite" : "Postgres";
+}
+
+class KbBackendTest : public ::testing::TestWithParam<Backend> {
+ protected:
+  void SetUp() override {
+    dir_ = formloop::testing::FreshTestDir("formloop-kbbe");
+    if (GetParam() == Backend::kPostgres) {
+      ASSERT_TRUE(PostgresServer::Get().error().empty()) << PostgresServer::Get().error();
+    }
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  bool postgres() const { return GetParam() == Backend::kPostgres; }
+
+  // The name of a new, empty library: a file in the test's folder, or a fresh PostgreSQL schema.
+  std::string LibraryName(const std::string& name) {
+    if (!postgres()) return (dir_ / name).string();
+    return PostgresServer::Get().NewLibraryUrl(::testing::UnitTest::GetInstance()->current_test_info()->name() +
+                                               std::string("_") + name);
+  }
+  // A fresh library at the current schema.
+  std::unique_ptr<Library> NewLibrary(const std::string& name) {
+    const std::string library = LibraryName(name);
+    auto init = InitLibrary(library);
+    EXPECT_TRUE(init.ok()) << init.status().message();
+    auto lib = Library::Open(library);
     EXPECT_TRUE(lib.ok()) << lib.status().message();
     return lib.ok() ? std::move(lib).value() : nullptr;
   }

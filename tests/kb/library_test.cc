@@ -14,6 +14,8 @@
 namespace formloop::kb {
 namespace {
 
+using testing::Backend;
+using testing::KbBackendTest;
 using testing::KbLibraryTest;
 using testing::ReadBytes;
 using testing::SyntheticCase;
@@ -91,7 +93,7 @@ TEST_F(KbLibraryTest, MigratesAVersion1LibraryWithItsCasesAndLoops) {
   EXPECT_EQ(check->cases_missing_descriptor, std::vector<std::string>{"v1-2"});
 }
 
-TEST_F(KbLibraryTest, AddGetListRemoveRoundTrip) {
+TEST_P(KbBackendTest, AddGetListRemoveRoundTrip) {
   auto lib = NewLibrary("cases.db");
   ASSERT_NE(lib, nullptr);
   for (int i = 0; i < 9; ++i) ASSERT_TRUE(lib->AddCase(SyntheticCase(i)).ok());
@@ -137,7 +139,7 @@ TEST_F(KbLibraryTest, AddGetListRemoveRoundTrip) {
   EXPECT_EQ((*audit)[1].action, "add");
 }
 
-TEST_F(KbLibraryTest, DuplicateUidRefusedUnlessReplace) {
+TEST_P(KbBackendTest, DuplicateUidRefusedUnlessReplace) {
   auto lib = NewLibrary("cases.db");
   ASSERT_NE(lib, nullptr);
   CaseRecord c = SyntheticCase(1);
@@ -157,7 +159,7 @@ TEST_F(KbLibraryTest, DuplicateUidRefusedUnlessReplace) {
   EXPECT_EQ(*lib->db()->QueryInt("SELECT COUNT(*) FROM cases;"), 1);
 }
 
-TEST_F(KbLibraryTest, BadCaseFieldsAreNamed) {
+TEST_P(KbBackendTest, BadCaseFieldsAreNamed) {
   const nlohmann::json good = SyntheticCase(0).ToJson();
   struct Mutation {
     std::string field;
@@ -196,7 +198,7 @@ TEST_F(KbLibraryTest, BadCaseFieldsAreNamed) {
   EXPECT_NE(broken.status().message().find("broken.json"), std::string::npos);
 }
 
-TEST_F(KbLibraryTest, ExampleCaseFileIsValid) {
+TEST_P(KbBackendTest, ExampleCaseFileIsValid) {
   const auto example = ReadCaseFile(fs::path(FORMLOOP_SOURCE_DIR) / "data/kb/example_case.json");
   ASSERT_TRUE(example.ok()) << example.status().message();
   EXPECT_EQ(example->uid, "example-blade-001");
@@ -207,7 +209,7 @@ TEST_F(KbLibraryTest, ExampleCaseFileIsValid) {
   EXPECT_EQ(lib->GetCase(example->uid)->manufacturing, example->manufacturing);
 }
 
-TEST_F(KbLibraryTest, ExportImportExportIsByteIdentical) {
+TEST_P(KbBackendTest, ExportImportExportIsByteIdentical) {
   auto a = NewLibrary("a.db");
   ASSERT_NE(a, nullptr);
   for (int i = 0; i < 40; ++i) ASSERT_TRUE(a->AddCase(SyntheticCase(i, 11)).ok());
@@ -257,7 +259,7 @@ TEST_F(KbLibraryTest, ExportImportExportIsByteIdentical) {
   EXPECT_EQ(text, ReadBytes(second));
 }
 
-TEST_F(KbLibraryTest, ImportRefusesNewerFormatsAndBadLines) {
+TEST_P(KbBackendTest, ImportRefusesNewerFormatsAndBadLines) {
   auto lib = NewLibrary("cases.db");
   ASSERT_NE(lib, nullptr);
   const std::string one_case = nlohmann::json{{"type", "case"}, {"case", SyntheticCase(1).ToJson()}}.dump() + "\n";
@@ -289,7 +291,7 @@ TEST_F(KbLibraryTest, ImportRefusesNewerFormatsAndBadLines) {
   EXPECT_EQ(*lib->db()->QueryInt("SELECT COUNT(*) FROM cases;"), 0);
 }
 
-TEST_F(KbLibraryTest, RulesAreVersionedAndChecked) {
+TEST_P(KbBackendTest, RulesAreVersionedAndChecked) {
   auto lib = NewLibrary("cases.db");
   ASSERT_NE(lib, nullptr);
   nlohmann::json rules = lib->GetRules()->ToJson();
@@ -320,8 +322,7 @@ TEST_F(KbLibraryTest, RulesAreVersionedAndChecked) {
   EXPECT_FALSE(check->rule_problems.empty());
 }
 
-TEST_F(KbLibraryTest, CheckFindsOrphansAndStaleGhsom) {
-  const fs::path path = dir_ / "cases.db";
+TEST_P(KbBackendTest, CheckFindsOrphansAndStaleGhsom) {
   auto lib = NewLibrary("cases.db");
   ASSERT_NE(lib, nullptr);
   for (int i = 0; i < 5; ++i) ASSERT_TRUE(lib->AddCase(SyntheticCase(i)).ok());
@@ -355,10 +356,13 @@ TEST_F(KbLibraryTest, CheckFindsOrphansAndStaleGhsom) {
   // Storing a map replaces the previous one (only the newest is used; rows do not pile up).
   EXPECT_EQ(*lib->db()->QueryInt("SELECT COUNT(*) FROM ghsom;"), 1);
 
-  // An orphan concept row, written with foreign keys off by another program.
+  // An orphan concept row, written with foreign keys off by another program (PostgreSQL: a superuser
+  // session that skips the foreign-key triggers).
+  const std::string orphan_row = "INSERT INTO case_concepts(case_id, facet, concept) VALUES (9999, 'shape', 'ghost');";
   ASSERT_TRUE(lib->db()
-                  ->Execute("PRAGMA foreign_keys = OFF; INSERT INTO case_concepts(case_id, facet, concept) "
-                            "VALUES (9999, 'shape', 'ghost'); PRAGMA foreign_keys = ON;")
+                  ->Execute(postgres() ? "SET session_replication_role = replica; " + orphan_row +
+                                             " SET session_replication_role = origin;"
+                                       : "PRAGMA foreign_keys = OFF; " + orphan_row + " PRAGMA foreign_keys = ON;")
                   .ok());
   auto orphan = lib->Check();
   EXPECT_FALSE(orphan->clean());
@@ -425,6 +429,54 @@ TEST_F(KbLibraryTest, RefusedFilesAreNamedAndLeftUnchanged) {
   EXPECT_EQ(ReadBytes(dir_ / "old.db"), old_before);
   EXPECT_EQ(Library::Open(dir_ / "absent.db").status().code(), StatusCode::kNotFound);
 }
+
+// A library moved SQLite -> PostgreSQL -> SQLite by export/import: each export byte-identical to the first.
+TEST_F(KbLibraryTest, ExportIsByteIdenticalAcrossBackEnds) {
+  ASSERT_TRUE(testing::PostgresServer::Get().error().empty()) << testing::PostgresServer::Get().error();
+  auto a = NewLibrary("a.db");
+  ASSERT_NE(a, nullptr);
+  for (int i = 0; i < 30; ++i) ASSERT_TRUE(a->AddCase(SyntheticCase(i, 5)).ok());
+  CaseRecord odd = SyntheticCase(31, 5);
+  odd.name = "quotes ' \" and unicode \u00e9\u2202, tabs\t";  // text that needs escaping survives
+  odd.part["tolerance_mm"] = 0.1 + 0.2;                       // a double that needs all 17 digits
+  odd.descriptor = std::vector<double>{1e-300, -0.0, 123456789.123456789, 5e-324};
+  ASSERT_TRUE(a->AddCase(odd).ok());
+  nlohmann::json rules = a->GetRules()->ToJson();
+  for (auto& r : rules["rules"]) {
+    if (r["name"] == "facet.weights") r["choice"]["finish"] = 0.25;
+  }
+  ASSERT_TRUE(a->SetRules(rules, "rules.json").ok());
+  ASSERT_TRUE(a->SetTaxonomy("finish", {{"", "finish", std::nullopt},
+                                        {"", "Zfine", std::string("finish")},
+                                        {"", "afine", std::string("finish")}})
+                  .ok());
+  const fs::path first = dir_ / "a.jsonl";
+  ASSERT_TRUE(a->ExportToFile(first).ok());
+
+  const std::string url = testing::PostgresServer::Get().NewLibraryUrl("cross");
+  ASSERT_TRUE(InitLibrary(url).ok());
+  auto b = Library::Open(url);
+  ASSERT_TRUE(b.ok()) << b.status().message();
+  ASSERT_TRUE((*b)->ImportFile(first).ok());
+  const fs::path second = dir_ / "b.jsonl";
+  ASSERT_TRUE((*b)->ExportToFile(second).ok());
+  EXPECT_EQ(ReadBytes(first), ReadBytes(second));
+
+  auto c = NewLibrary("c.db");
+  ASSERT_NE(c, nullptr);
+  ASSERT_TRUE(c->ImportFile(second).ok());
+  const fs::path third = dir_ / "c.jsonl";
+  ASSERT_TRUE(c->ExportToFile(third).ok());
+  EXPECT_EQ(ReadBytes(first), ReadBytes(third));
+  auto back = c->GetCase(odd.uid);
+  ASSERT_TRUE(back.ok());
+  EXPECT_EQ(back->name, odd.name);
+  EXPECT_EQ(*back->descriptor, *odd.descriptor);
+}
+
+// The one instantiation of the back-end suite in this binary (its tests are in several files).
+INSTANTIATE_TEST_SUITE_P(Backends, KbBackendTest, ::testing::Values(Backend::kSqlite, Backend::kPostgres),
+                         testing::BackendName);
 
 }  // namespace
 }  // namespace formloop::kb

@@ -1,5 +1,5 @@
-// The case library under concurrent writers and under SIGKILL: processes made with fork(), each with its
-// own connection (a connection is never shared across fork()).
+// The case library under concurrent writers and under SIGKILL, on both back ends: processes made with
+// fork(), each with its own connection (a connection is never shared across fork()).
 
 #include <chrono>
 #include <csignal>
@@ -20,7 +20,7 @@
 namespace formloop::kb {
 namespace {
 
-using testing::KbLibraryTest;
+using testing::KbBackendTest;
 using testing::SyntheticCase;
 namespace fs = std::filesystem;
 
@@ -39,7 +39,7 @@ void WriteAll(int fd, const std::string& text) {
 
 // Child: adds cases [first, first + count) with `prefix`, writing "uid\n" to `fd` after each commit.
 // Exit code 0 when every add succeeded.
-[[noreturn]] void AddLoop(const fs::path& path, const std::string& prefix, int count, int fd) {
+[[noreturn]] void AddLoop(const std::string& path, const std::string& prefix, int count, int fd) {
   auto lib = Library::Open(path);
   if (!lib.ok()) {
     std::fprintf(stderr, "child open: %s\n", lib.status().message().c_str());
@@ -67,8 +67,8 @@ std::set<std::string> UidsIn(Library* lib) {
   return uids;
 }
 
-TEST_F(KbLibraryTest, TwoProcessesAdding500CasesEachGiveExactly1000) {
-  const fs::path path = dir_ / "cases.db";
+TEST_P(KbBackendTest, TwoProcessesAdding500CasesEachGiveExactly1000) {
+  const std::string path = LibraryName("cases.db");
   ASSERT_TRUE(InitLibrary(path).ok());
   const auto start = std::chrono::steady_clock::now();
   pid_t children[2];
@@ -97,8 +97,8 @@ TEST_F(KbLibraryTest, TwoProcessesAdding500CasesEachGiveExactly1000) {
   EXPECT_TRUE(check->clean()) << check->ToJson().dump();
 }
 
-TEST_F(KbLibraryTest, KilledDuringAddLoopKeepsEveryCommittedCase) {
-  const fs::path path = dir_ / "cases.db";
+TEST_P(KbBackendTest, KilledDuringAddLoopKeepsEveryCommittedCase) {
+  const std::string path = LibraryName("cases.db");
   ASSERT_TRUE(InitLibrary(path).ok());
   int fds[2];
   ASSERT_EQ(::pipe(fds), 0);
@@ -150,8 +150,8 @@ TEST_F(KbLibraryTest, KilledDuringAddLoopKeepsEveryCommittedCase) {
   EXPECT_TRUE((*lib)->AddCase(SyntheticCase(0, 5, "after")).ok());
 }
 
-TEST_F(KbLibraryTest, KilledDuringImportLeavesNothing) {
-  const fs::path path = dir_ / "cases.db";
+TEST_P(KbBackendTest, KilledDuringImportLeavesNothing) {
+  const std::string path = LibraryName("cases.db");
   // An export file of 2,000 cases.
   std::string text = "{\"format\":\"formloop-case-library\",\"format_version\":1,\"schema_version\":2}\n";
   for (int i = 0; i < 2000; ++i) {

@@ -8,12 +8,16 @@
 #include <gtest/gtest.h>
 
 #include "kb/database.h"
+#include "kb/library.h"
+#include "kb/library_url.h"
 #include "kb/schema.h"
+#include "tests/kb/kb_fixtures.h"
 
 namespace formloop::kb {
 namespace {
 
 namespace fs = std::filesystem;
+using testing::KbBackendTest;
 
 class KbTest : public ::testing::Test {
  protected:
@@ -106,27 +110,63 @@ TEST_F(KbTest, RefusesNewerLibrariesForeignDatabasesAndNonDatabases) {
   EXPECT_EQ(Database::Open(dir_ / "absent.db", Database::Mode::kOpenExisting).status().code(), StatusCode::kNotFound);
 }
 
-TEST_F(KbTest, TransactionRollsBackUnlessCommitted) {
-  const fs::path path = dir_ / "t.db";
-  ASSERT_TRUE(InitLibrary(path).ok());
-  auto db = Database::Open(path, Database::Mode::kOpenExisting);
-  ASSERT_TRUE(db.ok());
-  {
-    Transaction t(db->get());
-    ASSERT_TRUE(t.begin_status().ok());
-    ASSERT_TRUE((*db)->Execute("INSERT INTO materials(name, taxonomy_path) VALUES ('H13', 'metal/steel/H13');").ok());
-  }  // no commit
-  EXPECT_EQ(*(*db)->QueryInt("SELECT COUNT(*) FROM materials;"), 0);
-  {
-    Transaction t(db->get());
-    auto stmt = (*db)->Prepare("INSERT INTO materials(name, taxonomy_path) VALUES (?1, ?2);");
-    ASSERT_TRUE(stmt.ok());
-    ASSERT_TRUE(stmt->Bind(1, std::string("Ti-6Al-4V")).ok());
-    ASSERT_TRUE(stmt->Bind(2, std::string("metal/titanium/Ti-6Al-4V")).ok());
-    ASSERT_TRUE(stmt->Step().ok());
-    ASSERT_TRUE(t.Commit().ok());
+TEST_P(KbBackendTest, TransactionRollsBackUnlessCommitted) {
+  const std::string name = LibraryName("t.db");
+  ASSERT_TRUE(InitLibrary(name).ok());
+  auto db = Database::Open(*LibraryUrl::Parse(name), Database::Mode::kOpenExisting);
+  ASSERT_TRUE(db.ok()) << db.status().message();
+  Database* d = db->get();
+  const Status failed = d->RunInTransaction([&]() -> Status {
+    EXPECT_TRUE(d->Execute("INSERT INTO materials(name, taxonomy_path) VALUES ('H13', 'metal/steel/H13');").ok());
+    return Status::IoError("the body failed");
+  });
+  EXPECT_EQ(failed.message(), "the body failed");
+  EXPECT_EQ(*d->QueryInt("SELECT COUNT(*) FROM materials;"), 0);
+  EXPECT_THROW(d->RunInTransaction([&]() -> Status {
+    EXPECT_TRUE(d->Execute("INSERT INTO materials(name, taxonomy_path) VALUES ('H13', 'metal/steel/H13');").ok());
+    throw std::runtime_error("interrupted");
+  }),
+               std::runtime_error);
+  EXPECT_EQ(*d->QueryInt("SELECT COUNT(*) FROM materials;"), 0);
+  EXPECT_FALSE(d->in_transaction());
+  // A failed statement inside the body: nothing of the body is written (PostgreSQL aborts the whole
+  // transaction; a COMMIT would answer ROLLBACK and must not be reported as written).
+  const Status duplicate = d->RunInTransaction([&]() -> Status {
+    EXPECT_TRUE(d->Execute("INSERT INTO materials(name, taxonomy_path) VALUES ('Al', 'metal/Al');").ok());
+    (void)d->Execute("INSERT INTO materials(name, taxonomy_path) VALUES ('Al', 'metal/Al');");
+    return Status::Ok();
+  });
+  if (postgres()) {
+    EXPECT_FALSE(duplicate.ok());
   }
-  EXPECT_EQ(*(*db)->QueryText("SELECT name FROM materials;"), "Ti-6Al-4V");
+  EXPECT_EQ(*d->QueryInt("SELECT COUNT(*) FROM materials WHERE name = 'Al';"), postgres() ? 0 : 1);
+  ASSERT_TRUE(d->RunInTransaction([&]() -> Status {
+                 FL_ASSIGN_OR_RETURN(Statement stmt,
+                                     d->Prepare("INSERT INTO materials(name, taxonomy_path) VALUES (?1, ?2);"));
+                 FL_RETURN_IF_ERROR(stmt.Bind(1, std::string("Ti-6Al-4V")));
+                 FL_RETURN_IF_ERROR(stmt.Bind(2, std::string("metal/titanium/Ti-6Al-4V")));
+                 return stmt.Step().status();
+               }).ok());
+  EXPECT_EQ(*d->QueryText("SELECT name FROM materials WHERE name <> 'Al';"), "Ti-6Al-4V");
+}
+
+TEST(KbLibraryUrl, NamesAreParsedAndPasswordsNeverShown) {
+  EXPECT_FALSE(LibraryUrl::Parse("cases.db")->is_postgres());
+  EXPECT_EQ(LibraryUrl::Parse("sqlite:lib/cases.db")->path, fs::path("lib/cases.db"));
+  const auto pg = LibraryUrl::Parse("postgresql://plant:s3cret@db.local:5433/kb?sslmode=require&password=x");
+  ASSERT_TRUE(pg.ok());
+  EXPECT_TRUE(pg->is_postgres());
+  EXPECT_EQ(pg->display, "postgresql://plant@db.local:5433/kb?sslmode=require");
+  EXPECT_EQ(LibraryUrl::Parse("mysql://x/y").status().code(), StatusCode::kBadInput);
+  EXPECT_EQ(LibraryUrl::Parse("").status().code(), StatusCode::kBadInput);
+  EXPECT_EQ(LibraryUrl::Parse("sqlite:").status().code(), StatusCode::kBadInput);
+  // A server that is not there: the error names the library (without the password) and the fix.
+  const auto down = Library::Open("postgresql://plant:s3cret@127.0.0.1:1/kb?connect_timeout=5");
+  ASSERT_FALSE(down.ok());
+  EXPECT_NE(down.status().message().find("'postgresql://plant@127.0.0.1:1/kb?connect_timeout=5'"), std::string::npos)
+      << down.status().message();
+  EXPECT_EQ(down.status().message().find("s3cret"), std::string::npos);
+  EXPECT_NE(down.status().message().find("Fix:"), std::string::npos);
 }
 
 }  // namespace
