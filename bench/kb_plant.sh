@@ -4,6 +4,7 @@
 # and stops it at the end. Long: run it nice'd, by hand, not in CI.
 #
 #   bench/kb_plant.sh BUILD_DIR [WORK_DIR]      e.g. nice -n 10 bench/kb_plant.sh build
+#   FORMLOOP_PLANT_STAGES="fault batch" bench/kb_plant.sh build    only some of: adds retain fault batch
 #
 # Prints one line per figure:
 #   adds        8 processes x 250 `formloop kb add` into one library: cases, kb check, GHSOM state
@@ -31,7 +32,22 @@ library() {  # a fresh schema -> its library URL
 }
 count() { "$formloop" kb stats "$1" 2>/dev/null | python3 -c 'import json,sys; print(json.load(sys.stdin)["cases"])'; }
 
+stages=${FORMLOOP_PLANT_STAGES:-adds retain fault batch}
+want() { case " $stages " in *" $1 "*) return 0 ;; esac; return 1; }
+mkdir -p "$work/parts4" "$work/parts16"
+python3 - "$src/data/parts/demo-saddle.json" "$work" <<'PY'
+import json, sys
+part = json.load(open(sys.argv[1]))
+for n, folder in ((4, "parts4"), (16, "parts16")):
+    for i in range(n):
+        p = dict(part)
+        p["name"] = "plant-saddle-%02d" % i
+        p["seed"] = part["seed"] + i
+        json.dump(p, open("%s/%s/%s.json" % (sys.argv[2], folder, p["name"]), "w"), indent=1)
+PY
+
 # ---- 8 processes x 250 kb add
+if want adds; then
 kb=$(library adds)
 "$formloop" kb init "$kb" --starter >/dev/null 2>&1
 before=$(count "$kb")
@@ -56,20 +72,12 @@ after=$(count "$kb")
 check=$("$formloop" kb check "$kb" 2>/dev/null | python3 -c 'import json,sys; r=json.load(sys.stdin); g=r["ghsom"]; print("clean" if not r["problems"] else "NOT CLEAN %s" % r["problems"], "ghsom_stale=%s" % g.get("stale"), "ghsom_cases=%s" % g.get("case_count"))')
 echo "adds: 8 x 250 kb add: cases $before -> $after (+$((after - before))), failed adds: $(cat "$work/adds-failed.log" 2>/dev/null | wc -l), kb check: $check, wall $(python3 -c "print(round($end - $start, 1))") s"
 
+fi
+
 # ---- 4 parallel retain steps
+if want retain; then
 kb=$(library retain)
 "$formloop" kb init "$kb" --starter >/dev/null 2>&1
-mkdir -p "$work/parts4" "$work/parts16"
-python3 - "$src/data/parts/demo-saddle.json" "$work" <<'PY'
-import json, sys
-part = json.load(open(sys.argv[1]))
-for n, folder in ((4, "parts4"), (16, "parts16")):
-    for i in range(n):
-        p = dict(part)
-        p["name"] = "plant-saddle-%02d" % i
-        p["seed"] = part["seed"] + i
-        json.dump(p, open("%s/%s/%s.json" % (sys.argv[2], folder, p["name"]), "w"), indent=1)
-PY
 before=$(count "$kb")
 "$formloop" run "$work/parts4" --kb "$kb" --jobs 4 --no-report --out "$work/retain" >/dev/null 2>"$work/retain.log" || true
 after=$(count "$kb")
@@ -92,12 +100,15 @@ print("retain: 4 parts --jobs 4: %d ok / %d failed; retained cases present %d/%d
       check["ghsom"].get("case_count")))
 PY
 
+fi
+
 # ---- the server stopped in the middle of a batch
+if want fault; then
 kb=$(library fault)
 "$formloop" kb init "$kb" --starter >/dev/null 2>&1
 before=$(count "$kb")
 audit_before=$(psql_c "SELECT count(*) FROM fault.audit;")
-("$formloop" run "$work/parts4" --kb "$kb" --jobs 2 --no-report --out "$work/fault" >/dev/null 2>"$work/fault.log"; echo $? >"$work/fault.rc") &
+(set +e; "$formloop" run "$work/parts4" --kb "$kb" --jobs 2 --no-report --out "$work/fault" >/dev/null 2>"$work/fault.log"; echo $? >"$work/fault.rc") &
 runner=$!
 # Stop the server once the first retain step is under way or 4 s into the batch, whichever comes later.
 sleep 4
@@ -107,10 +118,13 @@ python3 - "$work/fault" <<'PY'
 import json, sys
 b = json.load(open(sys.argv[1] + "/batch_summary.json"))
 errors = [row.get("error", "") for row in b["parts"] if row["status"] == "failed"]
-print("fault: exit %s; %d of %d parts failed; first error: %s" % (open(sys.argv[1] + "/../fault.rc").read().strip(),
+import os
+print("fault: exit %s; %d of %d parts failed; first error: %s" % (open(os.path.dirname(sys.argv[1]) + "/fault.rc").read().strip(),
       len(errors), b["count"], errors[0] if errors else "-"))
 PY
-as_server_user "$bin/pg_ctl" -D "$pgdir/data" -l "$pgdir/server.log" -w start >/dev/null
+port=$(echo "$base" | sed 's|.*:\([0-9]*\)/.*|\1|')
+as_server_user "$bin/pg_ctl" -D "$pgdir/data" -l "$pgdir/server.log" -w \
+  -o "-p $port -k $pgdir -c listen_addresses=127.0.0.1 -c fsync=off -c synchronous_commit=off" start >/dev/null
 after=$(count "$kb")
 check=$("$formloop" kb check "$kb" 2>/dev/null | python3 -c 'import json,sys; r=json.load(sys.stdin); print("clean" if not r["problems"] else r["problems"])')
 partial=$(ls -d "$work"/fault/*.partial 2>/dev/null | wc -l)
@@ -124,7 +138,10 @@ print("rerun: exit %s; %d within / %d out of tolerance / %d failed of %d" % (sys
 PY
 echo "rerun: cases now $(count "$kb")"
 
-# ---- 16 parts, --jobs 1 vs --jobs 2 (SQLite library, then the same on PostgreSQL)
+fi
+
+# ---- 16 parts, --jobs 1 vs --jobs 2 (SQLite library)
+if want batch; then
 for jobs in 1 2; do
   "$formloop" kb init "$work/batch-j$jobs.db" --starter >/dev/null 2>&1
   start=$(date +%s.%N)
@@ -132,3 +149,4 @@ for jobs in 1 2; do
   end=$(date +%s.%N)
   echo "batch: 16 parts --jobs $jobs (SQLite library): $(python3 -c "print(round($end - $start, 1))") s, failed $(python3 -c "import json; print(json.load(open('$work/batch-j$jobs/batch_summary.json'))['failed'])")"
 done
+fi

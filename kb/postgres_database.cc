@@ -19,9 +19,18 @@ namespace {
 // Advisory locks are per database; this key ("formloop" in ASCII) is the library's writer lock.
 constexpr long long kWriterLockKey = 0x666f726d6c6f6f70LL;
 
-std::string Trimmed(std::string text) {
-  while (!text.empty() && (text.back() == '\n' || text.back() == ' ')) text.pop_back();
-  return text;
+// libpq's messages end in a newline and may span lines ("...refused\n\tIs the server running..."): one line.
+std::string Trimmed(const std::string& text) {
+  std::string out;
+  for (char c : text) {
+    if (c == '\n' || c == '\t') {
+      if (!out.empty() && out.back() != ' ') out += ' ';
+    } else {
+      out += c;
+    }
+  }
+  while (!out.empty() && out.back() == ' ') out.pop_back();
+  return out;
 }
 
 // `?N` -> `$N`, outside quoted strings and identifiers.
