@@ -11,6 +11,9 @@
 //   - lookup latency p50/p99: GetCase of `lookups` random uids (one indexed read + its concepts);
 //   - the full read retrieval starts from: ListCases() of the whole library (3 repetitions, median);
 // printed as one table. Run the Release build, nice'd, on an otherwise quiet machine if possible.
+// Durability differs unless the server is set up like the SQLite file: tests/kb/postgres_server.sh
+// runs its throw-away server with fsync=off and synchronous_commit=off, which favours PostgreSQL's
+// commit rate; a production server (fsync on) pays a WAL flush per commit as SQLite does.
 
 #include <unistd.h>
 
