@@ -59,6 +59,11 @@ TEST(RegressGoldens, ReferencePartsMatchTheirGoldensAndReachTolerance) {
   ASSERT_TRUE(result.ok()) << text;
   const Json& r = *result;
   EXPECT_EQ(r["regressions"], 0) << err;
+  // The truth line (issue 20): no effect named that the machine profile does not have, and every true
+  // effect named, inside a reported alias group or already in the baseline the diagnosis started from.
+  ASSERT_TRUE(r.contains("truth")) << text;
+  EXPECT_EQ(r["truth"]["named_not_in_profile"].get<int>(), 0) << err;
+  EXPECT_EQ(r["truth"]["true_missed"].get<int>(), 0) << err;
   const int parts = r["count"].get<int>();
   EXPECT_GE(parts, 8);
   EXPECT_GE(r["within_tolerance_after_at_most_one_compensation"].get<int>() * 10, parts * 9) << err;
