@@ -26,7 +26,7 @@ TEST_P(SingleEffect, IsNamedFirstWithItsParameterAndAHeldOutGain) {
   const std::string effect = GetParam();
   const sim::Effect* e = sim::FindEffect(effect);
   ASSERT_NE(e, nullptr);
-  int named_first = 0, parameters = 0, in_interval = 0, gain_ok = 0;
+  int named_first = 0, grouped = 0, parameters = 0, in_interval = 0, gain_ok = 0;
   const std::vector<std::string> all = InjectableEffects();
   std::uint64_t seed = 1000 + 100 * static_cast<std::uint64_t>(std::find(all.begin(), all.end(), effect) - all.begin());
   for (int k = 0; k < kPerEffect; ++k) {
@@ -34,14 +34,19 @@ TEST_P(SingleEffect, IsNamedFirstWithItsParameterAndAHeldOutGain) {
     const auto d = DiagnoseScenario(s);
     ASSERT_TRUE(d.ok()) << d.status().message();
     const sim::EffectInstance* truth = s.truth.Find(effect);
-    parameters += e->parameter_count();
     if (!d->causes.empty() && d->causes.front().effect == effect) {
       ++named_first;
+      const sim::Cause& c = d->causes.front();
       for (int j = 0; j < e->parameter_count(); ++j) {
-        const double err = std::abs(d->causes.front().parameters[j] - truth->values[j]);
-        if (err <= 1.96 * d->causes.front().std_errors[j]) ++in_interval;
+        if (c.aliased[static_cast<std::size_t>(j)]) continue;  // no interval: the alias group carries it
+        ++parameters;
+        if (truth->values[j] >= c.lower[j] && truth->values[j] <= c.upper[j]) ++in_interval;
       }
     } else {
+      parameters += e->parameter_count();
+      // Not named, but honestly reported: inside an alias group ("one or more of: ...") and nothing
+      // else named in its place.
+      if (d->causes.empty() && d->InAliasGroup(effect)) ++grouped;
       std::printf("  miss: seed %llu %s n %d snr %.1f -> %s", static_cast<unsigned long long>(seed), s.surface.c_str(),
                   s.points, s.snr, d->causes.empty() ? "(none)" : d->causes.front().effect.c_str());
       for (const auto& g : d->alias_groups) std::printf("; %s", g.Message().c_str());
@@ -49,10 +54,15 @@ TEST_P(SingleEffect, IsNamedFirstWithItsParameterAndAHeldOutGain) {
     }
     if (d->heldout_rms_before_um - d->heldout_rms_after_um >= 0.5 * s.effect_rms_um) ++gain_ok;
   }
-  std::printf("%-16s scenarios %d  named first %.0f%%  parameters in 95%% interval %.0f%%  held-out gain >= 50%%: %.0f%%\n",
-              effect.c_str(), kPerEffect, 100.0 * named_first / kPerEffect, 100.0 * in_interval / parameters,
-              100.0 * gain_ok / kPerEffect);
-  EXPECT_GE(named_first, 0.95 * kPerEffect);
+  std::printf("%-16s scenarios %d  named first %.0f%%  only in an alias group %.0f%%  parameters in 95%% interval "
+              "%.0f%%  held-out gain >= 50%%: %.0f%%\n",
+              effect.c_str(), kPerEffect, 100.0 * named_first / kPerEffect, 100.0 * grouped / kPerEffect,
+              100.0 * in_interval / std::max(1, parameters), 100.0 * gain_ok / kPerEffect);
+  // Issue 20: an effect whose look-alike the design cannot exclude (wear and thermal drift at SNR 3–5,
+  // squareness and a rotation on a saddle) is reported as an alias group, not named. Named or so
+  // reported in ≥ 95 %; named first in ≥ 85 % (before issue 20 the bound was named first in ≥ 95 %).
+  EXPECT_GE(named_first + grouped, 0.95 * kPerEffect);
+  EXPECT_GE(named_first, 0.85 * kPerEffect);
   // 20 draws cannot pin a 95 % coverage per effect (P(≤ 17 of 20) is 7.5 % at exactly 95 %); this is
   // the per-effect sanity bound, the ≥ 90 % requirement is asserted pooled in ParametersLie... below.
   EXPECT_GE(in_interval, 0.75 * parameters);
@@ -62,9 +72,10 @@ TEST_P(SingleEffect, IsNamedFirstWithItsParameterAndAHeldOutGain) {
 INSTANTIATE_TEST_SUITE_P(Catalogue, SingleEffect, ::testing::ValuesIn(InjectableEffects()),
                          [](const ::testing::TestParamInfo<std::string>& param_info) { return param_info.param; });
 
-// The reported 95 % intervals, pooled over every effect (10 scenarios each, other seeds than above).
+// The reported 95 % intervals, pooled over every effect (10 scenarios each, other seeds than above). A
+// parameter inside an alias group has no interval (the group carries it, issue 20): counted apart.
 TEST(DiscoveryTest, ParametersLieInTheirReported95PercentIntervals) {
-  int parameters = 0, inside = 0, not_named = 0;
+  int parameters = 0, inside = 0, not_named = 0, aliased = 0;
   std::uint64_t seed = 50000;
   for (const std::string& effect : InjectableEffects()) {
     int p_e = 0, in_e = 0;
@@ -73,21 +84,28 @@ TEST(DiscoveryTest, ParametersLieInTheirReported95PercentIntervals) {
       const auto d = DiagnoseScenario(s);
       ASSERT_TRUE(d.ok()) << d.status().message();
       const sim::EffectInstance* truth = s.truth.Find(effect);
-      p_e += static_cast<int>(truth->values.size());
       if (d->causes.empty() || d->causes.front().effect != effect) {
+        p_e += static_cast<int>(truth->values.size());
         ++not_named;
         continue;
       }
+      const sim::Cause& c = d->causes.front();
       for (std::size_t j = 0; j < truth->values.size(); ++j) {
-        if (std::abs(d->causes.front().parameters[j] - truth->values[j]) <= 1.96 * d->causes.front().std_errors[j]) ++in_e;
+        if (c.aliased[j]) {
+          ++aliased;
+          continue;
+        }
+        ++p_e;
+        if (truth->values[j] >= c.lower[j] && truth->values[j] <= c.upper[j]) ++in_e;
       }
     }
-    std::printf("%-16s parameters %3d inside %5.1f%%\n", effect.c_str(), p_e, 100.0 * in_e / p_e);
+    std::printf("%-16s parameters %3d inside %5.1f%%\n", effect.c_str(), p_e, 100.0 * in_e / std::max(1, p_e));
     parameters += p_e;
     inside += in_e;
   }
-  std::printf("pooled: %d of %d parameters inside their 95%% interval (%.1f%%); %d scenarios not named first\n", inside,
-              parameters, 100.0 * inside / parameters, not_named);
+  std::printf("pooled: %d of %d parameters inside their 95%% interval (%.1f%%); %d scenarios not named first; %d "
+              "parameters of named effects inside an alias group (no interval)\n",
+              inside, parameters, 100.0 * inside / parameters, not_named, aliased);
   EXPECT_GE(inside, 0.90 * parameters);
 }
 
