@@ -40,8 +40,9 @@ nlohmann::json LearnedModelEntry(const sim::Model& model, const std::string& mac
   }
   nlohmann::json groups = nlohmann::json::array();
   for (const auto& g : model.alias_groups) groups.push_back({{"id", g.id}, {"members", g.members}});
-  return {{"machine", machine},  {"tool", tool},        {"material", material},       {"effects", rows},
-          {"alias_groups", groups}, {"model", model.ToJson()}, {"provenance", provenance}};
+  return {{"machine", machine},      {"tool", tool},           {"material", material},
+          {"effects", rows},         {"alias_groups", groups}, {"model", model.ToJson()},
+          {"provenance", provenance}};
 }
 
 retrieval::PartDescription DescriptionOf(const PartSpec& part, const nc::ToolpathOptions& plan) {
@@ -95,7 +96,9 @@ Result<kb::CaseRecord> MakeRetainedCase(const RetainInput& in) {
   const auto& p = in.plan;
   record.manufacturing = {
       {"machine", part.machine_name},
-      {"tools", nlohmann::json::array({{{"type", "ball-end"}, {"number", p.tool.number}, {"radius_mm", p.tool.radius_mm},
+      {"tools", nlohmann::json::array({{{"type", "ball-end"},
+                                        {"number", p.tool.number},
+                                        {"radius_mm", p.tool.radius_mm},
                                         {"flutes", part.flutes}}})},
       {"strategy",
        {{"pattern", p.zigzag ? "raster zig-zag" : "raster one-way"},

@@ -35,7 +35,7 @@ struct RetainInput {
   const PartSpec* part = nullptr;
   const retrieval::PartFeatures* features = nullptr;
   nc::ToolpathOptions plan;
-  nlohmann::json outcome;           // route, similarity, loops, form errors, causes
+  nlohmann::json outcome;  // route, similarity, loops, form errors, causes
   nlohmann::json compensation_loops = nlohmann::json::array();
   std::optional<sim::Model> learned;  // the extended model of the diagnosis (or the baseline kept)
   nlohmann::json learned_provenance = nlohmann::json::object();

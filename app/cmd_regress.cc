@@ -26,8 +26,10 @@ void PrintTable(const RegressResult& r) {
   for (const auto& row : r.table) {
     const nlohmann::json f = row.value("figures", nlohmann::json::object());
     std::string errors, causes;
-    for (const auto& e : f.value("form_error_um", nlohmann::json::array())) errors += (errors.empty() ? "" : " -> ") + Number(e, "{:.1f}");
-    for (const auto& c : f.value("causes", nlohmann::json::array())) causes += (causes.empty() ? "" : ",") + c.get<std::string>();
+    for (const auto& e : f.value("form_error_um", nlohmann::json::array()))
+      errors += (errors.empty() ? "" : " -> ") + Number(e, "{:.1f}");
+    for (const auto& c : f.value("causes", nlohmann::json::array()))
+      causes += (causes.empty() ? "" : ",") + c.get<std::string>();
     std::cerr << fmt::format("{:<16} {:<11} {:>6} {:<9} {:<40} {:<24} {:>5}\n", row.value("part", "?"),
                              row.value("status", "?"), Number(f.value("similarity", nlohmann::json())),
                              f.value("route", "-"), errors, causes,
@@ -41,10 +43,11 @@ void PrintTable(const RegressResult& r) {
         for (const auto& x : list) out += (out.empty() ? "" : ",") + (x.is_string() ? x.get<std::string>() : x.dump());
         return out.empty() ? std::string("-") : out;
       };
-      std::cerr << fmt::format("    truth: machine has {}; named not in it: {}; true effects not found: {}; named "
-                               "parameters outside their 95% interval: {}/{}\n",
-                               names(t["true_effects"]), names(t["named_not_in_profile"]), names(t["true_missed"]),
-                               t["parameters_outside"].size(), t["parameters"].get<int>());
+      std::cerr << fmt::format(
+          "    truth: machine has {}; named not in it: {}; true effects not found: {}; named "
+          "parameters outside their 95% interval: {}/{}\n",
+          names(t["true_effects"]), names(t["named_not_in_profile"]), names(t["true_missed"]),
+          t["parameters_outside"].size(), t["parameters"].get<int>());
     }
     for (const auto& d : row.value("differences", nlohmann::json::array())) {
       std::cerr << fmt::format("    {}: golden {} now {} (allowed {})\n", d["figure"].get<std::string>(),
@@ -57,10 +60,11 @@ void PrintTable(const RegressResult& r) {
   }
   std::cerr << fmt::format("within tolerance after at most one compensation loop: {}/{}; regressions: {}\n",
                            r.within_one_loop, r.parts, r.regressions);
-  std::cerr << fmt::format("truth (against the machine profiles, not a golden): effects named that the machine lacks: "
-                           "{}; true effects neither named, in an alias group nor in the baseline: {}/{}; named "
-                           "parameters outside their 95% interval: {}/{}\n",
-                           r.named_not_in_profile, r.true_missed, r.true_effects, r.parameters_outside, r.parameters);
+  std::cerr << fmt::format(
+      "truth (against the machine profiles, not a golden): effects named that the machine lacks: "
+      "{}; true effects neither named, in an alias group nor in the baseline: {}/{}; named "
+      "parameters outside their 95% interval: {}/{}\n",
+      r.named_not_in_profile, r.true_missed, r.true_effects, r.parameters_outside, r.parameters);
 }
 
 }  // namespace
@@ -79,7 +83,8 @@ void AddRegressCommand(CLI::App& root, CommandAction* action) {
       "form error per cycle, loops to tolerance) compared with the goldens. Exit code 1 on a regression.");
   cmd->add_option("--parts", args->parts, "folder of reference parts (default data/regress/parts)");
   cmd->add_option("--goldens", args->goldens, "folder of goldens (default data/regress/goldens)");
-  cmd->add_option("--out,-o", args->out, "folder for the run folders and the library (replaced)")->capture_default_str();
+  cmd->add_option("--out,-o", args->out, "folder for the run folders and the library (replaced)")
+      ->capture_default_str();
   cmd->add_option("--only", args->only, "only these parts (names)")->delimiter(',');
   cmd->add_flag("--update", args->update, "rewrite the goldens with this run's figures and print what changed");
   cmd->callback([args, action] {
@@ -98,9 +103,10 @@ void AddRegressCommand(CLI::App& root, CommandAction* action) {
         return Status::Failed(std::to_string(result.regressions) + " part(s) regressed (table above)");
       }
       if (result.parts > 0 && result.within_one_loop * 10 < result.parts * 9) {
-        return Status::Failed(fmt::format("only {}/{} parts within tolerance after at most one compensation loop "
-                                          "(required: 90 %)",
-                                          result.within_one_loop, result.parts));
+        return Status::Failed(
+            fmt::format("only {}/{} parts within tolerance after at most one compensation loop "
+                        "(required: 90 %)",
+                        result.within_one_loop, result.parts));
       }
       return Status::Ok();
     };

@@ -1,7 +1,7 @@
 // `formloop simulate` and `formloop diagnose`: thin CLI over app/model_jobs.h.
 
-#include <iostream>
 #include <algorithm>
+#include <iostream>
 #include <memory>
 #include <string>
 #include <vector>

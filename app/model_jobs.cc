@@ -57,12 +57,15 @@ Status StoreLearnedModel(const DiagnoseArgs& args, const RunFolder& run, const s
   FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args.library));
   FL_ASSIGN_OR_RETURN(kb::CaseRecord record, library->GetCase(args.case_uid));
   const std::string tool = planning::ToolKey(run.part.toolpath.tool.radius_mm);
-  const nlohmann::json entry = LearnedModelEntry(
-      diagnosis.extended, args.machine, tool, run.part.material,
-      {{"measured", args.measured}, {"run", args.run}, {"more_measured", args.more_measured},
-       {"more_runs", args.more_runs}, {"baseline", args.baseline}, {"points", diagnosis.n},
-       {"heldout_rms_before_um", diagnosis.heldout_rms_before_um},
-       {"heldout_rms_after_um", diagnosis.heldout_rms_after_um}});
+  const nlohmann::json entry = LearnedModelEntry(diagnosis.extended, args.machine, tool, run.part.material,
+                                                 {{"measured", args.measured},
+                                                  {"run", args.run},
+                                                  {"more_measured", args.more_measured},
+                                                  {"more_runs", args.more_runs},
+                                                  {"baseline", args.baseline},
+                                                  {"points", diagnosis.n},
+                                                  {"heldout_rms_before_um", diagnosis.heldout_rms_before_um},
+                                                  {"heldout_rms_after_um", diagnosis.heldout_rms_after_um}});
   nlohmann::json& models = record.simulation["effect_models"];
   if (!models.is_array()) models = nlohmann::json::array();
   bool replaced = false;
@@ -132,7 +135,8 @@ Status RunSimulate(const SimulateArgs& args) {
 }
 
 Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
-  if (args.out.empty()) return Status::BadInput(Where{.field = "--out"}, "is required", "give a folder for the diagnosis");
+  if (args.out.empty())
+    return Status::BadInput(Where{.field = "--out"}, "is required", "give a folder for the diagnosis");
   if (args.measured.empty() == args.features.empty()) {
     return Status::BadInput(Where{.field = "--measured/--features"}, "give exactly one of them");
   }
@@ -148,9 +152,9 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
   // DIR.partial and renamed into place at the end, replacing only a folder formloop wrote.
   const fs::path dir(args.out);
   std::vector<NamedPath> inputs = {
-      {"--measured", args.measured}, {"--features", args.features},   {"--run", args.run},
+      {"--measured", args.measured}, {"--features", args.features},           {"--run", args.run},
       {"--plan", args.plan},         {"--probe-profile", args.probe_profile}, {"--baseline", args.baseline},
-      {"--validate", args.validate}, {"--validate-run", args.validate_run}, {"--validate-plan", args.validate_plan},
+      {"--validate", args.validate}, {"--validate-run", args.validate_run},   {"--validate-plan", args.validate_plan},
       {"--library", args.library}};
   for (const auto& m : args.more_measured) inputs.push_back({"--measured", m});
   for (const auto& r : args.more_runs) inputs.push_back({"--run", r});
@@ -218,7 +222,8 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
       FL_ASSIGN_OR_RETURN(data.emplace_back(), sim::ProbeResiduals(inputs.back(), baseline));
       std::string label = fs::path(runs[p]).lexically_normal().filename().string();
       if (label.empty()) label = fs::path(runs[p]).lexically_normal().parent_path().filename().string();
-      if (label.empty() || std::find(labels.begin(), labels.end(), label) != labels.end()) label = std::to_string(p + 1);
+      if (label.empty() || std::find(labels.begin(), labels.end(), label) != labels.end())
+        label = std::to_string(p + 1);
       labels.push_back(label);
     }
     if (data.size() == 1) {
@@ -267,38 +272,44 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
       const sim::ProbeDataInput in2 = ProbeInputOf(run2, plan2, log2);
       FL_ASSIGN_OR_RETURN(const double before, sim::PredictionRms(in2, baseline));
       FL_ASSIGN_OR_RETURN(const double after, sim::PredictionRms(in2, diagnosis.extended));
-      second_part = {{"log", args.validate}, {"run", args.validate_run}, {"rms_before_um", before}, {"rms_after_um", after}};
+      second_part = {
+          {"log", args.validate}, {"run", args.validate_run}, {"rms_before_um", before}, {"rms_after_um", after}};
     }
   }
   nlohmann::json out = diagnosis.ToJson();
   out["gain"]["second_part"] = second_part;
   out["proposals"] = proposals;
   FL_RETURN_IF_ERROR(MakeDirectories(staging / "inputs"));
-  for (const auto& [from, name] : std::vector<std::pair<std::string, std::string>>{
-           {args.measured, "measured.csv"}, {args.features, "features.csv"}, {args.baseline, "baseline.json"},
-           {args.plan, "plan" + fs::path(args.plan).extension().string()}, {args.validate, "validate.csv"},
-           {args.probe_profile, "probe_profile.json"}}) {
+  for (const auto& [from, name] :
+       std::vector<std::pair<std::string, std::string>>{{args.measured, "measured.csv"},
+                                                        {args.features, "features.csv"},
+                                                        {args.baseline, "baseline.json"},
+                                                        {args.plan, "plan" + fs::path(args.plan).extension().string()},
+                                                        {args.validate, "validate.csv"},
+                                                        {args.probe_profile, "probe_profile.json"}}) {
     if (!from.empty()) FL_RETURN_IF_ERROR(CopyInto(from, staging / "inputs" / name));
   }
   for (std::size_t p = 0; p < args.more_measured.size(); ++p) {
-    FL_RETURN_IF_ERROR(CopyInto(args.more_measured[p], staging / "inputs" / ("measured_" + std::to_string(p + 2) + ".csv")));
+    FL_RETURN_IF_ERROR(
+        CopyInto(args.more_measured[p], staging / "inputs" / ("measured_" + std::to_string(p + 2) + ".csv")));
   }
-  nlohmann::json args_json = {{"measured", args.measured}, {"features", args.features}, {"run", args.run},
-                              {"more_measured", args.more_measured}, {"more_runs", args.more_runs},
-                              {"plan", args.plan}, {"probe_profile", args.probe_profile}, {"baseline", args.baseline},
-                              {"validate", args.validate},
-                              {"validate_run", args.validate_run}};
+  nlohmann::json args_json = {
+      {"measured", args.measured},           {"features", args.features},   {"run", args.run},
+      {"more_measured", args.more_measured}, {"more_runs", args.more_runs}, {"plan", args.plan},
+      {"probe_profile", args.probe_profile}, {"baseline", args.baseline},   {"validate", args.validate},
+      {"validate_run", args.validate_run}};
   FL_RETURN_IF_ERROR(WriteJsonFile(staging / "inputs" / "arguments.json", args_json));
   FL_RETURN_IF_ERROR(WriteJsonFile(staging / "diagnosis.json", out));
   FL_RETURN_IF_ERROR(sim::WriteModel(staging / "model.json", diagnosis.extended));
-  if (!residuals.points.empty()) FL_RETURN_IF_ERROR(WritePoints(staging / "residuals.csv", residuals, {.precision = 6}));
+  if (!residuals.points.empty())
+    FL_RETURN_IF_ERROR(WritePoints(staging / "residuals.csv", residuals, {.precision = 6}));
   FL_RETURN_IF_ERROR(folder.Commit());
   log::Info("{}", diagnosis.Summary());
   if (stored_run.has_value()) {
     const Status stored = StoreLearnedModel(args, *stored_run, diagnosis);
     if (!stored.ok()) {
-      return Status(stored.code(), "the diagnosis is in '" + dir.string() + "', but storing the learned model failed: " +
-                                       stored.message());
+      return Status(stored.code(), "the diagnosis is in '" + dir.string() +
+                                       "', but storing the learned model failed: " + stored.message());
     }
     out["stored_in_library"] = {{"library", args.library}, {"case", args.case_uid}};
   }

@@ -23,9 +23,9 @@ struct SimulateArgs {
 Status RunSimulate(const SimulateArgs& args);
 
 struct DiagnoseArgs {
-  std::string measured;       // LOG.csv (probe data) ...
-  std::string features;       // ... or F.csv (feature positions)
-  std::string run;            // the run that made the part (probe data)
+  std::string measured;  // LOG.csv (probe data) ...
+  std::string features;  // ... or F.csv (feature positions)
+  std::string run;       // the run that made the part (probe data)
   // More parts of the same machine, tool and material (--measured/--run given again, in pairs): the
   // shared effects are fitted over all parts, each part's set-up on its own (sim::DiagnosePooled).
   std::vector<std::string> more_measured, more_runs;

@@ -66,7 +66,7 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
   summary->precompensation_scale = cut.precompensation_scale;
 
   // Cycles: machine (or take the measured log), analyse, diagnose (cycle 0), compensate.
-  const int max_loops = in.machine.virtual_machine    ? part.max_loops
+  const int max_loops = in.machine.virtual_machine     ? part.max_loops
                         : !in.machine.linuxcnc.empty() ? 1  // its part does not change (stages::Machine)
                                                        : static_cast<int>(in.machine.measured.size());
   std::optional<sim::Diagnosis> diagnosis;
@@ -95,10 +95,9 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
         FL_ASSIGN_OR_RETURN(library, kb::Library::Open(options.kb));
       }
       FL_ASSIGN_OR_RETURN(const sim::PlausibleRanges plausible, PlausibleRangesFor(library.get(), data_dir));
-      FL_ASSIGN_OR_RETURN(sim::Diagnosis d,
-                          stages::DiagnoseFirstCycle(part, q, machined, analysed.flagged_ids, plan.tool.radius_mm,
-                                                     programs.probing_plan, choice, summary->case_uid, plausible,
-                                                     folder));
+      FL_ASSIGN_OR_RETURN(sim::Diagnosis d, stages::DiagnoseFirstCycle(part, q, machined, analysed.flagged_ids,
+                                                                       plan.tool.radius_mm, programs.probing_plan,
+                                                                       choice, summary->case_uid, plausible, folder));
       for (const auto& c : d.causes) summary->causes.push_back(c.effect);
       diagnosis = std::move(d);
     }
@@ -217,20 +216,22 @@ Result<RunSummary> RunPart(const PartSpec& part, const RunOptions& options) {
       const auto start = std::chrono::steady_clock::now();
       status = stages::CommitRetained(options.kb, *retained);
       if (options.on_stage) {
-        options.on_stage("retain commit", std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+        options.on_stage("retain commit",
+                         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
       }
     }
   } catch (const std::bad_alloc&) {
-    status = Status::Failed("out of memory during the run; the part asks for more work than this computer can hold. "
-                            "Fix: check the part's sizes (toolpath.scallop_um, toolpath.chord_tolerance_um, "
-                            "probing.grid)");
+    status = Status::Failed(
+        "out of memory during the run; the part asks for more work than this computer can hold. "
+        "Fix: check the part's sizes (toolpath.scallop_um, toolpath.chord_tolerance_um, "
+        "probing.grid)");
   } catch (const std::exception& e) {
     status = Status::Internal(std::string("unexpected exception: ") + e.what());
   }
   if (status.ok()) status = folder.MarkComplete();
   if (status.ok()) {
-    log::Info("run complete: {} after {} cycle(s)", summary.within_tolerance ? "within tolerance" : "NOT within tolerance",
-              summary.loops.size());
+    log::Info("run complete: {} after {} cycle(s)",
+              summary.within_tolerance ? "within tolerance" : "NOT within tolerance", summary.loops.size());
   } else {
     log::Error("run failed: {}", status.ToString());
   }

@@ -1,9 +1,9 @@
 #include "app/pipeline_stages.h"
 
-#include <set>
 #include <cmath>
 #include <cstdlib>
 #include <memory>
+#include <set>
 
 #include "app/case_knowledge.h"
 #include "app/machine_profile.h"
@@ -19,8 +19,8 @@
 #include "nc-gen/toolpath_io.h"
 #include "planning/precompensation.h"
 #include "reconstruction/cad_io.h"
-#include "reconstruction/trim.h"
 #include "reconstruction/surface_family.h"
+#include "reconstruction/trim.h"
 #include "retrieval/retrieve.h"
 #include "simulation/virtual_machine.h"
 
@@ -59,9 +59,9 @@ Result<Machine> ResolveMachine(const PartSpec& part, const RunOptions& options, 
   }
   if (spec == "virtual") {
     m.model = *part.effects;
-    FL_RETURN_IF_ERROR(folder.WriteJson(
-        fs::path("inputs") / "machine_profile.json",
-        MachineProfile{m.name, "the part file's machine.effects", m.model, m.probe}.ToJson()));
+    FL_RETURN_IF_ERROR(
+        folder.WriteJson(fs::path("inputs") / "machine_profile.json",
+                         MachineProfile{m.name, "the part file's machine.effects", m.model, m.probe}.ToJson()));
     return m;
   }
   if (spec.rfind("linuxcnc:", 0) == 0) {
@@ -75,23 +75,24 @@ Result<Machine> ResolveMachine(const PartSpec& part, const RunOptions& options, 
     char* end = nullptr;
     const double radius_mm = std::strtod(radius.c_str(), &end);
     if (radius.empty() || *end != '\0' || std::abs(radius_mm - part.probe.ball_radius_mm) > 1e-9) {
-      return Status::BadInput(Where{.field = "probing.ball_radius_mm"},
-                              FormatExact(part.probe.ball_radius_mm) + " mm, but the probe surface of " +
-                                  config.ini.string() + " is built for a " + (radius.empty() ? "missing" : radius) +
-                                  " mm ball",
-                              "write the configuration with --ball-radius-mm " + FormatExact(part.probe.ball_radius_mm));
+      return Status::BadInput(
+          Where{.field = "probing.ball_radius_mm"},
+          FormatExact(part.probe.ball_radius_mm) + " mm, but the probe surface of " + config.ini.string() +
+              " is built for a " + (radius.empty() ? "missing" : radius) + " mm ball",
+          "write the configuration with --ball-radius-mm " + FormatExact(part.probe.ball_radius_mm));
     }
     if (config.Get("FORMLOOP", "PROBE_SURFACE") != part.surface_reference) {
-      log::Warn("[machine] LinuxCNC's probe surface is '{}', the part's surface '{}': the deviations will show the "
-                "difference",
-                config.Get("FORMLOOP", "PROBE_SURFACE"), part.SurfaceName());
+      log::Warn(
+          "[machine] LinuxCNC's probe surface is '{}', the part's surface '{}': the deviations will show the "
+          "difference",
+          config.Get("FORMLOOP", "PROBE_SURFACE"), part.SurfaceName());
     }
     m.virtual_machine = false;
     m.name = config.Get("EMC", "MACHINE");
     m.linuxcnc = config.ini.string();
-    FL_RETURN_IF_ERROR(folder.WriteJson(
-        fs::path("inputs") / "machine_linuxcnc.json",
-        {{"ini", m.linuxcnc}, {"machine", m.name}, {"formloop", config.sections.at("FORMLOOP")}}));
+    FL_RETURN_IF_ERROR(
+        folder.WriteJson(fs::path("inputs") / "machine_linuxcnc.json",
+                         {{"ini", m.linuxcnc}, {"machine", m.name}, {"formloop", config.sections.at("FORMLOOP")}}));
     return m;
   }
   if (spec.rfind("virtual:", 0) != 0) {
@@ -119,12 +120,11 @@ Result<Inputs> ResolveInputs(const PartSpec& given, const RunOptions& options, c
   FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("inputs") / "part.json", in.part.ToJson()));
   // The CAD model or scan beside it, so the run repeats from its folder (the part names the copy and its hash).
   if (in.part.surface_file) FL_RETURN_IF_ERROR(CopySurfaceFile(*in.part.surface_file, folder.Path("inputs")));
-  FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("inputs") / "options.json",
-                                      {{"kb", options.kb},
-                                       {"machine", options.machine},
-                                       {"measured", options.measured},
-                                       {"retain", options.retain},
-                                       {"learn", options.learn}}));
+  FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("inputs") / "options.json", {{"kb", options.kb},
+                                                                            {"machine", options.machine},
+                                                                            {"measured", options.measured},
+                                                                            {"retain", options.retain},
+                                                                            {"learn", options.learn}}));
   Rng seeds(in.part.seed);
   in.fit_seed = seeds.Fork();
   in.machine_seed = seeds.Fork();
@@ -281,9 +281,10 @@ Result<Programs> WritePrograms(const PartSpec& part, const recon::BSplineSurface
     FL_RETURN_IF_ERROR(folder.WriteText(fs::path("toolpath") / (name + p.extension), probe_programs[b]));
   }
   if (probe_programs.size() > 1) {
-    log::Info("[nc] the probing plan is split into {} programs: the {} controller stores the results of at most {} "
-              "points at once", probe_programs.size(), part.dialect,
-              nc::FindPost(part.dialect)->ProbeResultCapacity(probe_options));
+    log::Info(
+        "[nc] the probing plan is split into {} programs: the {} controller stores the results of at most {} "
+        "points at once",
+        probe_programs.size(), part.dialect, nc::FindPost(part.dialect)->ProbeResultCapacity(probe_options));
   }
   // The nominal program as written: what the first cycle cuts (unless pre-compensated).
   FL_ASSIGN_OR_RETURN(p.program.moves,
@@ -304,12 +305,9 @@ Result<FirstCut> Precompensate(const PartSpec& part, const recon::BSplineSurface
   cut.program = programs.program;
   const nc::ToolpathOptions& plan = choice.plan;
   json plan_json = choice.report;
-  plan_json["toolpath"] = {{"tool_number", plan.tool.number},
-                           {"tool_radius_mm", plan.tool.radius_mm},
-                           {"scallop_um", plan.scallop_um},
-                           {"raster_angle_deg", plan.raster_angle_deg},
-                           {"feed_mm_per_min", plan.feed_mm_per_min},
-                           {"spindle_rpm", plan.spindle_rpm}};
+  plan_json["toolpath"] = {{"tool_number", plan.tool.number},         {"tool_radius_mm", plan.tool.radius_mm},
+                           {"scallop_um", plan.scallop_um},           {"raster_angle_deg", plan.raster_angle_deg},
+                           {"feed_mm_per_min", plan.feed_mm_per_min}, {"spindle_rpm", plan.spindle_rpm}};
   if (choice.learned && choice.precompensation_scale > 0) {
     FL_ASSIGN_OR_RETURN(planning::PredictedField predicted,
                         planning::PredictLearnedField(q, programs.nominal, *choice.learned, seed));
@@ -319,20 +317,20 @@ Result<FirstCut> Precompensate(const PartSpec& part, const recon::BSplineSurface
     nc::PostOptions post = programs.post;
     post.title = "formloop " + std::string(kVersion) + " part " + part.name + " loop 0, pre-compensated";
     const fs::path path = fs::path("toolpath") / ("program_precompensated" + programs.extension);
-    FL_ASSIGN_OR_RETURN(nc::Compensation pc,
-                        nc::WriteCompensatedProgram(programs.nominal, programs.program.text, cut.field,
-                                                    "learned model of case " + case_uid, part.compensation, post,
-                                                    folder.Path(path),
-                                                    folder.Path(fs::path("toolpath") / "precompensation_side.csv"),
-                                                    part.dialect));
+    FL_ASSIGN_OR_RETURN(
+        nc::Compensation pc,
+        nc::WriteCompensatedProgram(programs.nominal, programs.program.text, cut.field,
+                                    "learned model of case " + case_uid, part.compensation, post, folder.Path(path),
+                                    folder.Path(fs::path("toolpath") / "precompensation_side.csv"), part.dialect));
     cut.program = {std::move(pc.program), path, std::move(pc.program_moves)};
     cut.precompensation_scale = scale;
     pre["scale"] = scale;
     pre["max_offset_um"] = pc.max_offset_um;
     pre["program"] = path.string();
     plan_json["precompensation"] = pre;
-    log::Info("[precompensation] learned model of case {}: predicted peak {:.1f} um, scale {:.2f}, max offset {:.1f} um",
-              case_uid, pre["predicted_peak_um"].get<double>(), scale, pc.max_offset_um);
+    log::Info(
+        "[precompensation] learned model of case {}: predicted peak {:.1f} um, scale {:.2f}, max offset {:.1f} um",
+        case_uid, pre["predicted_peak_um"].get<double>(), scale, pc.max_offset_um);
   } else {
     plan_json["precompensation"] = nullptr;
   }
@@ -369,22 +367,21 @@ Result<Machined> MachineCycle(const Inputs& in, const Program& program, double t
         cnc::ProbePlanOnLinuxCnc(config, plan, cnc::LinuxCncProbingOptions{}, folder.Path(loop_dir / "linuxcnc")));
     FL_RETURN_IF_ERROR(metrology::WriteProbeLog(folder.Path(loop_dir / "probe_log.csv"), probed.log));
     out.cut = false;
-    FL_RETURN_IF_ERROR(folder.WriteJson(
-        loop_dir / "machine.json",
-        {{"machine", machine.name},
-         {"linuxcnc", machine.linuxcnc},
-         {"program", (loop_dir / "linuxcnc" / "probe.ngc").string()},
-         {"cut", "not run: the simulated part is the configuration's probe surface, " +
-                     config.Get("FORMLOOP", "PROBE_SURFACE")},
-         {"points", probed.log.records.size()},
-         {"controller_seconds", probed.run.total_s}}));
+    FL_RETURN_IF_ERROR(folder.WriteJson(loop_dir / "machine.json",
+                                        {{"machine", machine.name},
+                                         {"linuxcnc", machine.linuxcnc},
+                                         {"program", (loop_dir / "linuxcnc" / "probe.ngc").string()},
+                                         {"cut", "not run: the simulated part is the configuration's probe surface, " +
+                                                     config.Get("FORMLOOP", "PROBE_SURFACE")},
+                                         {"points", probed.log.records.size()},
+                                         {"controller_seconds", probed.run.total_s}}));
   } else {
     const std::string& measured = machine.measured[static_cast<std::size_t>(loop)];
     FL_ASSIGN_OR_RETURN(std::string text, ReadFile(measured));
     FL_RETURN_IF_ERROR(folder.WriteText(loop_dir / "probe_log.csv", text));
-    FL_RETURN_IF_ERROR(folder.WriteJson(
-        loop_dir / "machine.json",
-        {{"machine", machine.name}, {"measured", measured}, {"program", program.path.string()}}));
+    FL_RETURN_IF_ERROR(
+        folder.WriteJson(loop_dir / "machine.json",
+                         {{"machine", machine.name}, {"measured", measured}, {"program", program.path.string()}}));
   }
   // The analysis reads the log back from disk, as it would a real machine's.
   FL_ASSIGN_OR_RETURN(out.log, metrology::ReadProbeLog(folder.Path(loop_dir / "probe_log.csv")));
@@ -433,18 +430,20 @@ Result<Analysed> AnalyseCycle(const PartSpec& part, const recon::BSplineSurface&
   if (ls.within_tolerance) {
     ls.decision = "within tolerance: done";
   } else if (!evaluation.compensate) {
-    ls.decision = "out of tolerance but the error is random (constant model, offset not significant): "
-                  "compensation cannot help";
+    ls.decision =
+        "out of tolerance but the error is random (constant model, offset not significant): "
+        "compensation cannot help";
   } else if (!compensate) {
     ls.decision = "out of tolerance after the last allowed loop (" + evaluation.decision + ")";
   } else {
     ls.decision = evaluation.decision;
   }
-  log::Info("      deviation rms {:.2f} um; raw Moran z {:.2f}; model {} (residual z {:.2f}); d_s peak {:.2f} um;"
-            " sigma(d_u) {:.2f} um; form error {:.2f} um vs tolerance {:.1f} um",
-            decomposition.deviation_rms_um, decomposition.raw.z_normality, ls.chosen_model, ls.residual_moran_z,
-            decomposition.systematic_peak_um, decomposition.random_sigma_um, decomposition.form_error_um,
-            part.tolerance_mm * 1e3);
+  log::Info(
+      "      deviation rms {:.2f} um; raw Moran z {:.2f}; model {} (residual z {:.2f}); d_s peak {:.2f} um;"
+      " sigma(d_u) {:.2f} um; form error {:.2f} um vs tolerance {:.1f} um",
+      decomposition.deviation_rms_um, decomposition.raw.z_normality, ls.chosen_model, ls.residual_moran_z,
+      decomposition.systematic_peak_um, decomposition.random_sigma_um, decomposition.form_error_um,
+      part.tolerance_mm * 1e3);
   log::Info("      decision: {}", ls.decision);
   json analysis = decomposition.ToJson();
   analysis["tolerance_um"] = part.tolerance_mm * 1e3;
@@ -490,7 +489,8 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
   }
   const fs::path dir = RunFolderWriter::LoopDir(0) / "diagnosis";
   json dj = d.ToJson();
-  if (!machined.cut) dj["data"] = "probe data of a part the program did not cut: the tool-path effects are not screened";
+  if (!machined.cut)
+    dj["data"] = "probe data of a part the program did not cut: the tool-path effects are not screened";
   dj["baseline"] = choice.learned ? "learned model of case " + case_uid : "no effects (no learned model)";
   dj["baseline_model"] = baseline.ToJson();
   FL_RETURN_IF_ERROR(folder.WriteJson(dir / "diagnosis.json", dj));
@@ -502,15 +502,16 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
 Result<Program> CompensateCycle(const PartSpec& part, const Programs& programs, const CompensatedField& field, int loop,
                                 const RunFolderWriter& folder) {
   const fs::path loop_dir = RunFolderWriter::LoopDir(loop);
-  const std::string source = "sum of the pre-compensation and the systematic fields of loops 0.." + std::to_string(loop);
+  const std::string source =
+      "sum of the pre-compensation and the systematic fields of loops 0.." + std::to_string(loop);
   nc::PostOptions post = programs.post;
   post.title = "formloop " + std::string(kVersion) + " part " + part.name + " loop " + std::to_string(loop + 1) +
                ", mirror-compensated";
   const fs::path path = loop_dir / ("program_compensated" + programs.extension);
-  FL_ASSIGN_OR_RETURN(nc::Compensation compensation,
-                      nc::WriteCompensatedProgram(programs.nominal, programs.program.text, field, source,
-                                                  part.compensation, post, folder.Path(path),
-                                                  folder.Path(loop_dir / "compensation_side.csv"), part.dialect));
+  FL_ASSIGN_OR_RETURN(
+      nc::Compensation compensation,
+      nc::WriteCompensatedProgram(programs.nominal, programs.program.text, field, source, part.compensation, post,
+                                  folder.Path(path), folder.Path(loop_dir / "compensation_side.csv"), part.dialect));
   FL_RETURN_IF_ERROR(folder.WriteJson(loop_dir / "compensation.json",
                                       {{"source", compensation.source},
                                        {"cl_points", compensation.entries.size()},
@@ -524,8 +525,8 @@ Result<Program> CompensateCycle(const PartSpec& part, const Programs& programs, 
 
 Result<std::optional<kb::CaseRecord>> PrepareRetain(const PartSpec& part, const RunOptions& options,
                                                     const Retrieved& retrieved, const nc::ToolpathOptions& plan,
-                                                    const std::optional<sim::Diagnosis>& diagnosis,
-                                                    RunSummary* summary, const RunFolderWriter& folder) {
+                                                    const std::optional<sim::Diagnosis>& diagnosis, RunSummary* summary,
+                                                    const RunFolderWriter& folder) {
   if (options.kb.empty() || !options.retain) return std::optional<kb::CaseRecord>();
   RetainInput in;
   in.part = &part;
@@ -562,11 +563,12 @@ Result<std::optional<kb::CaseRecord>> PrepareRetain(const PartSpec& part, const 
     in.rerun = {{"part", part.ToJson()}, {"machine", options.machine}};
   }
   FL_ASSIGN_OR_RETURN(kb::CaseRecord record, MakeRetainedCase(in));
-  FL_RETURN_IF_ERROR(folder.WriteJson("retain.json", {{"library", options.kb},
-                                                      {"action", retrieved.own ? "update" : "add"},
-                                                      {"uid", record.uid},
-                                                      {"learned_model", in.learned ? in.learned->ToJson() : json(nullptr)},
-                                                      {"case", record.ToJson()}}));
+  FL_RETURN_IF_ERROR(
+      folder.WriteJson("retain.json", {{"library", options.kb},
+                                       {"action", retrieved.own ? "update" : "add"},
+                                       {"uid", record.uid},
+                                       {"learned_model", in.learned ? in.learned->ToJson() : json(nullptr)},
+                                       {"case", record.ToJson()}}));
   summary->retained = (retrieved.own ? "updated " : "added ") + record.uid;
   return std::optional<kb::CaseRecord>(std::move(record));
 }

@@ -133,37 +133,37 @@ struct Machined {
   bool cut = true;
 };
 Result<Machined> MachineCycle(const Inputs& in, const Program& program, double tool_radius_mm,
-                          const metrology::ProbingPlan& plan, int loop, const RunFolderWriter& folder);
+                              const metrology::ProbingPlan& plan, int loop, const RunFolderWriter& folder);
 
 // 7b. The cycle's analysis (deviations.csv|.ply, analysis.json) and its compensation decision.
 struct Analysed {
   LoopSummary summary;
-  std::vector<std::int64_t> flagged_ids;  // points beyond the search distance or past Q's edge, left out
+  std::vector<std::int64_t> flagged_ids;            // points beyond the search distance or past Q's edge, left out
   std::optional<metrology::FieldModel> systematic;  // when the cycle is to be compensated
 };
 Result<Analysed> AnalyseCycle(const PartSpec& part, const recon::BSplineSurface& q, const metrology::ProbingPlan& plan,
-                         const metrology::ProbeLog& log, int loop, bool another_loop_allowed, std::uint64_t seed,
-                         const RunFolderWriter& folder);
+                              const metrology::ProbeLog& log, int loop, bool another_loop_allowed, std::uint64_t seed,
+                              const RunFolderWriter& folder);
 
 // 7c. Loop 0: what the simulation (the case's model) gets wrong on this part, and the extended model
 // (loop-0/diagnosis/); effects are named only within `plausible` (app/case_knowledge.h PlausibleRangesFor).
 // The points the analysis flagged (`excluded_ids`) are left out of the diagnosis too.
-Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSplineSurface& q, const Machined& machined,
-                                          const std::vector<std::int64_t>& excluded_ids, double tool_radius_mm,
-                                          const metrology::ProbingPlan& plan, const planning::PlanChoice& choice,
-                                          const std::string& case_uid, const sim::PlausibleRanges& plausible,
-                                          const RunFolderWriter& folder);
+Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSplineSurface& q,
+                                          const Machined& machined, const std::vector<std::int64_t>& excluded_ids,
+                                          double tool_radius_mm, const metrology::ProbingPlan& plan,
+                                          const planning::PlanChoice& choice, const std::string& case_uid,
+                                          const sim::PlausibleRanges& plausible, const RunFolderWriter& folder);
 
 // 7d. The mirror-compensated program of the next cycle from the sum of the fields so far
 // (loop-K/program_compensated.*, compensation_side.csv, compensation.json).
 Result<Program> CompensateCycle(const PartSpec& part, const Programs& programs, const CompensatedField& field, int loop,
-                           const RunFolderWriter& folder);
+                                const RunFolderWriter& folder);
 
 // 8. The case the library will hold (retain.json); committed by RunPart after everything else is written.
 Result<std::optional<kb::CaseRecord>> PrepareRetain(const PartSpec& part, const RunOptions& options,
                                                     const Retrieved& retrieved, const nc::ToolpathOptions& plan,
-                                                    const std::optional<sim::Diagnosis>& diagnosis,
-                                                    RunSummary* summary, const RunFolderWriter& folder);
+                                                    const std::optional<sim::Diagnosis>& diagnosis, RunSummary* summary,
+                                                    const RunFolderWriter& folder);
 
 // One transaction for the case, then the GHSOM insertion (a failure there leaves it stale, not wrong).
 Status CommitRetained(const std::string& kb_path, const kb::CaseRecord& record);

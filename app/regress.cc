@@ -146,7 +146,8 @@ Result<json> TruthCheck(const fs::path& run_dir, const sim::Model& truth) {
       ++parameters;
       const double lo = interval[0].get<double>(), hi = interval[1].get<double>();
       if (t->values[k] < lo || t->values[k] > hi) {
-        outside.push_back({{"effect", effect}, {"parameter", spec[k].name}, {"truth", t->values[k]}, {"interval", {lo, hi}}});
+        outside.push_back(
+            {{"effect", effect}, {"parameter", spec[k].name}, {"truth", t->values[k]}, {"interval", {lo, hi}}});
       }
     }
   }
@@ -155,13 +156,20 @@ Result<json> TruthCheck(const fs::path& run_dir, const sim::Model& truth) {
     if (e.effect->kind() == sim::EffectKind::kNoise) continue;
     const std::string name(e.effect->name());
     true_effects.push_back(name);
-    const bool found = std::count(named_effects.begin(), named_effects.end(), name) + std::count(grouped.begin(), grouped.end(), name) +
-                           std::count(baseline.begin(), baseline.end(), name) > 0;
+    const bool found = std::count(named_effects.begin(), named_effects.end(), name) +
+                           std::count(grouped.begin(), grouped.end(), name) +
+                           std::count(baseline.begin(), baseline.end(), name) >
+                       0;
     if (!found) missed.push_back(name);
   }
-  return json{{"true_effects", true_effects}, {"baseline", baseline},   {"named", named},
-              {"alias_groups", groups},        {"named_not_in_profile", not_in_profile},
-              {"true_missed", missed},         {"parameters", parameters}, {"parameters_outside", outside}};
+  return json{{"true_effects", true_effects},
+              {"baseline", baseline},
+              {"named", named},
+              {"alias_groups", groups},
+              {"named_not_in_profile", not_in_profile},
+              {"true_missed", missed},
+              {"parameters", parameters},
+              {"parameters_outside", outside}};
 }
 
 json RegressResult::ToJson() const {
@@ -184,7 +192,8 @@ Result<RegressResult> RunRegress(const RegressOptions& options) {
   for (const auto& entry : fs::directory_iterator(options.parts, ec)) {
     if (entry.path().extension() == ".json") files.push_back(entry.path());
   }
-  if (ec) return Status::BadInput(Where{.file = options.parts.string()}, "cannot list the reference parts: " + ec.message());
+  if (ec)
+    return Status::BadInput(Where{.file = options.parts.string()}, "cannot list the reference parts: " + ec.message());
   std::sort(files.begin(), files.end());
   if (files.empty()) return Status::BadInput(Where{.file = options.parts.string()}, "no reference parts (*.json)");
 
@@ -192,7 +201,8 @@ Result<RegressResult> RunRegress(const RegressOptions& options) {
     const bool known = std::any_of(files.begin(), files.end(), [&](const fs::path& f) { return f.stem() == name; });
     if (!known) {
       return Status::BadInput(Where{.file = options.parts.string(), .field = "--only"},
-                              "no reference part '" + name + "'", "name parts as their files are named (without .json)");
+                              "no reference part '" + name + "'",
+                              "name parts as their files are named (without .json)");
     }
   }
   // A fresh starter library: the regression must not depend on what earlier runs stored. The old folder

@@ -43,17 +43,17 @@ std::vector<FigureDifference> CompareFigures(const nlohmann::json& golden, const
 Result<nlohmann::json> TruthCheck(const std::filesystem::path& run_dir, const sim::Model& truth);
 
 struct RegressOptions {
-  std::filesystem::path parts;    // folder of part files
-  std::filesystem::path goldens;  // folder of <part>.json goldens
-  std::filesystem::path out;      // run folders and the library
-  std::vector<std::string> only;  // part names (empty: all)
-  bool update = false;            // rewrite the goldens and report what changed
-  std::filesystem::path data_dir; // default retrieval::DefaultDataDir()
+  std::filesystem::path parts;     // folder of part files
+  std::filesystem::path goldens;   // folder of <part>.json goldens
+  std::filesystem::path out;       // run folders and the library
+  std::vector<std::string> only;   // part names (empty: all)
+  bool update = false;             // rewrite the goldens and report what changed
+  std::filesystem::path data_dir;  // default retrieval::DefaultDataDir()
 };
 struct RegressResult {
   nlohmann::json table = nlohmann::json::array();
-  int regressions = 0;            // parts whose figures left the golden tolerances (or failed)
-  int within_one_loop = 0;        // parts within tolerance after at most one compensation loop
+  int regressions = 0;      // parts whose figures left the golden tolerances (or failed)
+  int within_one_loop = 0;  // parts within tolerance after at most one compensation loop
   int parts = 0;
   // The truth line (TruthCheck summed over the parts): not compared with goldens.
   int named_not_in_profile = 0, true_effects = 0, true_missed = 0, parameters = 0, parameters_outside = 0;

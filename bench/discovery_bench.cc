@@ -9,8 +9,8 @@
 
 #include <chrono>
 #include <cstdio>
-#include <ctime>
 #include <cstdlib>
+#include <ctime>
 #include <map>
 #include <string>
 #include <vector>
@@ -49,8 +49,9 @@ int main(int argc, char** argv) {
     }
     std::sort(wall.begin(), wall.end());
     std::sort(cpu.begin(), cpu.end());
-    std::printf("diagnose, 3000 points, %zu candidate effects: median wall %.3f s, CPU %.3f s (min %.3f / max %.3f s wall)\n\n",
-                InjectableEffects().size(), wall[2], cpu[2], wall.front(), wall.back());
+    std::printf(
+        "diagnose, 3000 points, %zu candidate effects: median wall %.3f s, CPU %.3f s (min %.3f / max %.3f s wall)\n\n",
+        InjectableEffects().size(), wall[2], cpu[2], wall.front(), wall.back());
   }
   // 1b. Pooling: three parts of one machine (thermal drift, wear and a tool radius error shared; each
   // part its own set-up offset), different surfaces and raster angles.
@@ -96,9 +97,10 @@ int main(int argc, char** argv) {
       std::sort(wall.begin(), wall.end());
       std::sort(cpu.begin(), cpu.end());
       std::sort(wall_proposal.begin(), wall_proposal.end());
-      std::printf("diagnose pooled, 3 parts x %d points (%d in all): median wall %.3f s, CPU %.3f s (min %.3f / max "
-                  "%.3f s wall); the separating-experiment proposal on top: median %.3f s\n\n",
-                  parts[0].points, 3 * parts[0].points, wall[1], cpu[1], wall.front(), wall.back(), wall_proposal[1]);
+      std::printf(
+          "diagnose pooled, 3 parts x %d points (%d in all): median wall %.3f s, CPU %.3f s (min %.3f / max "
+          "%.3f s wall); the separating-experiment proposal on top: median %.3f s\n\n",
+          parts[0].points, 3 * parts[0].points, wall[1], cpu[1], wall.front(), wall.back(), wall_proposal[1]);
     }
   }
   // 2. The sweep.
@@ -116,7 +118,8 @@ int main(int argc, char** argv) {
       if (!d->causes.empty() && d->causes.front().effect == effect) {
         ++named;
         for (std::size_t j = 0; j < truth->values.size(); ++j) {
-          if (std::abs(d->causes.front().parameters[j] - truth->values[j]) <= 1.96 * d->causes.front().std_errors[j]) ++in;
+          if (std::abs(d->causes.front().parameters[j] - truth->values[j]) <= 1.96 * d->causes.front().std_errors[j])
+            ++in;
         }
       }
       if (d->heldout_rms_before_um - d->heldout_rms_after_um >= 0.5 * s.effect_rms_um) ++gain;
@@ -128,7 +131,8 @@ int main(int argc, char** argv) {
     total_in += in;
     total_params += params;
   }
-  std::printf("%-16s %9d %11.1f%% %13.1f%%\n\n", "all", total, 100.0 * total_named / total, 100.0 * total_in / total_params);
+  std::printf("%-16s %9d %11.1f%% %13.1f%%\n\n", "all", total, 100.0 * total_named / total,
+              100.0 * total_in / total_params);
   const int others = 4 * per_effect;
   int quiet = 0, both = 0, bump_ok = 0, broad_ok = 0;
   const auto effects = InjectableEffects();
@@ -152,7 +156,9 @@ int main(int argc, char** argv) {
   }
   std::printf("noise only: no cause named              %5.1f%% of %d\n", 100.0 * quiet / others, others);
   std::printf("two effects: both named                 %5.1f%% of %d\n", 100.0 * both / others, others);
-  std::printf("local bump (sigma 6%% of part): unexplained, nothing named  %5.1f%% of %d\n", 100.0 * bump_ok / others, others);
-  std::printf("broad bump (sigma 12%% of part): unexplained, nothing named %5.1f%% of %d\n", 100.0 * broad_ok / others, others);
+  std::printf("local bump (sigma 6%% of part): unexplained, nothing named  %5.1f%% of %d\n", 100.0 * bump_ok / others,
+              others);
+  std::printf("broad bump (sigma 12%% of part): unexplained, nothing named %5.1f%% of %d\n", 100.0 * broad_ok / others,
+              others);
   return 0;
 }

@@ -14,7 +14,8 @@
 namespace formloop::sim {
 namespace {
 
-Eigen::MatrixXd ProbeJacobian(const std::vector<PointContext>& contexts, const Effect* e, const std::vector<double>& theta) {
+Eigen::MatrixXd ProbeJacobian(const std::vector<PointContext>& contexts, const Effect* e,
+                              const std::vector<double>& theta) {
   const int p = e->parameter_count();
   Eigen::MatrixXd j(contexts.size(), p);
   std::vector<double> row(p);
@@ -83,7 +84,8 @@ Result<Problem> BuildProbeProblem(const std::vector<PartRows>& sets, const std::
       for (int i : rows) prob.weight[i] = 1.0 / sigma;
     }
     for (int i = 0; i < n; ++i) {
-      if (sigma_of_row[static_cast<std::size_t>(i)] > 0) prob.weight[i] = 1.0 / sigma_of_row[static_cast<std::size_t>(i)];
+      if (sigma_of_row[static_cast<std::size_t>(i)] > 0)
+        prob.weight[i] = 1.0 / sigma_of_row[static_cast<std::size_t>(i)];
     }
     prob.r = prob.r.cwiseProduct(prob.weight);
   }
@@ -154,7 +156,8 @@ Status DiagnoseOptions::Validate() const {
   if (cv_blocks < 2) return Status::BadInput(Where{.field = "cv_blocks"}, "must be >= 2");
   for (const auto& c : candidates) {
     if (FindEffect(c) == nullptr) {
-      return Status::BadInput(Where{.field = "candidates"}, "unknown effect '" + c + "'", "use one of " + EffectNames());
+      return Status::BadInput(Where{.field = "candidates"}, "unknown effect '" + c + "'",
+                              "use one of " + EffectNames());
     }
   }
   return Status::Ok();

@@ -63,16 +63,16 @@
 namespace formloop::sim {
 
 struct DiagnoseOptions {
-  double alpha = 0.01;                 // family-wise level of the F test per step (spec: 0.01)
-  double alias_alpha = 0.01;           // a selected term not significant at this level given a candidate is its alias
-  double z_critical = 2.326;           // residual Moran's z above which the residual is "systematic" (α = 0.01)
-  double min_share = 0.3;              // of the systematic variance an effect must explain to be named (see above)
+  double alpha = 0.01;        // family-wise level of the F test per step (spec: 0.01)
+  double alias_alpha = 0.01;  // a selected term not significant at this level given a candidate is its alias
+  double z_critical = 2.326;  // residual Moran's z above which the residual is "systematic" (α = 0.01)
+  double min_share = 0.3;     // of the systematic variance an effect must explain to be named (see above)
   double confounded_correlation = 0.95;
-  int knn = 8;                         // Moran's I weights
-  int max_causes = 8;                  // selected terms (a pooled set-up counts once per part)
-  int cv_blocks = 4;                   // block CV: cv_blocks × cv_blocks contiguous blocks over x-y
-  std::vector<std::string> candidates; // empty = the whole catalogue (minus the baseline's effects)
-  bool toolpath_known = true;          // false: effects that need the tool path are not screened (reported)
+  int knn = 8;                          // Moran's I weights
+  int max_causes = 8;                   // selected terms (a pooled set-up counts once per part)
+  int cv_blocks = 4;                    // block CV: cv_blocks × cv_blocks contiguous blocks over x-y
+  std::vector<std::string> candidates;  // empty = the whole catalogue (minus the baseline's effects)
+  bool toolpath_known = true;           // false: effects that need the tool path are not screened (reported)
   // Plausible parameter ranges (the rule base's "diagnose.plausible_ranges"); empty: none, and τ is
   // searched over [T/100, 100 T], T the longest cutting time.
   PlausibleRanges plausible;
@@ -80,26 +80,26 @@ struct DiagnoseOptions {
 };
 
 struct ScreenedEffect {
-  std::string effect;     // a term: the effect, "@part" for a part's own set-up when pooling
+  std::string effect;  // a term: the effect, "@part" for a part's own set-up when pooling
   std::vector<double> parameters, std_errors;
-  double rss_drop = 0;    // µm² (pooled: in units of each part's σ̂²)
+  double rss_drop = 0;  // µm² (pooled: in units of each part's σ̂²)
   double f = 0, p_value = 1;
   double delta_bic = 0;
-  double share = 0;       // of the systematic variance of the residual it was fitted to
-  double z_after = 0;     // residual Moran's z with it added
+  double share = 0;    // of the systematic variance of the residual it was fitted to
+  double z_after = 0;  // residual Moran's z with it added
   bool significant = false;
 };
 
 struct Cause {
   std::string effect;
-  std::string part;               // empty: shared by every part; else the part whose set-up it is
+  std::string part;  // empty: shared by every part; else the part whose set-up it is
   std::vector<std::string> parameter_names;
   std::vector<double> parameters, std_errors;
   std::vector<double> lower, upper;  // 95 % interval per parameter (profile likelihood for τ)
   // Per parameter: inside an alias group (another effect can do its work); its value, error and
   // interval are then NaN (reported as null) — the group carries it.
   std::vector<bool> aliased;
-  double variance_explained = 0;  // fraction of the baseline residual's variance it removes (given the others)
+  double variance_explained = 0;     // fraction of the baseline residual's variance it removes (given the others)
   double z_before = 0, z_after = 0;  // residual Moran's z without it and with it (the others fitted)
   std::string Label() const { return part.empty() ? effect : effect + "@" + part; }
 };
@@ -141,7 +141,7 @@ struct Diagnosis {
   std::vector<AliasGroup> alias_groups;  // findings the data cannot split
   std::vector<Implausible> implausible;
   std::vector<std::vector<ScreenedEffect>> screening;  // per forward-selection step
-  std::vector<Confounding> confounded;   // named effects with a look-alike the data still separate
+  std::vector<Confounding> confounded;                 // named effects with a look-alike the data still separate
   std::vector<std::string> not_screened;  // effects the data cannot test (e.g. no tool path), with the reason in ToJson
   bool unexplained = false;
   nlohmann::json unexplained_where = nlohmann::json::array();  // clusters of the remaining residual

@@ -39,9 +39,7 @@ Eigen::MatrixXd Problem::Columns(const Term& t, const std::vector<double>& theta
   return j;
 }
 
-int Problem::Width(const Term& t) const {
-  return t.effect->parameter_count() * (t.part == kEachPart ? parts() : 1);
-}
+int Problem::Width(const Term& t) const { return t.effect->parameter_count() * (t.part == kEachPart ? parts() : 1); }
 
 std::string Problem::Label(const Term& t) const {
   std::string label(t.effect->name());
@@ -207,8 +205,7 @@ Result<std::vector<std::vector<int>>> KnnLists(const Eigen::MatrixXd& points, in
   for (const auto& [part, idx] : rows) {
     Eigen::MatrixXd sub(idx.size(), points.cols());
     for (std::size_t t = 0; t < idx.size(); ++t) sub.row(static_cast<Eigen::Index>(t)) = points.row(idx[t]);
-    FL_ASSIGN_OR_RETURN(const auto local,
-                        KnnLists(sub, std::min(k, static_cast<int>(idx.size()) - 1), nullptr));
+    FL_ASSIGN_OR_RETURN(const auto local, KnnLists(sub, std::min(k, static_cast<int>(idx.size()) - 1), nullptr));
     for (std::size_t t = 0; t < idx.size(); ++t) {
       for (int j : local[t]) out[static_cast<std::size_t>(idx[t])].push_back(idx[static_cast<std::size_t>(j)]);
     }
@@ -221,7 +218,8 @@ std::string SeparateHint(std::string_view effect) {
       {"tool_radius", "a constant offset along n: measure the tool (tool setter) or probe a datum"},
       {"tool_wear", "grows with cutting path length: probe regions cut early and late, or cut in another order"},
       {"tool_deflection", "grows with wall steepness and engagement: probe steep and flat regions"},
-      {"thermal_drift_z", "saturates over cutting time and acts on n_z: include pauses or a longer cut, probe inclined regions"},
+      {"thermal_drift_z",
+       "saturates over cutting time and acts on n_z: include pauses or a longer cut, probe inclined regions"},
       {"axis_scale_x", "grows with x: probe across the whole x range"},
       {"axis_scale_y", "grows with y: probe across the whole y range"},
       {"axis_scale_z", "grows with z: probe across the whole z range"},
@@ -313,7 +311,8 @@ double BlockCvRms(const Problem& prob, const Eigen::MatrixXd& design, int blocks
       y[static_cast<Eigen::Index>(k)] = prob.xy(rows[k], 1);
     }
     const std::vector<int> own = metrology::GridBlocks(x, y, blocks);
-    for (std::size_t k = 0; k < rows.size(); ++k) block[static_cast<std::size_t>(rows[k])] = p * blocks * blocks + own[k];
+    for (std::size_t k = 0; k < rows.size(); ++k)
+      block[static_cast<std::size_t>(rows[k])] = p * blocks * blocks + own[k];
   }
   const metrology::HeldOutErrors held =
       metrology::SpatialBlockCv(block, prob.parts() * blocks * blocks, prob.r, [&](const std::vector<int>& train) {

@@ -41,7 +41,7 @@ struct Problem {
   std::function<bool(const Effect*)> applicable;
   // n × p Jacobian of effect e at θ over every row, unweighted.
   std::function<Eigen::MatrixXd(const Effect*, const std::vector<double>&)> jacobian;
-  double time_scale_s = 1;                   // for the τ search range when no plausible range is given
+  double time_scale_s = 1;  // for the τ search range when no plausible range is given
   int n() const { return static_cast<int>(r.size()); }
   int parts() const { return static_cast<int>(part_names.size()); }
   // Weighted columns of a term at θ (its Width() values; a linear term ignores them): zero outside its
@@ -90,9 +90,8 @@ Eigen::MatrixXd DesignOf(const std::vector<TermFit>& s, int skip = -1);
 // each τ of a 64-point log grid over [tau_lo, tau_hi] whose RSS is below the limit are joined (at fixed
 // τ the RSS is quadratic in a linear parameter: RSS(b) = RSS(τ) + (b − β̂(τ))² [(XᵀX)⁻¹]_jj⁻¹), and τ's
 // own interval is where its profile crosses the limit (bisection), clipped to the range searched.
-std::vector<std::vector<std::pair<double, double>>> ProfileIntervals(const Problem& prob,
-                                                                     const std::vector<TermFit>& s, double tau_lo,
-                                                                     double tau_hi, int nu, double f95);
+std::vector<std::vector<std::pair<double, double>>> ProfileIntervals(const Problem& prob, const std::vector<TermFit>& s,
+                                                                     double tau_lo, double tau_hi, int nu, double f95);
 
 // Residual Moran's z of `residual` after `design` (plus an intercept).
 double MoranZ(const Eigen::VectorXd& residual, const Eigen::MatrixXd& design, const metrology::SpatialWeights& w);
@@ -137,9 +136,9 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
 // plausibility, when it beats that one. Furnival & Wilson (1974) search the same space by branch and
 // bound; at ≤ 4 of ≤ 20 units plain enumeration is cheap.
 struct SubsetSearch {
-  std::vector<int> best;           // indices into units
+  std::vector<int> best;  // indices into units
   double best_bic = 0;
-  std::vector<int> implausible;    // a better-fitting subset with an implausible value (empty: none)
+  std::vector<int> implausible;  // a better-fitting subset with an implausible value (empty: none)
   double implausible_bic = 0;
 };
 SubsetSearch BestSubset(const Problem& prob, const std::vector<Term>& units, const DiagnoseOptions& options,

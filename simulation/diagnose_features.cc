@@ -49,7 +49,8 @@ Result<std::vector<FeaturePosition>> ReadFeatures(const std::string& path) {
       continue;
     }
     if (cells.size() < col.size()) {
-      return Status::BadInput(Where{.file = path, .line = line_no}, "expected " + std::to_string(col.size()) + " cells");
+      return Status::BadInput(Where{.file = path, .line = line_no},
+                              "expected " + std::to_string(col.size()) + " cells");
     }
     FeaturePosition f;
     f.id = cells[col["id"]];
@@ -59,7 +60,8 @@ Result<std::vector<FeaturePosition>> ReadFeatures(const std::string& path) {
       char* end = nullptr;
       *value = std::strtod(s.c_str(), &end);
       if (s.empty() || end != s.c_str() + s.size() || !std::isfinite(*value)) {
-        return Status::BadInput(Where{.file = path, .line = line_no, .field = name}, "'" + s + "' is not a finite number");
+        return Status::BadInput(Where{.file = path, .line = line_no, .field = name},
+                                "'" + s + "' is not a finite number");
       }
       return Status::Ok();
     };

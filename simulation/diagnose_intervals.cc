@@ -42,9 +42,8 @@ double CanonicalCorrelation(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) 
 
 }  // namespace
 
-std::vector<std::vector<std::pair<double, double>>> ProfileIntervals(const Problem& prob,
-                                                                     const std::vector<TermFit>& s, double tau_lo,
-                                                                     double tau_hi, int nu, double f95) {
+std::vector<std::vector<std::pair<double, double>>> ProfileIntervals(const Problem& prob, const std::vector<TermFit>& s,
+                                                                     double tau_lo, double tau_hi, int nu, double f95) {
   int nonlinear_term = -1;
   for (std::size_t k = 0; k < s.size(); ++k) {
     if (!s[k].term.effect->linear()) nonlinear_term = static_cast<int>(k);
@@ -66,8 +65,8 @@ std::vector<std::vector<std::pair<double, double>>> ProfileIntervals(const Probl
     for (std::size_t k = 0; k < s.size(); ++k) {
       const Effect& e = *s[k].term.effect;
       std::vector<int> cols;
-      const Eigen::MatrixXd c = static_cast<int>(k) == nonlinear_term ? LinearColumnsAt(prob, s[k].term, tau)
-                                                                       : s[k].columns;
+      const Eigen::MatrixXd c =
+          static_cast<int>(k) == nonlinear_term ? LinearColumnsAt(prob, s[k].term, tau) : s[k].columns;
       for (int j = 0, used = 0; j < prob.Width(s[k].term); ++j) {
         const bool has_column = static_cast<int>(k) != nonlinear_term || e.parameters()[j % e.parameter_count()].linear;
         cols.push_back(has_column ? static_cast<int>(x.cols()) + used++ : -1);
@@ -115,8 +114,7 @@ std::vector<std::vector<std::pair<double, double>>> ProfileIntervals(const Probl
       }
       return std::exp(0.5 * (a + b));
     };
-    out[static_cast<std::size_t>(nonlinear_term)][static_cast<std::size_t>(q)] = {crossing(tau_lo),
-                                                                                  crossing(tau_hi)};
+    out[static_cast<std::size_t>(nonlinear_term)][static_cast<std::size_t>(q)] = {crossing(tau_lo), crossing(tau_hi)};
   }
   double rss_min = fits.front().rss;
   for (const auto& f : fits) rss_min = std::min(rss_min, f.rss);
@@ -152,6 +150,5 @@ double GroupDesignCorrelation(const std::vector<Eigen::MatrixXd>& members, const
   }
   return worst;
 }
-
 
 }  // namespace formloop::sim::detail

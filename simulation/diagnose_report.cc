@@ -25,7 +25,8 @@ std::string AliasGroup::Message() const {
 bool Diagnosis::InAliasGroup(std::string_view effect) const {
   for (const auto& g : alias_groups) {
     for (const auto& m : g.members) {
-      if (m == effect || (m.size() > effect.size() && m.compare(0, effect.size(), effect) == 0 && m[effect.size()] == '@')) {
+      if (m == effect ||
+          (m.size() > effect.size() && m.compare(0, effect.size(), effect) == 0 && m[effect.size()] == '@')) {
         return true;
       }
     }
@@ -47,14 +48,10 @@ nlohmann::json Diagnosis::ToJson() const {
     for (std::size_t k = 0; k < c.aliased.size(); ++k) {
       if (c.aliased[k]) aliased.push_back(c.parameter_names[k]);
     }
-    nlohmann::json entry = {{"effect", c.effect},
-                            {"parameters", params},
-                            {"aliased_parameters", aliased},
-                            {"std_errors", errors},
-                            {"interval_95", intervals},
-                            {"variance_explained", c.variance_explained},
-                            {"z_before", c.z_before},
-                            {"z_after", c.z_after}};
+    nlohmann::json entry = {
+        {"effect", c.effect},     {"parameters", params},     {"aliased_parameters", aliased},
+        {"std_errors", errors},   {"interval_95", intervals}, {"variance_explained", c.variance_explained},
+        {"z_before", c.z_before}, {"z_after", c.z_after}};
     if (!c.part.empty()) entry["part"] = c.part;
     causes_json.push_back(entry);
   }
@@ -75,9 +72,10 @@ nlohmann::json Diagnosis::ToJson() const {
     nlohmann::json entry = {{"effect", b.effect},
                             {"fitted", params},
                             {"outside_plausible_range", b.violations},
-                            {"finding", "the data fit " + b.effect + " best with values outside its plausible range "
-                                        "(rule diagnose.plausible_ranges): not named, and the diagnosis ran again "
-                                        "without it"}};
+                            {"finding", "the data fit " + b.effect +
+                                            " best with values outside its plausible range "
+                                            "(rule diagnose.plausible_ranges): not named, and the diagnosis ran again "
+                                            "without it"}};
     if (!b.part.empty()) entry["part"] = b.part;
     implausible_json.push_back(entry);
   }
@@ -107,26 +105,26 @@ nlohmann::json Diagnosis::ToJson() const {
   if (unexplained) {
     unexplained_json = {{"message", "unexplained systematic residual"}, {"z", z_after}, {"where", unexplained_where}};
   }
-  nlohmann::json out = {
-      {"format", "formloop-diagnosis"},
-      {"version", 2},
-      {"n", n},
-      {"residual", {{"rms_um", rms_before_um}, {"z", z_before}, {"noise_sigma_um", noise_sigma_um}}},
-      {"explained_by_baseline", explained_by_baseline},
-      {"causes", causes_json},
-      {"alias_groups", groups_json},
-      {"implausible", implausible_json},
-      {"unexplained", unexplained_json},
-      {"confounded", confounded_json},
-      {"not_screened",
-       {{"effects", not_screened}, {"reason", not_screened.empty() ? "" : "needs the tool path (give the run folder)"}}},
-      {"gain",
-       {{"rms_before_um", rms_before_um},
-        {"rms_after_um", rms_after_um},
-        {"heldout_rms_before_um", heldout_rms_before_um},
-        {"heldout_rms_after_um", heldout_rms_after_um}}},
-      {"screening", screening_json},
-      {"extended_model", extended.ToJson()}};
+  nlohmann::json out = {{"format", "formloop-diagnosis"},
+                        {"version", 2},
+                        {"n", n},
+                        {"residual", {{"rms_um", rms_before_um}, {"z", z_before}, {"noise_sigma_um", noise_sigma_um}}},
+                        {"explained_by_baseline", explained_by_baseline},
+                        {"causes", causes_json},
+                        {"alias_groups", groups_json},
+                        {"implausible", implausible_json},
+                        {"unexplained", unexplained_json},
+                        {"confounded", confounded_json},
+                        {"not_screened",
+                         {{"effects", not_screened},
+                          {"reason", not_screened.empty() ? "" : "needs the tool path (give the run folder)"}}},
+                        {"gain",
+                         {{"rms_before_um", rms_before_um},
+                          {"rms_after_um", rms_after_um},
+                          {"heldout_rms_before_um", heldout_rms_before_um},
+                          {"heldout_rms_after_um", heldout_rms_after_um}}},
+                        {"screening", screening_json},
+                        {"extended_model", extended.ToJson()}};
   if (parts.size() > 1) out["parts"] = parts;
   return out;
 }
@@ -150,9 +148,10 @@ std::string Diagnosis::Summary() const {
                      100 * c.variance_explained, c.z_before, c.z_after);
   }
   for (const auto& g : alias_groups) {
-    s += fmt::format("  {}: together they explain {:.0f}% of the residual variance (combined rms {:.2f} um, design "
-                     "correlation {:.3f}); to separate: {}\n",
-                     g.Message(), 100 * g.variance_explained, g.combined_rms_um, g.max_correlation, g.separate_by);
+    s += fmt::format(
+        "  {}: together they explain {:.0f}% of the residual variance (combined rms {:.2f} um, design "
+        "correlation {:.3f}); to separate: {}\n",
+        g.Message(), 100 * g.variance_explained, g.combined_rms_um, g.max_correlation, g.separate_by);
   }
   for (const auto& b : implausible) {
     s += fmt::format("  not named: {}{} fits best with {} (outside its plausible range)\n", b.effect,
@@ -162,7 +161,8 @@ std::string Diagnosis::Summary() const {
     s += fmt::format("  look-alike: {} resembles {} (correlation {:.3f}) but the data separate them\n", c.named,
                      c.other, c.correlation);
   }
-  if (unexplained) s += fmt::format("  unexplained systematic residual (Moran z {:.2f} after the named causes)\n", z_after);
+  if (unexplained)
+    s += fmt::format("  unexplained systematic residual (Moran z {:.2f} after the named causes)\n", z_after);
   s += fmt::format("  gain: rms {:.2f} -> {:.2f} um; held-out (block CV) {:.2f} -> {:.2f} um\n", rms_before_um,
                    rms_after_um, heldout_rms_before_um, heldout_rms_after_um);
   return s;

@@ -10,10 +10,10 @@
 #include <limits>
 #include <numeric>
 
-#include <Eigen/Eigenvalues>
-#include <boost/math/distributions/fisher_f.hpp>
 #include <fmt/format.h>
 #include <fmt/ranges.h>
+#include <Eigen/Eigenvalues>
+#include <boost/math/distributions/fisher_f.hpp>
 
 #include "metrology/morans_i.h"
 #include "simulation/diagnose_engine.h"
@@ -299,8 +299,8 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
   // Selection, repeated without an effect whose named value is implausible.
   std::vector<TermFit> s;
   std::vector<Term> pool;
-  std::vector<std::vector<int>> groups;  // per alias group: indices into s (< s.size()) and pool (≥ s.size())
-  std::vector<int> named;                // indices into s
+  std::vector<std::vector<int>> groups;      // per alias group: indices into s (< s.size()) and pool (≥ s.size())
+  std::vector<int> named;                    // indices into s
   std::vector<std::pair<int, int>> columns;  // the selected terms' parameters that can be aliased on their own
   std::vector<Term> excluded;
   auto report_implausible = [&](const Term& term, const std::vector<std::string>& violations,
@@ -384,7 +384,8 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
     columns.clear();
     for (int k = 0; k < ns; ++k) {
       if (s[static_cast<std::size_t>(k)].columns.cols() < 2) continue;
-      for (int j = 0; j < static_cast<int>(s[static_cast<std::size_t>(k)].columns.cols()); ++j) columns.push_back({k, j});
+      for (int j = 0; j < static_cast<int>(s[static_cast<std::size_t>(k)].columns.cols()); ++j)
+        columns.push_back({k, j});
     }
     const int nodes = ns + np + static_cast<int>(columns.size());
     UnionFind uf(nodes);
@@ -409,7 +410,8 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
           std::fprintf(stderr, "alias test: %s given %s: F %.3f p %.3g plausible %d (%s)\n",
                        prob.Label(s[static_cast<std::size_t>(k)].term).c_str(),
                        prob.Label(pool[static_cast<std::size_t>(c)]).c_str(), f, FTail(f, q, dof),
-                       sel.Plausible(swapped.term, swapped.theta), fmt::format("{}", fmt::join(swapped.theta, ",")).c_str());
+                       sel.Plausible(swapped.term, swapped.theta),
+                       fmt::format("{}", fmt::join(swapped.theta, ",")).c_str());
         }
         if (FTail(f, q, dof) >= options.alias_alpha && sel.PlausibleFit(swapped)) uf.Join(k, ns + c);
       }
@@ -511,9 +513,8 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
   // tool radius, a thermal amplitude against wear); its model's interval then widens the reported one.
   auto intervals = ProfileIntervals(prob, s, tau_lo, tau_hi, nu, f95);
   for (const Term& c : pool) {
-    if (!c.effect->linear() && !(s.empty() || std::all_of(s.begin(), s.end(), [](const TermFit& t) {
-          return t.term.effect->linear();
-        }))) {
+    if (!c.effect->linear() &&
+        !(s.empty() || std::all_of(s.begin(), s.end(), [](const TermFit& t) { return t.term.effect->linear(); }))) {
       continue;  // one nonlinear term at a time
     }
     const TermFit with = sel.With(s, c);
@@ -716,8 +717,10 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
       }
     }
   }
-  out.extended.provenance = {{"baseline", baseline.provenance}, {"diagnosed_points", n},
-                             {"named", nlohmann::json::array()}, {"alias_groups", nlohmann::json::array()}};
+  out.extended.provenance = {{"baseline", baseline.provenance},
+                             {"diagnosed_points", n},
+                             {"named", nlohmann::json::array()},
+                             {"alias_groups", nlohmann::json::array()}};
   for (const auto& c : out.causes) out.extended.provenance["named"].push_back(c.Label());
   for (const auto& g : out.alias_groups) out.extended.provenance["alias_groups"].push_back(g.members);
   return result;

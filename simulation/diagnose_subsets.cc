@@ -40,9 +40,9 @@ SubsetSearch BestSubset(const Problem& prob, const std::vector<Term>& units, con
   // scaled to unit norm (a zero column stays out).
   std::vector<Eigen::VectorXd> columns;
   std::vector<double> norms;
-  std::vector<std::vector<int>> linear_cols(units.size());                // per unit (linear units)
-  std::vector<std::vector<std::vector<int>>> tau_cols(units.size());     // per unit, per grid τ (nonlinear)
-  std::vector<std::vector<int>> param_of(units.size());                  // per bank column of a unit: its parameter index
+  std::vector<std::vector<int>> linear_cols(units.size());            // per unit (linear units)
+  std::vector<std::vector<std::vector<int>>> tau_cols(units.size());  // per unit, per grid τ (nonlinear)
+  std::vector<std::vector<int>> param_of(units.size());               // per bank column of a unit: its parameter index
   std::vector<double> taus(kTauGrid);
   for (int g = 0; g < kTauGrid; ++g) {
     taus[g] = std::exp(std::log(tau_lo) + (std::log(tau_hi) - std::log(tau_lo)) * g / (kTauGrid - 1));

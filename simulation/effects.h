@@ -32,15 +32,15 @@ namespace formloop::sim {
 // written in (spec §2). Built by AssociateWithToolpath (covariates.h).
 struct PointContext {
   std::int64_t id = 0;
-  Eigen::Vector3d point = Eigen::Vector3d::Zero();      // nominal point on Q, mm (part frame)
-  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();    // outward unit normal of Q there
-  Eigen::Vector3d approach = -Eigen::Vector3d::UnitZ(); // unit probe approach direction
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();       // nominal point on Q, mm (part frame)
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();     // outward unit normal of Q there
+  Eigen::Vector3d approach = -Eigen::Vector3d::UnitZ();  // unit probe approach direction
   double path_length_mm = 0;  // s: cutting path length from the program start to the cut that made the point
   double cut_time_s = 0;      // t_cut: cutting time from the program start to that cut
   int pass = 0;               // pass index of that cut
-  Eigen::Vector3d feed = Eigen::Vector3d::UnitX();      // unit feed direction of that cut
-  double engagement = 0;      // radial engagement a_e / r at that cut (local step-over over ball radius)
-  double scallop_um = 0;      // geometric cusp height from the swept ball envelope (the scallop effect)
+  Eigen::Vector3d feed = Eigen::Vector3d::UnitX();  // unit feed direction of that cut
+  double engagement = 0;  // radial engagement a_e / r at that cut (local step-over over ball radius)
+  double scallop_um = 0;  // geometric cusp height from the swept ball envelope (the scallop effect)
 };
 
 struct EffectParameter {

@@ -5,9 +5,9 @@
 #include <limits>
 #include <map>
 
+#include <fmt/format.h>
 #include <Eigen/Eigenvalues>
 #include <Eigen/LU>
-#include <fmt/format.h>
 
 #include "simulation/diagnose_engine.h"
 #include "simulation/virtual_machine.h"
@@ -185,7 +185,8 @@ double LogDetInformation(const GroupDesign& g) {
                               Eigen::MatrixXd::Identity(g.others.rows(), g.others.cols());
     projected -= q * (q.transpose() * members);
   }
-  const Eigen::VectorXd ev = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(projected.transpose() * projected).eigenvalues();
+  const Eigen::VectorXd ev =
+      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(projected.transpose() * projected).eigenvalues();
   double sum = 0;
   for (Eigen::Index k = 0; k < ev.size(); ++k) sum += std::log(std::max(ev[k], 1e-12));
   return sum;
@@ -263,7 +264,8 @@ struct PartData {
   std::vector<std::string> labels;
 };
 
-Result<PartData> ReadParts(const std::vector<ProbeDataInput>& parts, const Diagnosis& diagnosis, const Model& baseline) {
+Result<PartData> ReadParts(const std::vector<ProbeDataInput>& parts, const Diagnosis& diagnosis,
+                           const Model& baseline) {
   PartData out;
   std::size_t row = 0;
   for (const auto& in : parts) {
@@ -274,13 +276,14 @@ Result<PartData> ReadParts(const std::vector<ProbeDataInput>& parts, const Diagn
     if (row + m > diagnosis.residual_after_um.size()) {
       return Status::Internal("experiment design: the diagnosis was made from other data");
     }
-    for (std::size_t i = 0; i < m; ++i) sum += diagnosis.residual_after_um[row + i] * diagnosis.residual_after_um[row + i];
+    for (std::size_t i = 0; i < m; ++i)
+      sum += diagnosis.residual_after_um[row + i] * diagnosis.residual_after_um[row + i];
     row += m;
     out.sigma.push_back(std::max(1e-3, std::sqrt(sum / static_cast<double>(m))));
     out.data.push_back(std::move(data));
   }
   out.labels = diagnosis.parts.size() == parts.size() && parts.size() > 1 ? diagnosis.parts
-                                                                        : std::vector<std::string>(parts.size(), "");
+                                                                          : std::vector<std::string>(parts.size(), "");
   if (parts.size() > 1 && diagnosis.parts.size() != parts.size()) {
     for (std::size_t p = 0; p < parts.size(); ++p) out.labels[p] = std::to_string(p + 1);
   }
@@ -294,8 +297,8 @@ double TauOf(const Diagnosis& d, const Problem& prob, const PlausibleRanges& pla
     lo = r->min;
     hi = r->max;
   }
-  const auto f = detail::FitTerm(prob, {FindEffect("thermal_drift_z"), detail::kShared}, Eigen::MatrixXd(prob.n(), 0),
-                                 lo, hi);
+  const auto f =
+      detail::FitTerm(prob, {FindEffect("thermal_drift_z"), detail::kShared}, Eigen::MatrixXd(prob.n(), 0), lo, hi);
   return f.theta[1];
 }
 
@@ -336,8 +339,8 @@ Result<double> GroupCorrelation(const std::vector<ProbeDataInput>& parts, const 
   FL_ASSIGN_OR_RETURN(const PartData pd, ReadParts(parts, diagnosis, baseline));
   std::vector<detail::PartRows> rows;
   for (std::size_t p = 0; p < pd.data.size(); ++p) {
-    rows.push_back({&pd.data[p].contexts, &pd.data[p].residual_um, &pd.data[p].sensitivity, static_cast<int>(p),
-                    pd.sigma[p]});
+    rows.push_back(
+        {&pd.data[p].contexts, &pd.data[p].residual_um, &pd.data[p].sensitivity, static_cast<int>(p), pd.sigma[p]});
   }
   FL_ASSIGN_OR_RETURN(const Problem prob, detail::BuildProbeProblem(rows, pd.labels, 8));
   AliasGroup group;
@@ -360,8 +363,8 @@ Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<Pro
   FL_ASSIGN_OR_RETURN(const PartData pd, ReadParts(parts, diagnosis, baseline));
   std::vector<detail::PartRows> current;
   for (std::size_t p = 0; p < pd.data.size(); ++p) {
-    current.push_back({&pd.data[p].contexts, &pd.data[p].residual_um, &pd.data[p].sensitivity, static_cast<int>(p),
-                       pd.sigma[p]});
+    current.push_back(
+        {&pd.data[p].contexts, &pd.data[p].residual_um, &pd.data[p].sensitivity, static_cast<int>(p), pd.sigma[p]});
   }
   FL_ASSIGN_OR_RETURN(const Problem now, detail::BuildProbeProblem(current, pd.labels, 8));
   const Eigen::Index n_now = now.n();
@@ -385,13 +388,12 @@ Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<Pro
       FL_ASSIGN_OR_RETURN(const std::vector<CutterLocation> cls, options.replan(turn, feed));
       if (cls.empty()) continue;
       NextPart np{turn, feed, cls.back().time_s, {}};
-      FL_ASSIGN_OR_RETURN(np.contexts, AssociateWithToolpath(cls, parts.front().tool_radius_mm,
-                                                             MeasuredPointsOf(*parts.front().plan)));
+      FL_ASSIGN_OR_RETURN(
+          np.contexts, AssociateWithToolpath(cls, parts.front().tool_radius_mm, MeasuredPointsOf(*parts.front().plan)));
       next_parts.push_back(std::move(np));
     }
   }
-  const Eigen::VectorXd next_zero =
-      Eigen::VectorXd::Zero(static_cast<Eigen::Index>(parts.front().plan->points.size()));
+  const Eigen::VectorXd next_zero = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(parts.front().plan->points.size()));
   std::vector<std::string> labels_plus = pd.labels;
   if (labels_plus.size() == 1) labels_plus = {"1"};
   labels_plus.push_back("next");
@@ -464,16 +466,18 @@ Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<Pro
         p.kind = "reprobe";
         for (int i = 0; i < count; ++i) {
           chosen.push_back(candidate_contexts[static_cast<std::size_t>(order[static_cast<std::size_t>(i)])]);
-          p.plan.points.push_back(candidates.first.points[static_cast<std::size_t>(order[static_cast<std::size_t>(i)])]);
+          p.plan.points.push_back(
+              candidates.first.points[static_cast<std::size_t>(order[static_cast<std::size_t>(i)])]);
           p.approaches.push_back(candidates.second[static_cast<std::size_t>(order[static_cast<std::size_t>(i)])]);
         }
         int tilted = 0;
         for (std::size_t i = 0; i < p.plan.points.size(); ++i) {
           tilted += -p.approaches[i].dot(p.plan.points[i].normal) < 0.999;
         }
-        p.change = fmt::format("re-probe {} more points of this part ({} of them with the approach tilted {:g} deg "
-                               "from the normal), chosen for the information they add on this group",
-                               count, tilted, options.tilt_deg);
+        p.change = fmt::format(
+            "re-probe {} more points of this part ({} of them with the approach tilted {:g} deg "
+            "from the normal), chosen for the information they add on this group",
+            count, tilted, options.tilt_deg);
         p.cost_s = count * options.probe_seconds_per_point;
         const Eigen::VectorXd zero = Eigen::VectorXd::Zero(count);
         std::vector<detail::PartRows> aug = current;
@@ -491,11 +495,14 @@ Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<Pro
       p.kind = np.feed != 1.0 ? "feed" : "raster_turn";
       p.raster_turn_deg = np.turn;
       p.feed_scale = np.feed;
-      p.change = np.feed != 1.0 ? fmt::format("cut the next part with the feed scaled by {:g}, probe it with this plan "
-                                              "and diagnose the two parts together", np.feed)
-                                : fmt::format("cut the next part with the raster turned by {:g} deg{}, probe it with "
-                                              "this plan and diagnose the two parts together",
-                                              np.turn, np.turn == 180 ? " (the cutting order reversed)" : "");
+      p.change = np.feed != 1.0 ? fmt::format(
+                                      "cut the next part with the feed scaled by {:g}, probe it with this plan "
+                                      "and diagnose the two parts together",
+                                      np.feed)
+                                : fmt::format(
+                                      "cut the next part with the raster turned by {:g} deg{}, probe it with "
+                                      "this plan and diagnose the two parts together",
+                                      np.turn, np.turn == 180 ? " (the cutting order reversed)" : "");
       p.cost_s = np.cut_time_s + static_cast<double>(np.contexts.size()) * options.probe_seconds_per_point;
       FL_RETURN_IF_ERROR(assess(augmented, std::move(p)));
     }
@@ -503,11 +510,11 @@ Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<Pro
     // The cheapest change predicted to split the group; else the most separation per second.
     auto best = options_for_group.begin();
     for (auto it = options_for_group.begin(); it != options_for_group.end(); ++it) {
-      const bool better = it->predicted_to_split
-                              ? (!best->predicted_to_split || it->cost_s < best->cost_s ||
-                                 (it->cost_s == best->cost_s && it->log_det_gain > best->log_det_gain))
-                              : (!best->predicted_to_split &&
-                                 it->separation / it->cost_s > best->separation / best->cost_s);
+      const bool better =
+          it->predicted_to_split
+              ? (!best->predicted_to_split || it->cost_s < best->cost_s ||
+                 (it->cost_s == best->cost_s && it->log_det_gain > best->log_det_gain))
+              : (!best->predicted_to_split && it->separation / it->cost_s > best->separation / best->cost_s);
       if (better) best = it;
     }
     out.push_back(*best);

@@ -47,7 +47,7 @@ struct ExperimentOptions {
   std::vector<double> raster_turns_deg = {45, 90, 180};
   std::vector<double> feed_scales = {0.5};
   double required_noncentrality = 15;
-  PlausibleRanges plausible;             // the τ search range of a thermal member not in the model
+  PlausibleRanges plausible;  // the τ search range of a thermal member not in the model
   // The part's path cut with the raster turned by `turn_deg` and the feed scaled: cutter locations (in
   // cutting order, with path length and time). Without it no next-part change is considered (the
   // simulation layer cannot plan tool paths; nc-gen can).
@@ -61,8 +61,8 @@ struct ExperimentProposal {
   std::string change;                // what to do, in words
   double cost_s = 0;
   double correlation_before = 0, correlation_after = 0;  // design correlation of the group
-  double log_det_gain = 0;           // increase of log det of the group's information
-  double separation = 0;             // min over members of λ_m after the change (see above)
+  double log_det_gain = 0;                               // increase of log det of the group's information
+  double separation = 0;                                 // min over members of λ_m after the change (see above)
   bool predicted_to_split = false;
   // The change itself: re-probe points (ids after the part's largest) and their approaches; or the
   // next part's raster turn and feed scale.

@@ -32,9 +32,8 @@ Status Model::Set(std::string_view name, std::vector<double> values, std::vector
     return Status::BadInput("unknown effect '" + std::string(name) + "'. Fix: use one of " + EffectNames());
   }
   if (static_cast<int>(values.size()) != effect->parameter_count()) {
-    return Status::BadInput("effect '" + std::string(name) + "' takes " +
-                            std::to_string(effect->parameter_count()) + " parameter(s), got " +
-                            std::to_string(values.size()));
+    return Status::BadInput("effect '" + std::string(name) + "' takes " + std::to_string(effect->parameter_count()) +
+                            " parameter(s), got " + std::to_string(values.size()));
   }
   if (std_errors.empty()) std_errors.assign(values.size(), 0.0);
   if (std_errors.size() != values.size()) return Status::Internal("std_errors size mismatch for " + std::string(name));
@@ -103,8 +102,9 @@ nlohmann::json Model::ToJson() const {
     for (const auto& g : alias_groups) {
       groups.push_back({{"id", g.id},
                         {"members", g.members},
-                        {"note", "the data could not tell these effects apart: the entries of this group carry their "
-                                 "combined prediction, not estimates of each"}});
+                        {"note",
+                         "the data could not tell these effects apart: the entries of this group carry their "
+                         "combined prediction, not estimates of each"}});
     }
     out["alias_groups"] = groups;
   }
@@ -120,13 +120,15 @@ Result<Model> Model::FromJson(const nlohmann::json& json, const std::string& sou
   std::string format;
   FL_RETURN_IF_ERROR(f.OptionalString("format", &format));
   if (format != kFormat) {
-    return bad("format", "expected \"formloop-model\"", "write models with formloop or add \"format\": \"formloop-model\"");
+    return bad("format", "expected \"formloop-model\"",
+               "write models with formloop or add \"format\": \"formloop-model\"");
   }
   long long version = 0;
   FL_RETURN_IF_ERROR(f.Integer("version", &version, 1));
   if (version > kVersion) {
-    return bad("version", "model format version " + std::to_string(version) + " is newer than this formloop reads (" +
-                              std::to_string(kVersion) + ")",
+    return bad("version",
+               "model format version " + std::to_string(version) + " is newer than this formloop reads (" +
+                   std::to_string(kVersion) + ")",
                "upgrade formloop");
   }
   std::vector<JsonFields> items;
@@ -136,7 +138,8 @@ Result<Model> Model::FromJson(const nlohmann::json& json, const std::string& sou
     std::string name;
     FL_RETURN_IF_ERROR(item.String("name", &name));
     const Effect* effect = FindEffect(name);
-    if (effect == nullptr) return bad(item.Path("name"), "unknown effect '" + name + "'", "use one of " + EffectNames());
+    if (effect == nullptr)
+      return bad(item.Path("name"), "unknown effect '" + name + "'", "use one of " + EffectNames());
     if (model.Has(name)) return bad(item.Path("name"), "effect '" + name + "' is listed twice");
     const nlohmann::json empty = nlohmann::json::object();
     std::optional<JsonFields> params, errors;

@@ -53,7 +53,8 @@ void ExpectHonest(const sim::Diagnosis& d, const sim::Model& truth) {
 // The first case: thermal drift 12 µm + set-up offset (10, −6, 0) µm + tool wear 2 µm/m on an
 // egg box, 30 × 30 probes. The old diagnosis added a false x-rotation of 118 µrad and gave thermal 21 µm.
 TEST(MultiEffectTest, ThermalOffsetAndWearOnAnEggBoxNameNothingFalse) {
-  const sim::Model m = MachineOf({{"thermal_drift_z", {12.0, 900.0}}, {"setup_offset", {10.0, -6.0, 0.0}}, {"tool_wear", {2.0}}});
+  const sim::Model m =
+      MachineOf({{"thermal_drift_z", {12.0, 900.0}}, {"setup_offset", {10.0, -6.0, 0.0}}, {"tool_wear", {2.0}}});
   for (double angle : {0.0, 45.0, 90.0}) {
     const Scenario s = ProbePart({"egg_box", angle, 30}, m, 11);
     const auto d = sim::Diagnose(InputOf(s), s.baseline, Options());

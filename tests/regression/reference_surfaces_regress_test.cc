@@ -46,7 +46,8 @@ TEST_P(ReferenceSurfaceTest, EndsWithinToleranceAfterCompensation) {
   EXPECT_LE(summary->fit_check_max_um, 0.1 * summary->tolerance_um);
 }
 
-INSTANTIATE_TEST_SUITE_P(AllReferenceSurfaces, ReferenceSurfaceTest, ::testing::ValuesIn(recon::ReferenceSurfaceNames()),
+INSTANTIATE_TEST_SUITE_P(AllReferenceSurfaces, ReferenceSurfaceTest,
+                         ::testing::ValuesIn(recon::ReferenceSurfaceNames()),
                          [](const auto& test_param) { return test_param.param; });
 
 TEST(RegressGoldens, ReferencePartsMatchTheirGoldensAndReachTolerance) {
@@ -73,11 +74,10 @@ TEST(RegressGoldens, ReferencePartsMatchTheirGoldensAndReachTolerance) {
   for (const auto& row : r["parts"]) {
     const Json& f = row["figures"];
     // The regression set's machines carry 20–60 µm of systematic error: every part has work to do.
-    EXPECT_GT(f["form_error_um"][0].get<double>(), 10.0 * (f["precompensated"].get<bool>() ? 0.0 : 2.0))
-        << row["part"];
+    EXPECT_GT(f["form_error_um"][0].get<double>(), 10.0 * (f["precompensated"].get<bool>() ? 0.0 : 2.0)) << row["part"];
     if (f["precompensated"].get<bool>()) ++precompensated;
-    if (f["route"] == "simulate" && f["sim_correction"].is_object() &&
-        !f["sim_correction"]["defects_before"].empty() && f["sim_correction"]["defects_after"].empty()) {
+    if (f["route"] == "simulate" && f["sim_correction"].is_object() && !f["sim_correction"]["defects_before"].empty() &&
+        f["sim_correction"]["defects_after"].empty()) {
       ++simulate_fixes;
     }
   }

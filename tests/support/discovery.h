@@ -86,14 +86,14 @@ struct Scenario {
   std::string surface;
   int points = 0;
   double snr = 0;
-  std::vector<std::string> injected;     // effect names (empty: noise only)
-  bool bump = false;                     // a localised bump outside the catalogue
-  sim::Model truth;                      // what was injected (grading only)
+  std::vector<std::string> injected;  // effect names (empty: noise only)
+  bool bump = false;                  // a localised bump outside the catalogue
+  sim::Model truth;                   // what was injected (grading only)
   metrology::ProbingPlan plan;
   metrology::ProbeLog log;
   sim::Model baseline;
   const MachinedSurface* machined = nullptr;
-  double effect_rms_um = 0;              // RMS of the injected systematic contribution
+  double effect_rms_um = 0;  // RMS of the injected systematic contribution
 };
 
 inline constexpr double kScenarioSigmaUm = 1.0;  // combined noise σ (0.6 surface, 0.8 probe)
@@ -144,7 +144,8 @@ inline Scenario MakeScenario(Rng& rng, const std::string& surface, int points, d
   vm.seed = rng.Fork();
   (void)s.truth.Set("noise", {0.6, 0.8});
   // Contexts once, to scale each effect to its SNR.
-  const auto contexts = sim::AssociateWithToolpath(s.machined->cls, 3.0, sim::MeasuredPointsOf(s.plan, approaches)).value();
+  const auto contexts =
+      sim::AssociateWithToolpath(s.machined->cls, 3.0, sim::MeasuredPointsOf(s.plan, approaches)).value();
   Eigen::VectorXd total = Eigen::VectorXd::Zero(s.points);
   if (fixed != nullptr) {
     for (const auto& e : fixed->effects) {
@@ -157,7 +158,8 @@ inline Scenario MakeScenario(Rng& rng, const std::string& surface, int points, d
     const sim::Effect* e = sim::FindEffect(name);
     std::vector<double> theta;
     for (const auto& p : e->parameters()) {
-      theta.push_back(p.linear ? rng.Uniform(p.typical_min, p.typical_max) : s.machined->total_time_s * rng.Uniform(0.2, 2.0));
+      theta.push_back(p.linear ? rng.Uniform(p.typical_min, p.typical_max)
+                               : s.machined->total_time_s * rng.Uniform(0.2, 2.0));
     }
     // Keep the linear part away from zero so the draw has a definite direction.
     double rms = 0;
@@ -183,7 +185,8 @@ inline Scenario MakeScenario(Rng& rng, const std::string& surface, int points, d
   if (bump) {
     // A bump of material left, outside the catalogue: moves the reported centres along the approach.
     const double height = 2.0 * s.snr * kScenarioSigmaUm;
-    const double cu = d.u_min + d.u_span() * rng.Uniform(0.25, 0.75), cv = d.v_min + d.v_span() * rng.Uniform(0.25, 0.75);
+    const double cu = d.u_min + d.u_span() * rng.Uniform(0.25, 0.75),
+                 cv = d.v_min + d.v_span() * rng.Uniform(0.25, 0.75);
     const double radius = bump_sigma_fraction * std::max(d.u_span(), d.v_span());
     for (int i = 0; i < s.points; ++i) {
       const auto& p = s.plan.points[i];

@@ -42,12 +42,12 @@ struct PartLayout {
 struct MultiScenario {
   std::uint64_t seed = 0;
   double sigma_um = 1;
-  std::vector<std::string> injected;      // effect names
-  std::vector<double> snr;                // per injected effect, on the first part
-  double total_peak_um = 0;               // Σ peak |δ_e| on the first part
-  sim::Model machine;                     // shared effects (+ noise)
-  std::vector<sim::Model> setups;         // per part: its set-up effects
-  std::vector<Scenario> parts;            // the probed parts (Scenario of discovery.h)
+  std::vector<std::string> injected;  // effect names
+  std::vector<double> snr;            // per injected effect, on the first part
+  double total_peak_um = 0;           // Σ peak |δ_e| on the first part
+  sim::Model machine;                 // shared effects (+ noise)
+  std::vector<sim::Model> setups;     // per part: its set-up effects
+  std::vector<Scenario> parts;        // the probed parts (Scenario of discovery.h)
   // True effects per part: the machine's plus the part's set-up (grading).
   sim::Model TruthOf(std::size_t part) const {
     sim::Model m = machine;
@@ -219,19 +219,25 @@ namespace formloop::testing {
 
 // How a diagnosis of a scenario's parts compares with the truth.
 struct Grade {
-  int true_effects = 0;       // effect instances: shared ones once, a set-up once per part
-  int found = 0;              // named or inside a reported alias group
-  int false_named = 0;        // named outside any alias group, not in the truth
-  int parameters = 0;         // of named true effects
-  int inside = 0;             // ... inside their 95 % interval
-  bool gain_ok = false;       // held-out RMS fell by ≥ 50 % of the systematic RMS
+  int true_effects = 0;  // effect instances: shared ones once, a set-up once per part
+  int found = 0;         // named or inside a reported alias group
+  int false_named = 0;   // named outside any alias group, not in the truth
+  int parameters = 0;    // of named true effects
+  int inside = 0;        // ... inside their 95 % interval
+  bool gain_ok = false;  // held-out RMS fell by ≥ 50 % of the systematic RMS
   int alias_groups = 0;
   std::vector<std::string> missed, false_names;
   nlohmann::json outside = nlohmann::json::array();  // named parameters whose interval misses the truth
   nlohmann::json ToJson() const {
-    return {{"true_effects", true_effects}, {"found", found},   {"false_named", false_named},
-            {"parameters", parameters},     {"inside", inside}, {"gain_ok", gain_ok},
-            {"alias_groups", alias_groups}, {"missed", missed}, {"false_names", false_names},
+    return {{"true_effects", true_effects},
+            {"found", found},
+            {"false_named", false_named},
+            {"parameters", parameters},
+            {"inside", inside},
+            {"gain_ok", gain_ok},
+            {"alias_groups", alias_groups},
+            {"missed", missed},
+            {"false_names", false_names},
             {"outside", outside}};
   }
 };
@@ -247,7 +253,9 @@ inline Grade GradeDiagnosis(const sim::Diagnosis& d, const MultiScenario& scenar
   auto grouped = [&](const std::string& l) {
     const std::string every = l.substr(0, l.find('@')) + "@each part";
     for (const auto& grp : d.alias_groups) {
-      if (std::count(grp.members.begin(), grp.members.end(), l) + std::count(grp.members.begin(), grp.members.end(), every) > 0) {
+      if (std::count(grp.members.begin(), grp.members.end(), l) +
+              std::count(grp.members.begin(), grp.members.end(), every) >
+          0) {
         return true;
       }
     }
@@ -287,8 +295,11 @@ inline Grade GradeDiagnosis(const sim::Diagnosis& d, const MultiScenario& scenar
       if (truth->values[j] >= c.lower[j] && truth->values[j] <= c.upper[j]) {
         ++g.inside;
       } else {
-        g.outside.push_back({{"effect", c.Label()}, {"parameter", c.parameter_names[j]}, {"truth", truth->values[j]},
-                             {"estimate", c.parameters[j]}, {"interval", {c.lower[j], c.upper[j]}}});
+        g.outside.push_back({{"effect", c.Label()},
+                             {"parameter", c.parameter_names[j]},
+                             {"truth", truth->values[j]},
+                             {"estimate", c.parameters[j]},
+                             {"interval", {c.lower[j], c.upper[j]}}});
       }
     }
   }

@@ -103,8 +103,8 @@ nlohmann::json RunScenario(int index) {
       if (!dp.ok()) continue;
       nlohmann::json split = nlohmann::json::object();
       for (const auto& sig : GroupSignatures(*d)) split[sig] = Splits(sig, *dp);
-      pooled[std::to_string(parts)] = {{"grade", GradeDiagnosis(*dp, s, parts).ToJson()}, {"split", split},
-                                       {"groups", GroupSignatures(*dp)}};
+      pooled[std::to_string(parts)] = {
+          {"grade", GradeDiagnosis(*dp, s, parts).ToJson()}, {"split", split}, {"groups", GroupSignatures(*dp)}};
     }
     row["pooled"] = pooled;
     // The separating experiment: proposed on this part, applied on the virtual machine, diagnosed again.
@@ -139,11 +139,12 @@ nlohmann::json RunScenario(int index) {
                              {"correlation_measured", measured.ok() ? nlohmann::json(*measured) : nlohmann::json()},
                              {"predicted_to_split", p.predicted_to_split},
                              {"split", Splits(sig, *after)},
-                             {"named", [&] {
-                               nlohmann::json names = nlohmann::json::array();
-                               for (const auto& c : after->causes) names.push_back(c.Label());
-                               return names;
-                             }()},
+                             {"named",
+                              [&] {
+                                nlohmann::json names = nlohmann::json::array();
+                                for (const auto& c : after->causes) names.push_back(c.Label());
+                                return names;
+                              }()},
                              {"groups", GroupSignatures(*after)}});
     }
     row["experiments"] = experiments;
@@ -155,7 +156,7 @@ std::filesystem::path ResultsDir() { return std::filesystem::path(FORMLOOP_RESUL
 
 // The modification time of this test binary: a shard file written by another build is not reused.
 long long BinaryStamp() {
-  struct stat st{};
+  struct stat st {};
   if (stat("/proc/self/exe", &st) != 0) return 0;
   return static_cast<long long>(st.st_mtime);
 }
@@ -287,10 +288,12 @@ SuiteTotals Summarise() {
   std::printf("multi-effect suite: %d scenarios over %zu surfaces (", scenarios, surfaces.size());
   for (const auto& [s, n] : surfaces) std::printf(" %s %d", s.c_str(), n);
   std::printf(" )\n");
-  std::printf("  true effects named or inside a reported alias group: %d of %d (%.1f%%); all of a scenario's: %d of %d (%.1f%%)\n",
-              found, true_effects, 100.0 * found / true_effects, all_found, scenarios, 100.0 * all_found / scenarios);
-  std::printf("  effects named that are not there (outside any alias group): %d in %d scenarios (%.1f%%)\n", false_named,
-              with_false, 100.0 * with_false / scenarios);
+  std::printf(
+      "  true effects named or inside a reported alias group: %d of %d (%.1f%%); all of a scenario's: %d of %d "
+      "(%.1f%%)\n",
+      found, true_effects, 100.0 * found / true_effects, all_found, scenarios, 100.0 * all_found / scenarios);
+  std::printf("  effects named that are not there (outside any alias group): %d in %d scenarios (%.1f%%)\n",
+              false_named, with_false, 100.0 * with_false / scenarios);
   std::printf("  named parameters inside their 95%% interval: %d of %d (%.1f%%)\n", inside, parameters,
               100.0 * inside / std::max(1, parameters));
   std::printf("  held-out RMS falls by >= 50%% of the systematic RMS: %d of %d (%.1f%%)\n", gain_ok, scenarios,
@@ -304,18 +307,19 @@ SuiteTotals Summarise() {
     std::printf("  %-60s %5d %6d/%-3d %3.0f%% %6d/%-3d %3.0f%%\n", sig.c_str(), n, sp[0], sp[1],
                 100.0 * sp[0] / std::max(1, sp[1]), sp[2], sp[3], 100.0 * sp[2] / std::max(1, sp[3]));
   }
-  std::printf("  separating experiment: %d of %d groups split (%.1f%%); all groups of the scenario in %d of %d aliased "
-              "scenarios (%.1f%%)\n",
-              groups_split, experiment_groups, 100.0 * groups_split / std::max(1, experiment_groups), scenarios_split,
-              experiment_scenarios, 100.0 * scenarios_split / std::max(1, experiment_scenarios));
+  std::printf(
+      "  separating experiment: %d of %d groups split (%.1f%%); all groups of the scenario in %d of %d aliased "
+      "scenarios (%.1f%%)\n",
+      groups_split, experiment_groups, 100.0 * groups_split / std::max(1, experiment_groups), scenarios_split,
+      experiment_scenarios, 100.0 * scenarios_split / std::max(1, experiment_scenarios));
   std::printf("  %-60s %5s %9s %9s %9s %9s %9s %8s  %s\n", "alias group", "n", "corr now", "predicted", "measured",
               "pred.split", "split", "cost s", "changes proposed");
   for (const auto& [sig, t] : experiment) {
     std::string kinds;
     for (const auto& [k, c] : t.kinds) kinds += k + " " + std::to_string(c) + " ";
-    std::printf("  %-60s %5d %9.4f %9.4f %9.4f %8.0f%% %8.0f%% %8.0f  %s\n", sig.c_str(), t.count, t.rho_before / t.count,
-                t.rho_predicted / t.count, t.rho_measured / t.count, 100.0 * t.predicted_split / t.count,
-                100.0 * t.split / t.count, t.cost_s / t.count, kinds.c_str());
+    std::printf("  %-60s %5d %9.4f %9.4f %9.4f %8.0f%% %8.0f%% %8.0f  %s\n", sig.c_str(), t.count,
+                t.rho_before / t.count, t.rho_predicted / t.count, t.rho_measured / t.count,
+                100.0 * t.predicted_split / t.count, 100.0 * t.split / t.count, t.cost_s / t.count, kinds.c_str());
   }
   SuiteTotals t;
   t.scenarios = scenarios;
