@@ -8,8 +8,8 @@
 // runs the one analysis of a probe log (metrology/probe_log_analysis.h, the same as each cycle of
 // `formloop run`) and writes DIR/analysis.json, DIR/deviations.csv and .ply (the per-point table, the same
 // columns as a run's loop-K/deviations.*) and DIR/inputs/ (the options as JSON and copies of the input
-// files up to 16 MB); `formloop report DIR` draws it. Everything is computed before DIR is created, so bad input leaves no DIR
-// (or an existing DIR untouched); each file is written atomically and analysis.json last, so a DIR with
+// files up to 16 MB); `formloop report DIR` draws it. Everything is computed before DIR is created, so bad input leaves
+// no DIR (or an existing DIR untouched); each file is written atomically and analysis.json last, so a DIR with
 // analysis.json is complete. Points whose foot point on Q is farther than --max-distance-mm, or whose
 // foot point is held at the edge of Q (the deviation is then not a normal distance), are listed under
 // "flagged_points" and left out of the statistics and of deviations.csv|.ply.
@@ -33,8 +33,8 @@
 #include <optional>
 #include <set>
 #include <sstream>
-#include <string_view>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
@@ -147,8 +147,8 @@ Status RunMoran(const MoranArgs& args) {
     return Status::BadInput(Where{.field = "--lisa-permutations"},
                             "must lie in 0 .. " + std::to_string(kMaxPermutations), "use e.g. 999, or 0");
   }
-  FL_RETURN_IF_ERROR(CheckOutputsNotInputs({{"--lisa", args.lisa_out}},
-                                           {{"--points", args.points}, {"--weights", args.gal}}));
+  FL_RETURN_IF_ERROR(
+      CheckOutputsNotInputs({{"--lisa", args.lisa_out}}, {{"--points", args.points}, {"--weights", args.gal}}));
   FL_ASSIGN_OR_RETURN(const WeightStyle style, metrology::ParseWeightStyle(args.style, "--style"));
   FL_ASSIGN_OR_RETURN(const IslandPolicy policy, metrology::ParseIslandPolicy(args.islands, "--islands"));
   FL_ASSIGN_OR_RETURN(const CsvTable table, ReadCsvTable(args.points));
@@ -306,14 +306,14 @@ struct PartArgs {
   }
 };
 
-
 Status ValidatePartArgs(const PartArgs& a) {
   if (a.knn < 1) return Status::BadInput(Where{.field = "--knn"}, "must be at least 1", "use e.g. 8");
   if (!(a.max_distance_mm > 0) || !std::isfinite(a.max_distance_mm)) {
     return Status::BadInput(Where{.field = "--max-distance-mm"}, "must be a positive distance", "use e.g. 1");
   }
   if (!std::isnan(a.tolerance_um) && !(a.tolerance_um > 0 && std::isfinite(a.tolerance_um))) {
-    return Status::BadInput(Where{.field = "--tolerance-um"}, "must be positive", "give the form tolerance in um, e.g. 20");
+    return Status::BadInput(Where{.field = "--tolerance-um"}, "must be positive",
+                            "give the form tolerance in um, e.g. 20");
   }
   if (!std::isnan(a.ball_radius_mm) && !(a.ball_radius_mm > 0 && std::isfinite(a.ball_radius_mm))) {
     return Status::BadInput(Where{.field = "--ball-radius"}, "must be positive", "give the stylus-ball radius in mm");
@@ -337,8 +337,8 @@ Status CopyInput(const std::string& from, const fs::path& to, nlohmann::json* co
   std::error_code ec;
   const std::uintmax_t size = fs::file_size(from, ec);
   if (ec || size > kMaxCopyBytes) {
-    (*copies)[to.filename().string()] = {{"from", from}, {"copied", false},
-                                         {"reason", ec ? "size unknown" : "larger than 16 MB"}};
+    (*copies)[to.filename().string()] = {
+        {"from", from}, {"copied", false}, {"reason", ec ? "size unknown" : "larger than 16 MB"}};
     return Status::Ok();
   }
   FL_ASSIGN_OR_RETURN(const std::string content, ReadFile(from));
@@ -352,7 +352,9 @@ Status RunPartAnalysis(const PartArgs& args) {
   // Built whole in DIR.partial and renamed into place; only a folder formloop wrote is replaced.
   StagedOutputFolder folder;
   FL_RETURN_IF_ERROR(folder.Open(args.out, "--out", "analyse",
-                                 {{"--surface", args.surface}, {"--probe-log", args.probe_log}, {"--plan", args.plan},
+                                 {{"--surface", args.surface},
+                                  {"--probe-log", args.probe_log},
+                                  {"--plan", args.plan},
                                   {"--probe-profile", args.probe_profile}}));
   metrology::ProbeLogAnalysisOptions options;
   FL_ASSIGN_OR_RETURN(options.registration, metrology::ParseDofMask(args.register_dofs, "--register"));
@@ -391,19 +393,21 @@ Status RunPartAnalysis(const PartArgs& args) {
   FL_RETURN_IF_ERROR(points.Validate("analyse deviations"));
 
   nlohmann::json probe_json = metrology::ProbeProfileToJson(probe);
-  probe_json["source"] = args.probe_profile.empty()
-                             ? (std::isnan(args.ball_radius_mm) ? "default (ball radius 1 mm, no pretravel)" : "--ball-radius")
-                             : args.probe_profile;
+  probe_json["source"] =
+      args.probe_profile.empty()
+          ? (std::isnan(args.ball_radius_mm) ? "default (ball radius 1 mm, no pretravel)" : "--ball-radius")
+          : args.probe_profile;
   probe_json["compensation"] = "p = c + (R_nom - delta(a)) a along each record's approach direction a";
 
   nlohmann::json analysis;
   analysis["format"] = "formloop part analysis";
   analysis["version"] = 1;
-  analysis["inputs"] = {{"surface", {{"file", args.surface},
-                                     {"face_index", face.info.index},
-                                     {"face_name", face.info.name},
-                                     {"surface_type", face.info.surface_type},
-                                     {"file_unit", face.file_unit}}},
+  analysis["inputs"] = {{"surface",
+                         {{"file", args.surface},
+                          {"face_index", face.info.index},
+                          {"face_name", face.info.name},
+                          {"surface_type", face.info.surface_type},
+                          {"file_unit", face.file_unit}}},
                         {"probe_log", {{"file", args.probe_log}, {"records", log.records.size()}}},
                         {"plan", plan ? nlohmann::json{{"file", args.plan},
                                                        {"points", plan->points.size()},
@@ -413,10 +417,10 @@ Status RunPartAnalysis(const PartArgs& args) {
                                           : "from the log; foot points by global search on Q (no plan)"},
                         {"options", args.ToJson()}};
   analysis["probe"] = probe_json;
-  analysis["registration"] = result.registration
-                                 ? result.registration->ToJson()
-                                 : nlohmann::json{{"enabled", false},
-                                                  {"note", "off (default): deviations in the machine frame"}};
+  analysis["registration"] =
+      result.registration
+          ? result.registration->ToJson()
+          : nlohmann::json{{"enabled", false}, {"note", "off (default): deviations in the machine frame"}};
   analysis["search_distance_mm"] = args.max_distance_mm;
   analysis["flagged_points"] = result.FlaggedJson();
   analysis["deviations"] = result.DeviationSummaryJson();
@@ -470,10 +474,11 @@ Status RunPartAnalysis(const PartArgs& args) {
   FL_RETURN_IF_ERROR(WritePoints(dir / "deviations.ply", points));
   FL_RETURN_IF_ERROR(WritePoints(dir / "deviations.csv", points, {.precision = 6}));
   FL_RETURN_IF_ERROR(WriteJsonFile(dir / "analysis.json", analysis));
-  log::Info("analyse: {} points ({} flagged), rms {:.2f} um, raw Moran z {:.2f}; model {}, d_s rms {:.2f} um, "
-            "d_u rms {:.2f} um -> {}",
-            n, result.flagged.size(), analysis["deviations"]["rms_um"].get<double>(), dec.raw.z_normality,
-            dec.systematic.name(), dec.systematic_rms_um, dec.random_rms_um, args.out);
+  log::Info(
+      "analyse: {} points ({} flagged), rms {:.2f} um, raw Moran z {:.2f}; model {}, d_s rms {:.2f} um, "
+      "d_u rms {:.2f} um -> {}",
+      n, result.flagged.size(), analysis["deviations"]["rms_um"].get<double>(), dec.raw.z_normality,
+      dec.systematic.name(), dec.systematic_rms_um, dec.random_rms_um, args.out);
   return folder.Commit();
 }
 
@@ -490,7 +495,8 @@ void AddAnalyseCommand(CLI::App& root, CommandAction* action) {
   analyse->add_option("--surface", part->surface, "Q as a STEP or IGES file (e.g. from `formloop fit`)");
   analyse->add_option("--face", part->face_index, "0-based face index in the CAD file (default: its only face)");
   analyse->add_option("--face-name", part->face_name, "face name in the CAD file");
-  analyse->add_option("--probe-log", part->probe_log, "probe log CSV: id,x,y,z,ax,ay,az,t (ball centre, approach, time)");
+  analyse->add_option("--probe-log", part->probe_log,
+                      "probe log CSV: id,x,y,z,ax,ay,az,t (ball centre, approach, time)");
   analyse->add_option("--plan", part->plan,
                       "probing plan JSON (e.g. toolpath/probing_plan.json): ids are checked against it and the "
                       "foot-point search starts at the planned (u, v)");
@@ -509,7 +515,8 @@ void AddAnalyseCommand(CLI::App& root, CommandAction* action) {
       ->add_option("--max-distance-mm", part->max_distance_mm,
                    "search distance: points whose foot point is farther are flagged and left out")
       ->capture_default_str();
-  analyse->add_option("--max-control-net", part->max_control_net, "largest B-spline field net tried (3: polynomials only)")
+  analyse
+      ->add_option("--max-control-net", part->max_control_net, "largest B-spline field net tried (3: polynomials only)")
       ->capture_default_str();
   analyse->add_option("--coverage-factor", part->coverage_factor, "k in form error = max|d_s| + k sigma(d_u)")
       ->capture_default_str();
@@ -570,8 +577,9 @@ void AddAnalyseCommand(CLI::App& root, CommandAction* action) {
     }
     if (part->surface.empty() || part->probe_log.empty() || part->out.empty()) {
       throw CLI::ValidationError(
-          "analyse", "give --surface Q.step --probe-log LOG.csv --out DIR for the part analysis, or a subcommand "
-                     "(moran); see formloop analyse --help");
+          "analyse",
+          "give --surface Q.step --probe-log LOG.csv --out DIR for the part analysis, or a subcommand "
+          "(moran); see formloop analyse --help");
     }
     *action = [part] { return RunPartAnalysis(*part); };
   });

@@ -98,8 +98,9 @@ void AddFitCommand(CLI::App& root, CommandAction* action) {
   auto args = std::make_shared<FitArgs>();
   FitRequest& r = args->request;
   CLI::App* fit = root.add_subcommand(
-      "fit", "The ideal surface Q as a B-spline (STEP) with its fit report, from points, a CAD face or an analytic "
-             "reference surface.");
+      "fit",
+      "The ideal surface Q as a B-spline (STEP) with its fit report, from points, a CAD face or an analytic "
+      "reference surface.");
   fit->add_option("input", r.input,
                   "points (.csv .ply .xyz .pcd), CAD (.step .stp .iges .igs) or analytic:NAME "
                   "(see `formloop surfaces list`)")
@@ -124,7 +125,8 @@ void AddFitCommand(CLI::App& root, CommandAction* action) {
       ->capture_default_str();
   fit->add_option("--degree", r.scattered.degree, "scattered: B-spline degree")->capture_default_str();
   fit->add_option("--poles", args->poles, "scattered: control net NUxNV (default: chosen from the point count)");
-  fit->add_option("--smoothing", args->smoothing, "scattered: thin-plate weight by gcv, to a target tolerance, or fixed")
+  fit->add_option("--smoothing", args->smoothing,
+                  "scattered: thin-plate weight by gcv, to a target tolerance, or fixed")
       ->capture_default_str();
   fit->add_option("--lambda", r.scattered.lambda, "scattered, --smoothing fixed: the weight (dimensionless)");
   fit->add_option("--tolerance-mm", args->tolerance_mm,
@@ -148,15 +150,17 @@ void AddFitCommand(CLI::App& root, CommandAction* action) {
   auto project_args = std::make_shared<ProjectRequest>();
   auto project_face = std::make_shared<int>(-1);
   CLI::App* project = root.add_subcommand(
-      "project", "Foot points of points on Q: signed deviation (+ = material left), foot point, unit normal, (u, v) "
-                 "and a boundary flag for every point. Summary (JSON) on stdout.");
+      "project",
+      "Foot points of points on Q: signed deviation (+ = material left), foot point, unit normal, (u, v) "
+      "and a boundary flag for every point. Summary (JSON) on stdout.");
   project->add_option("--surface", project_args->surface, "Q as a STEP or IGES file")->required();
   project->add_option("--face", *project_face, "0-based face index when the file has several faces");
   project->add_option("--face-name", project_args->face.name, "face name");
   project->add_option("--points", project_args->points, "points (.csv .ply .xyz .pcd)")->required();
-  project->add_option("--out", project_args->out,
-                      "deviations (.csv .ply .xyz .pcd): the points with the normals of Q and the columns "
-                      "deviation_mm, foot_u, foot_v (parameters of the foot point), foot_x, foot_y, foot_z, on_boundary")
+  project
+      ->add_option("--out", project_args->out,
+                   "deviations (.csv .ply .xyz .pcd): the points with the normals of Q and the columns "
+                   "deviation_mm, foot_u, foot_v (parameters of the foot point), foot_x, foot_y, foot_z, on_boundary")
       ->required();
   project->callback([action, project_args, project_face] {
     *action = [project_args, project_face] {

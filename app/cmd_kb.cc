@@ -35,8 +35,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "app/command.h"
 #include "app/case_knowledge.h"
+#include "app/command.h"
 #include "app/kb_jobs.h"
 #include "app/route_calibration.h"
 #include "core/json_io.h"
@@ -104,7 +104,8 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
   init->add_flag("--starter", args->starter,
                  "fill a new library with the synthetic starter cases (data/starter/families.json), write the starter "
                  "rule base (data/starter/rules.json) and train the GHSOM");
-  init->add_option("--data", args->data, "data folder with taxonomies/ and starter/ (default: the source tree's data/)");
+  init->add_option("--data", args->data,
+                   "data folder with taxonomies/ and starter/ (default: the source tree's data/)");
   init->callback([args, action] {
     *action = [args]() -> Status {
       FL_ASSIGN_OR_RETURN(kb::InitReport report, kb::InitLibrary(args->path));
@@ -134,7 +135,8 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
     *action = [args]() -> Status {
       FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
       FL_ASSIGN_OR_RETURN(nlohmann::json report, retrieval::TrainLibraryGhsom(*library, TrainOptions(*args)));
-      log::Info("GHSOM {} trained on {} case(s)", report["ghsom_id"].get<long long>(), report["cases"].get<long long>());
+      log::Info("GHSOM {} trained on {} case(s)", report["ghsom_id"].get<long long>(),
+                report["cases"].get<long long>());
       Print(report);
       return Status::Ok();
     };
@@ -147,9 +149,11 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
       "--rerun, every retained part cut on the virtual machine run again through the pipeline on a library without "
       "it, per route how many end within tolerance on the first cycle and after one compensation loop.",
       args.get());
-  calibrate->add_option("--breadth", args->breadth, "candidate breadth (0 leaf, 1 + neighbours, 2 + the leaf's map ...)");
-  calibrate->add_option("--max-cases", args->max_cases,
-                        "leave out at most this many cases, evenly spaced (0: all; each costs one GHSOM training)")
+  calibrate->add_option("--breadth", args->breadth,
+                        "candidate breadth (0 leaf, 1 + neighbours, 2 + the leaf's map ...)");
+  calibrate
+      ->add_option("--max-cases", args->max_cases,
+                   "leave out at most this many cases, evenly spaced (0: all; each costs one GHSOM training)")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
   calibrate->add_flag("--rerun", args->rerun, "run the retained virtual-machine parts again (a pipeline run each)");
@@ -170,9 +174,8 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
     };
   });
 
-  CLI::App* migrate = PathCommand(kb, "migrate",
-                                  "Migrate an existing case library to this formloop's schema (never downgrades).",
-                                  args.get());
+  CLI::App* migrate = PathCommand(
+      kb, "migrate", "Migrate an existing case library to this formloop's schema (never downgrades).", args.get());
   migrate->callback([args, action] {
     *action = [args]() -> Status {
       FL_RETURN_IF_ERROR(kb::ProbeLibraryFile(args->path, /*allow_unversioned=*/false).status());
@@ -202,8 +205,8 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
     };
   });
 
-  CLI::App* import_cmd = PathCommand(kb, "import", "Import a `kb export` file (JSON Lines) in one transaction.",
-                                 args.get());
+  CLI::App* import_cmd =
+      PathCommand(kb, "import", "Import a `kb export` file (JSON Lines) in one transaction.", args.get());
   import_cmd->add_option("file", args->file, "export file, e.g. cases.jsonl")->required();
   import_cmd->add_flag("--replace", args->replace, "replace cases whose uid exists instead of refusing the import");
   import_cmd->add_option("--data", args->data, "data folder whose taxonomies/ the concepts are checked against");
@@ -223,13 +226,12 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
   });
 
   CLI::App* export_cmd = PathCommand(kb, "export", "Export the library as deterministic JSON Lines.", args.get());
-  export_cmd->add_option("--out", args->out, "output file (written through a temporary file and renamed)")
-      ->required();
+  export_cmd->add_option("--out", args->out, "output file (written through a temporary file and renamed)")->required();
   export_cmd->callback([args, action] {
     *action = [args]() -> Status {
-      FL_RETURN_IF_ERROR(CheckOutputsNotInputs({{"--out", args->out}}, {{"PATH", args->path},
-                                                                        {"PATH", args->path + "-wal"},
-                                                                        {"PATH", args->path + "-shm"}}));
+      FL_RETURN_IF_ERROR(
+          CheckOutputsNotInputs({{"--out", args->out}},
+                                {{"PATH", args->path}, {"PATH", args->path + "-wal"}, {"PATH", args->path + "-shm"}}));
       FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
       FL_RETURN_IF_ERROR(library->ExportToFile(args->out));
       FL_ASSIGN_OR_RETURN(kb::LibraryStats stats, library->Stats());
@@ -289,8 +291,8 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
     };
   });
 
-  CLI::App* stats = PathCommand(kb, "stats", "Counts per family and per facet concept, rule version, GHSOM status.",
-                                args.get());
+  CLI::App* stats =
+      PathCommand(kb, "stats", "Counts per family and per facet concept, rule version, GHSOM status.", args.get());
   stats->callback([args, action] {
     *action = [args]() -> Status {
       FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
@@ -320,18 +322,17 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
       out["retrieval_problems"] = retrieval_problems;
       Print(out);
       if (!report.clean()) {
-        return Status::Failed("case library '" + args->path + "' is not clean: " + report.problems.front() +
-                              (report.problems.size() > 1 ? " (and " + std::to_string(report.problems.size() - 1) +
-                                                                " more)"
-                                                          : ""));
+        return Status::Failed(
+            "case library '" + args->path + "' is not clean: " + report.problems.front() +
+            (report.problems.size() > 1 ? " (and " + std::to_string(report.problems.size() - 1) + " more)" : ""));
       }
       for (const auto& w : report.warnings) log::Warn("{}", w);
       return Status::Ok();
     };
   });
 
-  CLI::App* rules = PathCommand(kb, "rules", "Print the active rule base, or write a new version with --set.",
-                                args.get());
+  CLI::App* rules =
+      PathCommand(kb, "rules", "Print the active rule base, or write a new version with --set.", args.get());
   rules->add_option("--set", args->rules, "rules file: {\"rules\": [{\"name\", \"condition\", \"choice\"}, ...]}");
   rules->callback([args, action] {
     *action = [args]() -> Status {

@@ -6,8 +6,8 @@
 //   formloop nc compensate --toolpath path.csv --field ds.csv --out P1 --side side.csv [--nominal P0] [--dialect D]
 //   formloop nc compensate --program SHOP.ngc --surface Q.step --ball-radius-mm R --field ds.csv --out P1 --side S
 //   formloop nc distribute PROGRAM --deviations D.csv --out OUT      (M57/M58/M59, app/cmd_nc_program.cc)
-//   formloop nc probe --surface Q.step --out probe.ngc   [--dialect D] [--grid NUxNV | --count N [--curvature-weight B]]
-//   formloop nc check --nominal P0 --compensated P1 --side side.csv [--field ds.csv] [--dialect D]
+//   formloop nc probe --surface Q.step --out probe.ngc   [--dialect D] [--grid NUxNV | --count N [--curvature-weight
+//   B]] formloop nc check --nominal P0 --compensated P1 --side side.csv [--field ds.csv] [--dialect D]
 //
 // Every program passes the machine-limit check before any text exists; a refusal names the block
 // or probe point and nothing is written. Outputs are written through a temporary file and renamed.
@@ -78,9 +78,11 @@ struct MachineArgs {
       return Status::BadInput(Where{.field = "--max-line-length"}, "must be 0 (no limit) or at least 16",
                               "give the controller's longest line, or 0");
     }
-    for (const auto& [option, value] : {std::pair<const char*, double>{"--travel-mm", travel}, {"--travel-z-mm", travel_z}}) {
+    for (const auto& [option, value] :
+         {std::pair<const char*, double>{"--travel-mm", travel}, {"--travel-z-mm", travel_z}}) {
       if (!(value > 0 && value <= 100000)) {
-        return Status::BadInput(Where{.field = option}, "must lie in (0, 100000] mm, got " + FormatSignificant(value, 6),
+        return Status::BadInput(Where{.field = option},
+                                "must lie in (0, 100000] mm, got " + FormatSignificant(value, 6),
                                 "give the machine's travel from the part zero in mm");
       }
     }
@@ -95,17 +97,17 @@ struct MachineArgs {
   // A feed or speed above the machine's limit, named by its option.
   Status CheckFeed(const char* option, double value) const {
     if (value <= max_feed) return Status::Ok();
-    return Status::BadInput(Where{.field = option},
-                            FormatSignificant(value, 6) + " mm/min is above the machine's --max-feed " +
-                                FormatSignificant(max_feed, 6),
-                            "lower it, or give the machine's real limit with --max-feed");
+    return Status::BadInput(
+        Where{.field = option},
+        FormatSignificant(value, 6) + " mm/min is above the machine's --max-feed " + FormatSignificant(max_feed, 6),
+        "lower it, or give the machine's real limit with --max-feed");
   }
   Status CheckSpindle(double value) const {
     if (value <= max_spindle) return Status::Ok();
-    return Status::BadInput(Where{.field = "--spindle"},
-                            FormatSignificant(value, 6) + " rpm is above the machine's --max-spindle " +
-                                FormatSignificant(max_spindle, 6),
-                            "lower it, or give the machine's real limit with --max-spindle");
+    return Status::BadInput(
+        Where{.field = "--spindle"},
+        FormatSignificant(value, 6) + " rpm is above the machine's --max-spindle " + FormatSignificant(max_spindle, 6),
+        "lower it, or give the machine's real limit with --max-spindle");
   }
   nc::PostOptions Post(const std::string& title) const {
     nc::PostOptions post;
@@ -163,9 +165,9 @@ Status PlanAndPost(const PathArgs& input) {
   FL_RETURN_IF_ERROR(args.machine.CheckFeed("--feed", args.path.feed_mm_per_min));
   FL_RETURN_IF_ERROR(args.machine.CheckFeed("--plunge-feed", args.path.plunge_feed_mm_per_min));
   FL_RETURN_IF_ERROR(args.machine.CheckSpindle(args.path.spindle_rpm));
-  FL_RETURN_IF_ERROR(CheckOutputsNotInputs(
-      {{"--out", args.out}, {"--toolpath", args.toolpath}, {"--report", args.report}},
-      {{"--surface", args.surface.surface}}));
+  FL_RETURN_IF_ERROR(
+      CheckOutputsNotInputs({{"--out", args.out}, {"--toolpath", args.toolpath}, {"--report", args.report}},
+                            {{"--surface", args.surface.surface}}));
   FL_ASSIGN_OR_RETURN(const recon::CadFace face, args.surface.Read());
   FL_RETURN_IF_ERROR(args.path.Validate());
   const nc::RasterEstimate estimate = nc::EstimateRaster(face.surface, args.path);
@@ -180,8 +182,8 @@ Status PlanAndPost(const PathArgs& input) {
   std::string program;
   if (!args.out.empty()) {
     FL_ASSIGN_OR_RETURN(const nc::MoveList moves, nc::BuildMoveList(path));
-    FL_ASSIGN_OR_RETURN(program, nc::Post(moves, args.machine.dialect,
-                                          args.machine.Post("formloop nc path " + args.surface.surface)));
+    FL_ASSIGN_OR_RETURN(
+        program, nc::Post(moves, args.machine.dialect, args.machine.Post("formloop nc path " + args.surface.surface)));
   }
   // All files or none: the report waits in its temporary file until the others are in place.
   std::unique_ptr<AtomicFile> report;
@@ -202,9 +204,10 @@ Status PlanAndPost(const PathArgs& input) {
             args.path.raster_angle_deg, args.out.empty() ? "" : ", " + args.machine.dialect + " program -> " + args.out,
             args.toolpath.empty() ? "" : ", tool path -> " + args.toolpath);
   if (path.gouge_risk_points > 0) {
-    log::Warn("nc path: {} CL points lie where Q is concave below the ball radius; they are lifted and the region "
-              "is left uncut (see the report)",
-              path.gouge_risk_points);
+    log::Warn(
+        "nc path: {} CL points lie where Q is concave below the ball radius; they are lifted and the region "
+        "is left uncut (see the report)",
+        path.gouge_risk_points);
   }
   return Status::Ok();
 }
@@ -264,9 +267,9 @@ Status CompensateProgram(const CompensateArgs& args) {
     return Status::BadInput(Where{.field = "--max-offset-um"}, "must lie in (0, 5000] um",
                             "a compensation offset is a few to a few hundred um; use e.g. 200");
   }
-  FL_RETURN_IF_ERROR(CheckOutputsNotInputs(
-      {{"--out", args.out}, {"--side", args.side}},
-      {{"--toolpath", args.toolpath}, {"--field", args.field}, {"--nominal", args.nominal}}));
+  FL_RETURN_IF_ERROR(
+      CheckOutputsNotInputs({{"--out", args.out}, {"--side", args.side}},
+                            {{"--toolpath", args.toolpath}, {"--field", args.field}, {"--nominal", args.nominal}}));
   FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::ReadToolpathFile(args.toolpath));
   FL_ASSIGN_OR_RETURN(nc::DeviationField field, nc::ReadDeviationField(args.field, {.smoothing = args.lambda}));
   const nc::PostOptions post = args.machine.Post("formloop nc compensate " + args.toolpath);
@@ -281,7 +284,8 @@ Status CompensateProgram(const CompensateArgs& args) {
   }
   nc::CompensationOptions options;
   options.max_offset_um = args.max_offset_um;
-  const std::string source = "systematic field " + args.field + " (thin-plate, lambda " + FormatExact(args.lambda) + ")";
+  const std::string source =
+      "systematic field " + args.field + " (thin-plate, lambda " + FormatExact(args.lambda) + ")";
   FL_ASSIGN_OR_RETURN(const nc::Compensation compensation,
                       nc::WriteCompensatedProgram(path, nominal, field.AsSystematicField(), source, options, post,
                                                   args.out, args.side, args.machine.dialect));
@@ -302,7 +306,7 @@ struct ProbeArgs {
   MachineArgs machine;
   nc::ProbeProgramOptions probe;
   std::string grid = "10x10";
-  int count = 0;                 // > 0: curvature-weighted plan of this many points instead of the grid
+  int count = 0;  // > 0: curvature-weighted plan of this many points instead of the grid
   double curvature_weight = 1.0;
   double inset_fraction = 0.05;
   std::string out;
@@ -332,13 +336,12 @@ Status PlanAndPostProbing(const ProbeArgs& args) {
   FL_RETURN_IF_ERROR(CheckOutputsNotInputs({{"--out", args.out}}, {{"--surface", args.surface.surface}}));
   FL_RETURN_IF_ERROR(args.probe.Validate());
   const double points = args.count > 0 ? args.count : static_cast<double>(nu) * nv;
-  const WorkEstimate work{
-      .what = "the probing program",
-      .points = points,
-      .memory_bytes = 20e6 + 2e3 * points,
-      .machining_s = nc::ProbingSeconds(points, args.probe.clearance_mm, args.probe.search_mm,
-                                        args.probe.probe_feed_mm_per_min),
-      .output_bytes = 250 * points};
+  const WorkEstimate work{.what = "the probing program",
+                          .points = points,
+                          .memory_bytes = 20e6 + 2e3 * points,
+                          .machining_s = nc::ProbingSeconds(points, args.probe.clearance_mm, args.probe.search_mm,
+                                                            args.probe.probe_feed_mm_per_min),
+                          .output_bytes = 250 * points};
   FL_RETURN_IF_ERROR(CheckWork(work, "", args.count > 0 ? "--count" : "--grid"));
   FL_ASSIGN_OR_RETURN(const recon::CadFace face, args.surface.Read());
   metrology::ProbingPlan plan;
@@ -364,8 +367,8 @@ Status PlanAndPostProbing(const ProbeArgs& args) {
   for (const auto& path : paths) outputs.push_back({"--out", path});
   FL_RETURN_IF_ERROR(CheckOutputsNotInputs(outputs, {{"--surface", args.surface.surface}}));
   for (std::size_t b = 0; b < programs.size(); ++b) FL_RETURN_IF_ERROR(WriteFileAtomic(paths[b], programs[b]));
-  log::Info("nc probe: {} points, {} {} program(s) -> {}{}", plan.points.size(), programs.size(),
-            args.machine.dialect, paths.front().string(),
+  log::Info("nc probe: {} points, {} {} program(s) -> {}{}", plan.points.size(), programs.size(), args.machine.dialect,
+            paths.front().string(),
             programs.size() > 1 ? " .. " + paths.back().string() + " (the controller stores the results of at most " +
                                       std::to_string(nc::FindPost(args.machine.dialect)->ProbeResultCapacity(options)) +
                                       " points at once)"
@@ -425,8 +428,9 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
 
   auto path_args = std::make_shared<PathArgs>();
   CLI::App* path = nc->add_subcommand(
-      "path", "Plan a ball-end raster on Q (scallop-driven step-over, chord tolerance, concave regions below the "
-              "ball radius lifted and flagged) and post it for a controller.");
+      "path",
+      "Plan a ball-end raster on Q (scallop-driven step-over, chord tolerance, concave regions below the "
+      "ball radius lifted and flagged) and post it for a controller.");
   AddSurfaceOptions(path, &path_args->surface);
   AddMachineOptions(path, &path_args->machine);
   nc::ToolpathOptions& p = path_args->path;
@@ -446,7 +450,8 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
   path->add_option("--lead-mm", p.lead_mm, "radius of the arc lead-in/out at each pass end, mm (0: none)")
       ->capture_default_str();
   path->add_option("--out", path_args->out, "the program");
-  path->add_option("--toolpath", path_args->toolpath, "the planned path as a CSV file (for `nc post`, `nc compensate`)");
+  path->add_option("--toolpath", path_args->toolpath,
+                   "the planned path as a CSV file (for `nc post`, `nc compensate`)");
   path->add_option("--report", path_args->report, "tool-path report (JSON): passes, step-over, lifted region");
   path->callback([action, path_args] { *action = [path_args] { return PlanAndPost(*path_args); }; });
 
@@ -459,8 +464,9 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
 
   auto comp_args = std::make_shared<CompensateArgs>();
   CLI::App* comp = nc->add_subcommand(
-      "compensate", "Mirror compensation: move every cutting CL point by -d_s*n of a systematic field, post the "
-                    "program, check it against the nominal one and write it with its side file (both or neither).");
+      "compensate",
+      "Mirror compensation: move every cutting CL point by -d_s*n of a systematic field, post the "
+      "program, check it against the nominal one and write it with its side file (both or neither).");
   comp->add_option("--toolpath", comp_args->toolpath, "the nominal tool-path file (or --program)");
   ShopProgramArgs& shop = comp_args->shop;
   comp->add_option("--program", shop.program,
@@ -489,15 +495,18 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
 
   auto probe_args = std::make_shared<ProbeArgs>();
   CLI::App* probe = nc->add_subcommand(
-      "probe", "A probing program over Q: a grid of points equidistant in parameter space, each approached along "
-               "its normal from a clearance, probed along -n with a search distance, and retracted.");
+      "probe",
+      "A probing program over Q: a grid of points equidistant in parameter space, each approached along "
+      "its normal from a clearance, probed along -n with a search distance, and retracted.");
   AddSurfaceOptions(probe, &probe_args->surface);
   AddMachineOptions(probe, &probe_args->machine);
   probe->add_option("--grid", probe_args->grid, "points NUxNV equidistant in parameter space")->capture_default_str();
-  probe->add_option("--count", probe_args->count,
-                    "instead of the grid: this many points, denser where Q is curved (weighted farthest-point sampling)");
-  probe->add_option("--curvature-weight", probe_args->curvature_weight,
-                    "with --count: 0 = evenly spread on Q; larger = more points where curvature is high")
+  probe->add_option(
+      "--count", probe_args->count,
+      "instead of the grid: this many points, denser where Q is curved (weighted farthest-point sampling)");
+  probe
+      ->add_option("--curvature-weight", probe_args->curvature_weight,
+                   "with --count: 0 = evenly spread on Q; larger = more points where curvature is high")
       ->capture_default_str();
   probe->add_option("--inset", probe_args->inset_fraction, "keep this fraction of the domain free at each edge")
       ->capture_default_str();
@@ -507,18 +516,21 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
   probe->add_option("--search-mm", o.search_mm, "probe this far beyond Q, mm")->capture_default_str();
   probe->add_option("--probe-feed", o.probe_feed_mm_per_min, "probing feed, mm/min")->capture_default_str();
   probe->add_option("--safe-z-mm", o.safe_z_mm, "rapid height between points, mm")->capture_default_str();
-  probe->add_option("--fanuc-result-base", o.fanuc_result_base,
-                    "Fanuc: first common variable of the results (#100-#199 or #500-#999); a plan that does not fit "
-                    "is split into programs OUT_1, OUT_2, ...")
+  probe
+      ->add_option("--fanuc-result-base", o.fanuc_result_base,
+                   "Fanuc: first common variable of the results (#100-#199 or #500-#999); a plan that does not fit "
+                   "is split into programs OUT_1, OUT_2, ...")
       ->capture_default_str();
   probe->add_option("--sinumerik-r-base", o.sinumerik_r_base, "Sinumerik: first R parameter of the results")
       ->capture_default_str();
-  probe->add_option("--sinumerik-r-last", o.sinumerik_r_last,
-                    "Sinumerik: the control's last R parameter (MD28050 - 1); a plan that does not fit is split")
+  probe
+      ->add_option("--sinumerik-r-last", o.sinumerik_r_last,
+                   "Sinumerik: the control's last R parameter (MD28050 - 1); a plan that does not fit is split")
       ->capture_default_str();
-  probe->add_option("--probe-tool", o.probe_tool,
-                    "the probe's tool number: changed to and its length offset activated (G43 H; length to the "
-                    "stylus-ball centre)")
+  probe
+      ->add_option("--probe-tool", o.probe_tool,
+                   "the probe's tool number: changed to and its length offset activated (G43 H; length to the "
+                   "stylus-ball centre)")
       ->capture_default_str();
   probe->add_option("--out", probe_args->out, "the program")->required();
   probe->callback([action, probe_args] { *action = [probe_args] { return PlanAndPostProbing(*probe_args); }; });
@@ -527,12 +539,12 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
 
   auto check_args = std::make_shared<CheckArgs>();
   CLI::App* check = nc->add_subcommand(
-      "check", "Recompute every compensated block from the nominal and compensated programs and compare it with the "
-               "side file and, given the field, with -d_s*n; JSON report on stdout, exit 1 if any block disagrees.");
+      "check",
+      "Recompute every compensated block from the nominal and compensated programs and compare it with the "
+      "side file and, given the field, with -d_s*n; JSON report on stdout, exit 1 if any block disagrees.");
   check->add_option("--nominal", check_args->nominal, "the nominal program")->required();
   check->add_option("--compensated", check_args->compensated, "the compensated program")->required();
-  check->add_option("--side", check_args->side, "the side file (CSV) written with the compensated program")
-      ->required();
+  check->add_option("--side", check_args->side, "the side file (CSV) written with the compensated program")->required();
   check->add_option("--field", check_args->field, "the systematic field as CSV u,v,ds_um (thin-plate interpolated)");
   check->add_option("--lambda", check_args->lambda, "smoothing of the field (0 = interpolate)")->capture_default_str();
   check->add_option("--dialect", check_args->dialect, "dialect of both programs")->capture_default_str();

@@ -30,8 +30,9 @@ void SetAction(CLI::App* cmd, std::shared_ptr<Args> args, CommandAction* action,
 
 void AddOptimiseCommand(CLI::App& root, CommandAction* action) {
   CLI::App* optimise = root.add_subcommand(
-      "optimise", "Process optimisation (spec/process-optimization.md): cutting parameters by the adaptive GA, fuzzy "
-                  "feed control on spindle current, NC blocks adjusted from inspection.");
+      "optimise",
+      "Process optimisation (spec/process-optimization.md): cutting parameters by the adaptive GA, fuzzy "
+      "feed control on spindle current, NC blocks adjusted from inspection.");
   optimise->require_subcommand(1);
 
   auto cutting = std::make_shared<OptimiseCuttingArgs>();
@@ -41,15 +42,17 @@ void AddOptimiseCommand(CLI::App& root, CommandAction* action) {
       "adaptive GA, fused with recommended cutting data. One cut (--a-p-mm, --a-e-mm): the GA next to the exact "
       "optimum and the Taylor tool lives. A program (--program with --engagement or --stock): the per-block "
       "depth-of-cut check (refused with the blocks named), then the optimum written into its F and S words.");
-  c->add_option("--coefficients", cutting->coefficients, "COEFFS.json: tool, material, Taylor and force laws, machine "
-                                                         "(data/cutting/s1.json)")
+  c->add_option("--coefficients", cutting->coefficients,
+                "COEFFS.json: tool, material, Taylor and force laws, machine "
+                "(data/cutting/s1.json)")
       ->required();
   c->add_option("--a-p-mm", cutting->a_p_mm, "axial depth of cut of one cut");
   c->add_option("--a-e-mm", cutting->a_e_mm, "radial depth of cut of one cut");
   c->add_option("--program", cutting->program, "a program to re-optimise (formloop word-address)");
   c->add_option("--dialect", cutting->dialect, "its dialect")->default_val("linuxcnc");
-  c->add_option("--engagement", cutting->engagement, "ENGAGEMENT.json: {\"blocks\": [{\"block\", \"a_p_mm\", "
-                                                     "\"a_e_mm\"}]} per cutting block");
+  c->add_option("--engagement", cutting->engagement,
+                "ENGAGEMENT.json: {\"blocks\": [{\"block\", \"a_p_mm\", "
+                "\"a_e_mm\"}]} per cutting block");
   c->add_option("--stock", cutting->stock, "STOCK.json: the stock the program cuts (engagement by a Z-map)");
   c->add_option("--cutting-data", cutting->cutting_data, "recommended cutting data: JSON array of records");
   c->add_option("--library", cutting->library, "case library whose case --case keeps manufacturing.cutting_data");

@@ -52,7 +52,8 @@ void AddReportCommand(CLI::App& root, CommandAction* action) {
   auto args = std::make_shared<ReportArgs>();
   CLI::App* cmd = root.add_subcommand(
       "report",
-      "Write a self-contained HTML report of a run folder or an analyse folder: verdict, retrieval, plan, loop history, deviation maps "
+      "Write a self-contained HTML report of a run folder or an analyse folder: verdict, retrieval, plan, loop "
+      "history, deviation maps "
       "before/after, Moran scatter and LISA clusters, diagnosis. Pictures are embedded; nothing is fetched.");
   cmd->add_option("RUN_DIR", args->run_dir,
                   "a `formloop run` folder (holds summary.json) or a `formloop analyse` folder (holds analysis.json)")

@@ -1,5 +1,5 @@
-// `formloop retrieve --library PATH --part PART.json [--top K] [--breadth B] [--max-scored N] [--data DIR]`: the most similar cases
-// of a case library for a part, with A, the per-facet similarities and common nodes, and the route
+// `formloop retrieve --library PATH --part PART.json [--top K] [--breadth B] [--max-scored N] [--data DIR]`: the most
+// similar cases of a case library for a part, with A, the per-facet similarities and common nodes, and the route
 // (retrieval/retrieve.h). `formloop retrieve --library PATH --calibrate` prints the leave-one-out report instead
 // (same as `formloop kb calibrate PATH`).
 //
@@ -76,8 +76,8 @@ Result<retrieval::PartFeatures> QueryFeatures(const nlohmann::json& file, const 
                                               const retrieval::FeatureOptions& options) {
   // A part file of `formloop run` is accepted wherever a part is asked for; a file in the query format
   // below names shape_family (or holds a case's "part" or a descriptor).
-  const bool query_format = file.is_object() && (file.contains("shape_family") || file.contains("part") ||
-                                                 file.contains("descriptor"));
+  const bool query_format =
+      file.is_object() && (file.contains("shape_family") || file.contains("part") || file.contains("descriptor"));
   if (!query_format) {
     FL_ASSIGN_OR_RETURN(const PartSpec spec, ParsePart(file, source));
     return PartFileFeatures(spec, options);
@@ -177,7 +177,9 @@ void AddRetrieveCommand(CLI::App& root, CommandAction* action) {
       nlohmann::json out = result.ToJson();
       out["query"]["part"] = args->part;
       out["query"]["concepts"] = features.Concepts();
-      out["library"] = {{"path", args->library}, {"ghsom_id", status.id}, {"stale", status.stale},
+      out["library"] = {{"path", args->library},
+                        {"ghsom_id", status.id},
+                        {"stale", status.stale},
                         {"cases_not_in_ghsom", model.untrained().size()}};
       log::Info("retrieve: best A = {:.4f} -> route {}", result.best_similarity, result.route);
       std::cout << out.dump(2) << std::endl;

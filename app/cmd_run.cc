@@ -147,7 +147,8 @@ Status RunBatch(const RunArgs& args, const std::vector<fs::path>& files) {
   FL_RETURN_IF_ERROR(WriteJsonFile(out / "batch_summary.json", batch));
   for (const std::string& line : table) std::cerr << line << '\n';
   std::cout << batch.dump(2) << std::endl;
-  if (failed > 0) return Status::Failed(std::to_string(failed) + " of " + std::to_string(files.size()) + " part(s) failed");
+  if (failed > 0)
+    return Status::Failed(std::to_string(failed) + " of " + std::to_string(files.size()) + " part(s) failed");
   if (args.strict && out_of_tolerance > 0) {
     return Status::Failed(std::to_string(out_of_tolerance) + " part(s) out of tolerance (--strict)");
   }
@@ -164,10 +165,13 @@ void AddRunCommand(CLI::App& root, CommandAction* action) {
       "simulation-correction / flagged default plan), tool path, NC and probing programs, pre-compensation from the "
       "case's learned model, machining (virtual machine or measured logs), analysis, diagnosis, compensation until "
       "within tolerance, report.html, and the retain step. Several parts or a folder run as a batch.");
-  cmd->add_option("parts", args->parts, "part description(s) (JSON) or folder(s) of them, e.g. data/parts/demo-saddle.json")
+  cmd->add_option("parts", args->parts,
+                  "part description(s) (JSON) or folder(s) of them, e.g. data/parts/demo-saddle.json")
       ->required();
-  cmd->add_option("--out,-o", args->out, "run folder (one part; default runs/<part>) or batch folder (default runs/batch)");
-  cmd->add_option("--kb", args->kb, "case library (formloop kb init --starter); without it the default plan is used, flagged");
+  cmd->add_option("--out,-o", args->out,
+                  "run folder (one part; default runs/<part>) or batch folder (default runs/batch)");
+  cmd->add_option("--kb", args->kb,
+                  "case library (formloop kb init --starter); without it the default plan is used, flagged");
   cmd->add_option("--machine", args->machine,
                   "virtual (the part's machine.effects), virtual:PROFILE (data/machines/PROFILE.json or a path) or "
                   "linuxcnc:CONFIG (a `formloop machine linuxcnc config` folder: LinuxCNC runs the probing program)");

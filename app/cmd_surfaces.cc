@@ -56,12 +56,12 @@ Status SampleSurface(const SampleArgs& args) {
   FL_RETURN_IF_ERROR(CheckGrid(args.nu, args.nv));
   const double count = static_cast<double>(args.nu) * args.nv;
   // A point with its normal, u, v and curvatures: about 100 bytes in memory, twice that as text.
-  FL_RETURN_IF_ERROR(CheckWork({.what = "sampling " + args.name + " on " + std::to_string(args.nu) + " x " +
-                                        std::to_string(args.nv) + " points",
-                                .points = count,
-                                .memory_bytes = 300 * count,
-                                .output_bytes = 200 * count},
-                               "", "--nu/--nv"));
+  FL_RETURN_IF_ERROR(CheckWork(
+      {.what = "sampling " + args.name + " on " + std::to_string(args.nu) + " x " + std::to_string(args.nv) + " points",
+       .points = count,
+       .memory_bytes = 300 * count,
+       .output_bytes = 200 * count},
+      "", "--nu/--nv"));
   FL_ASSIGN_OR_RETURN(auto surface, recon::MakeReferenceSurface(args.name));
   FL_RETURN_IF_ERROR(PointFormatFromPath(args.out).status());  // reject the extension before sampling
   const PointSet points = recon::SampleGridPoints(*surface, args.nu, args.nv);
@@ -121,8 +121,9 @@ void AddSurfacesCommand(CLI::App& root, CommandAction* action) {
 
   auto sample_args = std::make_shared<SampleArgs>();
   CLI::App* sample = surfaces->add_subcommand(
-      "sample", "Sample a reference surface on a regular grid: points, normals and the scalars u, v, k1, k2 "
-                "(principal curvatures, 1/mm, positive = convex).");
+      "sample",
+      "Sample a reference surface on a regular grid: points, normals and the scalars u, v, k1, k2 "
+      "(principal curvatures, 1/mm, positive = convex).");
   sample->add_option("name", sample_args->name, "surface name: " + NamesHelp())->required();
   sample->add_option("--nu", sample_args->nu, "samples along u (corners included)")->capture_default_str();
   sample->add_option("--nv", sample_args->nv, "samples along v (corners included)")->capture_default_str();
@@ -132,8 +133,9 @@ void AddSurfacesCommand(CLI::App& root, CommandAction* action) {
 
   auto export_args = std::make_shared<ExportArgs>();
   CLI::App* exp = surfaces->add_subcommand(
-      "export", "Fit a B-spline to a reference surface (GeomAPI_PointsToBSplineSurface on a grid), check it "
-                "against the analytic surface and write it as a STEP face (mm).");
+      "export",
+      "Fit a B-spline to a reference surface (GeomAPI_PointsToBSplineSurface on a grid), check it "
+      "against the analytic surface and write it as a STEP face (mm).");
   exp->add_option("name", export_args->name, "surface name: " + NamesHelp())->required();
   exp->add_option("--out", export_args->out, "output STEP file")->required();
   exp->add_option("--nu", export_args->nu, "grid samples along u")->capture_default_str();

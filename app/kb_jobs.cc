@@ -17,7 +17,8 @@ Result<nlohmann::json> FillStarterLibrary(const std::string& path, const std::fi
     return Status::BadInput("case library '" + path + "' already holds " + std::to_string(stats.cases) +
                             " case(s); --starter fills only an empty library");
   }
-  FL_ASSIGN_OR_RETURN(retrieval::StarterSpec spec, retrieval::StarterSpec::Load(data_dir / "starter" / "families.json"));
+  FL_ASSIGN_OR_RETURN(retrieval::StarterSpec spec,
+                      retrieval::StarterSpec::Load(data_dir / "starter" / "families.json"));
   FL_ASSIGN_OR_RETURN(retrieval::FacetTaxonomies tax, retrieval::FacetTaxonomies::Load(data_dir / "taxonomies"));
   retrieval::FeatureOptions options;
   options.taxonomies = std::make_shared<const retrieval::FacetTaxonomies>(std::move(tax));

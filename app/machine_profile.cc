@@ -61,8 +61,9 @@ Result<MachineProfile> ReadMachineProfile(const std::string& name_or_path, const
   if (path.extension() != ".json") path = data_dir / "machines" / (name_or_path + ".json");
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) {
-    return Status::BadInput(Where{.file = path.string()}, "machine profile not found",
-                            "give a profile name from " + (data_dir / "machines").string() + " or a path to a .json file");
+    return Status::BadInput(
+        Where{.file = path.string()}, "machine profile not found",
+        "give a profile name from " + (data_dir / "machines").string() + " or a path to a .json file");
   }
   FL_ASSIGN_OR_RETURN(Json json, ReadJsonFile(path));
   return MachineProfile::FromJson(json, path.string());

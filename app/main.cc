@@ -22,8 +22,7 @@ int main(int argc, char** argv) {
   app.fallthrough();  // global options (--quiet, --log-level) may also follow the subcommand
   app.set_version_flag("--version", std::string("formloop ") + Version());
   std::string level = "info";
-  app.add_option("--log-level", level, "stderr log level: trace, debug, info, warn, error, off")
-      ->capture_default_str();
+  app.add_option("--log-level", level, "stderr log level: trace, debug, info, warn, error, off")->capture_default_str();
   bool quiet = false;
   app.add_flag("--quiet,-q", quiet, "only warnings and errors on stderr, no progress");
   bool yes = false;

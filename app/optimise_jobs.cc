@@ -59,10 +59,10 @@ Result<fs::path> BeginOutput(const OptimiseOutput& output, const std::vector<std
                               "choose a new folder, or --force to replace an earlier optimise folder");
     }
     if (!fs::is_directory(out, ec) || !fs::exists(out / kMarker, ec)) {
-      return Status::BadInput(Where{.field = "--out"},
-                              "'" + out.string() + "' was not written by `formloop optimise` (no " + kMarker +
-                                  "); it is not replaced",
-                              "choose a new folder");
+      return Status::BadInput(
+          Where{.field = "--out"},
+          "'" + out.string() + "' was not written by `formloop optimise` (no " + kMarker + "); it is not replaced",
+          "choose a new folder");
     }
   }
   for (const std::string& in : inputs) {
@@ -116,8 +116,9 @@ Result<std::vector<planning::CuttingDataRecord>> CuttingData(const OptimiseCutti
   }
   if (args.library.empty() != args.case_uid.empty()) {
     return Status::BadInput(Where{.field = args.library.empty() ? "--library" : "--case"},
-                            "--library and --case go together", "name the case library and the case whose "
-                                                                "manufacturing.cutting_data to use");
+                            "--library and --case go together",
+                            "name the case library and the case whose "
+                            "manufacturing.cutting_data to use");
   }
   if (!args.library.empty()) {
     FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args.library));
@@ -125,10 +126,10 @@ Result<std::vector<planning::CuttingDataRecord>> CuttingData(const OptimiseCutti
     if (!record.manufacturing.contains("cutting_data")) {
       notes->push_back("case " + args.case_uid + " keeps no manufacturing.cutting_data: the model optimum is used");
     } else {
-      FL_ASSIGN_OR_RETURN(std::vector<planning::CuttingDataRecord> from_case,
-                          planning::CuttingDataFromJson(record.manufacturing["cutting_data"],
-                                                        args.library + ": case " + args.case_uid +
-                                                            " manufacturing.cutting_data"));
+      FL_ASSIGN_OR_RETURN(
+          std::vector<planning::CuttingDataRecord> from_case,
+          planning::CuttingDataFromJson(record.manufacturing["cutting_data"],
+                                        args.library + ": case " + args.case_uid + " manufacturing.cutting_data"));
       for (planning::CuttingDataRecord& r : from_case) out.push_back(std::move(r));
     }
   }
@@ -151,29 +152,32 @@ Result<json> OptimiseOneCut(const OptimiseCuttingArgs& args, const planning::Cut
   if (c.a_p_mm > limits.a_p_max_mm || c.a_e_mm > limits.a_e_max_mm) {
     return Status::SafetyLimit("L1-DOC-RANGE: the cut a_p " + FormatFixed(c.a_p_mm, 3) + " mm, a_e " +
                                FormatFixed(c.a_e_mm, 3) + " mm is beyond the tool's limits for " + limits.operation +
-                               " (a_p <= " + FormatFixed(limits.a_p_max_mm, 3) + " mm, a_e <= " +
-                               FormatFixed(limits.a_e_max_mm, 3) + " mm); fix --a-p-mm/--a-e-mm");
+                               " (a_p <= " + FormatFixed(limits.a_p_max_mm, 3) +
+                               " mm, a_e <= " + FormatFixed(limits.a_e_max_mm, 3) + " mm); fix --a-p-mm/--a-e-mm");
   }
   FL_ASSIGN_OR_RETURN(const planning::CuttingOptimum ga, planning::CuttingOptimumGa(c, args.seed));
   FL_ASSIGN_OR_RETURN(const planning::CuttingOptimum exact, planning::CuttingOptimumExact(c));
   json constraints = json::array();
   for (const planning::ConstraintValue& g : planning::CuttingConstraints(c, ga.state)) {
-    constraints.push_back({{"name", g.name}, {"label", g.label}, {"relative", g.relative}, {"satisfied", g.relative <= 1e-9}});
+    constraints.push_back(
+        {{"name", g.name}, {"label", g.label}, {"relative", g.relative}, {"satisfied", g.relative <= 1e-9}});
   }
   const auto match = planning::MatchCuttingData(records, coefficients.tool, c.diameter_mm, limits.operation);
   const planning::FusedCuttingPoint fused = planning::FuseWithDatabase(c, ga.state, match, args.model_credibility);
   const double shortfall = 100 * (1 - ga.state.q_mm3_per_min / exact.state.q_mm3_per_min);
-  log::Info("optimise cutting: Q {:.0f} mm3/min by the GA (seed {}), {:.0f} by the exact LP ({:.4f} % short), "
-            "T_p {:.2f} min, T_c {:.2f} min",
-            ga.state.q_mm3_per_min, args.seed, exact.state.q_mm3_per_min, shortfall,
-            planning::MaxProductionToolLifeMin(c), planning::MinCostToolLifeMin(c));
+  log::Info(
+      "optimise cutting: Q {:.0f} mm3/min by the GA (seed {}), {:.0f} by the exact LP ({:.4f} % short), "
+      "T_p {:.2f} min, T_c {:.2f} min",
+      ga.state.q_mm3_per_min, args.seed, exact.state.q_mm3_per_min, shortfall, planning::MaxProductionToolLifeMin(c),
+      planning::MinCostToolLifeMin(c));
   return json{{"case", c.ToJson()},
               {"warnings", c.Warnings()},
-              {"depth_of_cut_limits", {{"operation", limits.operation}, {"a_p_max_mm", limits.a_p_max_mm},
-                                       {"a_e_max_mm", limits.a_e_max_mm}}},
-              {"taylor", {{"T_p_min", planning::MaxProductionToolLifeMin(c)},
-                          {"T_c_min", planning::MinCostToolLifeMin(c)},
-                          {"T_min_in_effect_min", c.TMinMin()}}},
+              {"depth_of_cut_limits",
+               {{"operation", limits.operation}, {"a_p_max_mm", limits.a_p_max_mm}, {"a_e_max_mm", limits.a_e_max_mm}}},
+              {"taylor",
+               {{"T_p_min", planning::MaxProductionToolLifeMin(c)},
+                {"T_c_min", planning::MinCostToolLifeMin(c)},
+                {"T_min_in_effect_min", c.TMinMin()}}},
               {"ga", ga.ToJson()},
               {"exact", exact.ToJson()},
               {"ga_shortfall_percent", shortfall},
@@ -206,8 +210,9 @@ Result<json> RunOptimiseCutting(const OptimiseCuttingArgs& args) {
     FL_ASSIGN_OR_RETURN(result["cut"], OptimiseOneCut(args, coefficients, records));
   } else {
     if (args.engagement.empty() == args.stock.empty()) {
-      return Status::BadInput(Where{.field = "--engagement"},
-                              "a program needs its engagement: either --engagement ENGAGEMENT.json or --stock STOCK.json");
+      return Status::BadInput(
+          Where{.field = "--engagement"},
+          "a program needs its engagement: either --engagement ENGAGEMENT.json or --stock STOCK.json");
     }
     FL_ASSIGN_OR_RETURN(const std::string ext, ProgramExtension(args.dialect));
     FL_ASSIGN_OR_RETURN(const std::string text, ReadFile(args.program));
@@ -218,26 +223,27 @@ Result<json> RunOptimiseCutting(const OptimiseCuttingArgs& args) {
     } else {
       FL_ASSIGN_OR_RETURN(const json s, ReadJsonFile(args.stock));
       FL_ASSIGN_OR_RETURN(const planning::StockDescription stock, planning::StockFromJson(s, args.stock));
-      FL_ASSIGN_OR_RETURN(const planning::ProgramEngagement cut,
-                          planning::EngagementOfProgram(text, args.dialect, args.program, stock,
-                                                        coefficients.base.diameter_mm / 2));
+      FL_ASSIGN_OR_RETURN(
+          const planning::ProgramEngagement cut,
+          planning::EngagementOfProgram(text, args.dialect, args.program, stock, coefficients.base.diameter_mm / 2));
       FL_ASSIGN_OR_RETURN(engagement, planning::BlockEngagementOfProgram(text, args.dialect, args.program, cut));
     }
     planning::CuttingProgramOptions options;
     options.seed = args.seed;
     options.model_credibility = args.model_credibility;
     options.cutting_data = records;
-    FL_ASSIGN_OR_RETURN(const planning::CuttingProgramReport report,
-                        planning::OptimiseCuttingProgram(text, args.dialect, args.program, engagement, coefficients,
-                                                         options));
+    FL_ASSIGN_OR_RETURN(
+        const planning::CuttingProgramReport report,
+        planning::OptimiseCuttingProgram(text, args.dialect, args.program, engagement, coefficients, options));
     result["program"] = report.ToJson();
     program_name = "program" + ext;
     program_text = report.program;
     result["program"]["file"] = program_name;
-    log::Info("optimise cutting: {} cutting blocks in {} groups, n_op {:.0f} rpm, cutting time {:.2f} -> {:.2f} min, "
-              "{} lines changed",
-              report.cutting_blocks, report.groups.size(), report.spindle_rpm, report.cutting_time_before_min,
-              report.cutting_time_after_min, report.lines_changed);
+    log::Info(
+        "optimise cutting: {} cutting blocks in {} groups, n_op {:.0f} rpm, cutting time {:.2f} -> {:.2f} min, "
+        "{} lines changed",
+        report.cutting_blocks, report.groups.size(), report.spindle_rpm, report.cutting_time_before_min,
+        report.cutting_time_after_min, report.lines_changed);
   }
   if (args.output.out.empty()) {
     if (!args.program.empty()) return Status::BadInput(Where{.field = "--out"}, "a program is written into --out");
@@ -253,8 +259,9 @@ Result<json> RunOptimiseCutting(const OptimiseCuttingArgs& args) {
 namespace {
 
 std::string SamplesCsv(const std::vector<std::pair<std::string, const planning::FeedControlResult*>>& runs) {
-  std::string out = "run,t_s,s_mm,current_a,measured_a,voltage_v,feed_command_mm_per_min,feed_actual_mm_per_min,"
-                    "a_e_mm,a_p_mm,mode\n";
+  std::string out =
+      "run,t_s,s_mm,current_a,measured_a,voltage_v,feed_command_mm_per_min,feed_actual_mm_per_min,"
+      "a_e_mm,a_p_mm,mode\n";
   for (const auto& [name, run] : runs) {
     for (const planning::FeedSample& s : run->samples) {
       out += name + "," + FormatFixed(s.t_s, 4) + "," + FormatFixed(s.s_mm, 4) + "," + FormatFixed(s.current_a, 4) +
@@ -278,24 +285,30 @@ Canvas FeedPlot(const planning::FeedControlResult& adaptive, const planning::Fee
   };
   const Rgb fuzzy = HexColour(0x2166ac), fixed = HexColour(0xff7f00), limit = HexColour(0xd7191c);
   const planning::FeedControlFigures& f = adaptive.figures;
-  TimePanel current{.series = {series(constant, true, "constant feed " + FormatFixed(constant_feed, 0) + " mm/min", fixed),
-                               series(adaptive, true, "fuzzy feed control", fuzzy)},
-                    .levels = {{f.reference_a, "I ref " + FormatFixed(f.reference_a, 2) + " A", HexColour(0x4daf4a)},
-                               {f.overload_a, "I over " + FormatFixed(f.overload_a, 2) + " A", limit}},
-                    .y_label = "spindle current (A)"};
-  TimePanel feed{.series = {series(constant, false, "constant feed", fixed), series(adaptive, false, "fuzzy feed control", fuzzy)},
-                 .levels = {},
-                 .y_label = "feed (mm/min)"};
+  TimePanel current{
+      .series = {series(constant, true, "constant feed " + FormatFixed(constant_feed, 0) + " mm/min", fixed),
+                 series(adaptive, true, "fuzzy feed control", fuzzy)},
+      .levels = {{f.reference_a, "I ref " + FormatFixed(f.reference_a, 2) + " A", HexColour(0x4daf4a)},
+                 {f.overload_a, "I over " + FormatFixed(f.overload_a, 2) + " A", limit}},
+      .y_label = "spindle current (A)"};
+  TimePanel feed{
+      .series = {series(constant, false, "constant feed", fixed), series(adaptive, false, "fuzzy feed control", fuzzy)},
+      .levels = {},
+      .y_label = "feed (mm/min)"};
   return DrawTimePanels({current, feed}, "feed control: spindle current and feed over time");
 }
 
 std::string HtmlEscape(const std::string& text) {
   std::string out;
   for (char ch : text) {
-    if (ch == '<') out += "&lt;";
-    else if (ch == '>') out += "&gt;";
-    else if (ch == '&') out += "&amp;";
-    else out += ch;
+    if (ch == '<')
+      out += "&lt;";
+    else if (ch == '>')
+      out += "&gt;";
+    else if (ch == '&')
+      out += "&amp;";
+    else
+      out += ch;
   }
   return out;
 }
@@ -316,7 +329,8 @@ std::string FeedReportHtml(const json& result, const std::string& png) {
       "<h1>Fuzzy feed control (spec/process-optimization.md &sect;2)</h1>\n<p>Path: " +
       HtmlEscape(result["path"]["source"].get<std::string>()) + " (" + num(result["path"]["length_mm"], 1) +
       " mm of cutting path). Plant: the &sect;2.6 reference spindle (tool S1, " +
-      num(result["plant"]["spindle_rpm"], 0) + " rpm), noise seed " + std::to_string(result["noise_seed"].get<std::uint64_t>()) +
+      num(result["plant"]["spindle_rpm"], 0) + " rpm), noise seed " +
+      std::to_string(result["noise_seed"].get<std::uint64_t>()) +
       ".</p>\n<img alt=\"spindle current and feed over time\" src=\"data:image/png;base64," + Base64(png) +
       "\">\n<table><tr><th></th><th>fuzzy feed control</th><th>constant feed</th></tr>\n";
   html += row("machining time (s)", num(a["machining_time_s"], 2), num(c["machining_time_s"], 2));
@@ -369,8 +383,8 @@ Result<json> RunOptimiseFeed(const OptimiseFeedArgs& args) {
     FL_ASSIGN_OR_RETURN(const std::string text, ReadFile(args.program));
     FL_ASSIGN_OR_RETURN(const json s, ReadJsonFile(args.stock));
     FL_ASSIGN_OR_RETURN(const planning::StockDescription stock, planning::StockFromJson(s, args.stock));
-    FL_ASSIGN_OR_RETURN(path, planning::EngagementOfProgram(text, args.dialect, args.program, stock,
-                                                            options.plant.diameter_mm / 2));
+    FL_ASSIGN_OR_RETURN(
+        path, planning::EngagementOfProgram(text, args.dialect, args.program, stock, options.plant.diameter_mm / 2));
     source = args.program + " cutting " + args.stock;
   }
   const sim::EngagementProfile& profile = path->engagement.profile;
@@ -392,8 +406,8 @@ Result<json> RunOptimiseFeed(const OptimiseFeedArgs& args) {
             worst_settle <= 1.0);
   criterion("regulation outside the steps within +-5 %", FormatFixed(100 * a.max_regulation_error, 2) + " %",
             a.max_regulation_error <= 0.05);
-  criterion("the fuzzy run never exceeds I_over", "peak " + FormatFixed(a.peak_a, 2) + " A, " +
-                                                      FormatFixed(a.above_overload_s, 3) + " s above",
+  criterion("the fuzzy run never exceeds I_over",
+            "peak " + FormatFixed(a.peak_a, 2) + " A, " + FormatFixed(a.above_overload_s, 3) + " s above",
             a.above_overload_s == 0);
   criterion("the constant feed never exceeds I_over either",
             "peak " + FormatFixed(c.peak_a, 2) + " A, " + FormatFixed(c.above_overload_s, 3) + " s above",
@@ -422,10 +436,11 @@ Result<json> RunOptimiseFeed(const OptimiseFeedArgs& args) {
     result["files"].push_back("inputs/stock.json");
   }
   FL_ASSIGN_OR_RETURN(result["inputs"], InputHashes({args.program, args.stock}));
-  log::Info("optimise feed: {:.2f} s with fuzzy control vs {:.2f} s at the constant {:.0f} mm/min ({:.1f} % shorter); "
-            "peak {:.2f} A (I_over {:.2f} A), worst settle {:.3f} s over {} steps, regulation {:.2f} %",
-            a.machining_time_s, c.machining_time_s, constant_feed, 100 * (1 - time_ratio), a.peak_a, a.overload_a,
-            worst_settle, a.steps.size(), 100 * a.max_regulation_error);
+  log::Info(
+      "optimise feed: {:.2f} s with fuzzy control vs {:.2f} s at the constant {:.0f} mm/min ({:.1f} % shorter); "
+      "peak {:.2f} A (I_over {:.2f} A), worst settle {:.3f} s over {} steps, regulation {:.2f} %",
+      a.machining_time_s, c.machining_time_s, constant_feed, 100 * (1 - time_ratio), a.peak_a, a.overload_a,
+      worst_settle, a.steps.size(), 100 * a.max_regulation_error);
   FL_ASSIGN_OR_RETURN(const fs::path staging, BeginOutput(args.output, {args.program, args.stock}));
   FL_ASSIGN_OR_RETURN(const std::string png, EncodePng(FeedPlot(fuzzy, constant, constant_feed)));
   FL_RETURN_IF_ERROR(WriteFileAtomic(staging / "feed.csv", SamplesCsv({{"fuzzy", &fuzzy}, {"constant", &constant}})));
@@ -444,7 +459,8 @@ Result<json> RunOptimiseFeed(const OptimiseFeedArgs& args) {
 Result<json> RunOptimiseProgram(const OptimiseProgramArgs& args) {
   // The nominal surface, tool, tolerance and dialect: from the run folder, or given one by one.
   recon::BSplineSurface q;
-  std::string dialect = args.dialect, part_name = "part", program_path = args.program, inspection_path = args.inspection;
+  std::string dialect = args.dialect, part_name = "part", program_path = args.program,
+              inspection_path = args.inspection;
   double radius = args.ball_radius_mm, tolerance = args.tolerance_mm;
   if (args.run.empty() == args.surface.empty()) {
     return Status::BadInput(Where{.field = "--run"},
@@ -462,10 +478,9 @@ Result<json> RunOptimiseProgram(const OptimiseProgramArgs& args) {
     if (radius <= 0) radius = run.toolpath.options.tool.radius_mm;
     if (tolerance <= 0) tolerance = run.part.tolerance_mm;
   } else {
-    for (const auto& [missing, option] : {std::pair{program_path.empty(), "--program"},
-                                          std::pair{inspection_path.empty(), "--inspection"},
-                                          std::pair{!(radius > 0), "--ball-radius-mm"},
-                                          std::pair{!(tolerance > 0), "--tolerance-mm"}}) {
+    for (const auto& [missing, option] :
+         {std::pair{program_path.empty(), "--program"}, std::pair{inspection_path.empty(), "--inspection"},
+          std::pair{!(radius > 0), "--ball-radius-mm"}, std::pair{!(tolerance > 0), "--tolerance-mm"}}) {
       if (missing) return Status::BadInput(Where{.field = option}, "required with --surface (no run folder)");
     }
     FL_ASSIGN_OR_RETURN(const recon::CadFace face, recon::ReadCadFace(args.surface, {}));
@@ -498,25 +513,22 @@ Result<json> RunOptimiseProgram(const OptimiseProgramArgs& args) {
   FL_ASSIGN_OR_RETURN(const planning::InspectionEvaluation evaluation, planning::EvaluateInspection(points, options));
   FL_ASSIGN_OR_RETURN(const planning::ProgramGeometry geometry,
                       planning::BuildProgramGeometry(program, nominal, radius, std::min(0.5, evaluation.h_mm / 4)));
-  FL_ASSIGN_OR_RETURN(planning::InspectionAdjustment adjustment,
-                      planning::AdjustProgramFromInspection(program, geometry, nominal, points, load, options,
-                                                            inspection_path));
-  json result = {{"command", "optimise program"},
-                 {"run", args.run},
-                 {"surface", args.surface},
-                 {"program", program_path},
-                 {"inspection", inspection_path},
-                 {"tolerance_mm", options.tolerance_mm},
-                 {"ball_radius_mm", radius},
-                 {"adjustment", adjustment.ToJson()}};
+  FL_ASSIGN_OR_RETURN(
+      planning::InspectionAdjustment adjustment,
+      planning::AdjustProgramFromInspection(program, geometry, nominal, points, load, options, inspection_path));
+  json result = {{"command", "optimise program"}, {"run", args.run},
+                 {"surface", args.surface},       {"program", program_path},
+                 {"inspection", inspection_path}, {"tolerance_mm", options.tolerance_mm},
+                 {"ball_radius_mm", radius},      {"adjustment", adjustment.ToJson()}};
   FL_ASSIGN_OR_RETURN(result["inputs"], InputHashes({program_path, inspection_path, args.load, args.surface}));
   const std::string program_name = "program" + ext;
   if (!adjustment.program.empty()) result["adjustment"]["file"] = program_name;
-  log::Info("optimise program: {} points, Moran z {:.2f} ({}), {} region(s), program {}, {} CL points shifted, "
-            "{} feeds changed, max shift {:.4f} mm",
-            points.size(), adjustment.evaluation.moran_z,
-            adjustment.evaluation.systematic ? "systematic" : "not systematic: report only", adjustment.regions.size(),
-            adjustment.kind, adjustment.cl_points_shifted, adjustment.feeds_changed, adjustment.max_shift_mm);
+  log::Info(
+      "optimise program: {} points, Moran z {:.2f} ({}), {} region(s), program {}, {} CL points shifted, "
+      "{} feeds changed, max shift {:.4f} mm",
+      points.size(), adjustment.evaluation.moran_z,
+      adjustment.evaluation.systematic ? "systematic" : "not systematic: report only", adjustment.regions.size(),
+      adjustment.kind, adjustment.cl_points_shifted, adjustment.feeds_changed, adjustment.max_shift_mm);
   for (const std::string& alarm : adjustment.alarms) log::Warn("{}", alarm);
   FL_ASSIGN_OR_RETURN(const fs::path staging,
                       BeginOutput(args.output, {program_path, inspection_path, args.load, args.log, args.surface}));

@@ -45,7 +45,7 @@ struct OptimiseOutput {
 
 struct OptimiseCuttingArgs {
   OptimiseOutput output;
-  std::string coefficients;  // COEFFS.json (planning/cutting_model.h, data/cutting/s1.json)
+  std::string coefficients;       // COEFFS.json (planning/cutting_model.h, data/cutting/s1.json)
   double a_p_mm = 0, a_e_mm = 0;  // one cut (no --program)
   std::string program, dialect = "linuxcnc";
   std::string engagement;    // ENGAGEMENT.json ...
@@ -67,15 +67,15 @@ Result<nlohmann::json> RunOptimiseFeed(const OptimiseFeedArgs& args);
 
 struct OptimiseProgramArgs {
   OptimiseOutput output;
-  std::string run;         // the `formloop run` folder: Q, ball radius, tolerance, dialect ...
-  std::string surface;     // ... or Q.step with --program, --inspection, --ball-radius-mm, --tolerance-mm
+  std::string run;      // the `formloop run` folder: Q, ball radius, tolerance, dialect ...
+  std::string surface;  // ... or Q.step with --program, --inspection, --ball-radius-mm, --tolerance-mm
   double ball_radius_mm = 0;
   std::string dialect = "linuxcnc";  // without --run
-  std::string program;     // default: the run's toolpath program
-  std::string inspection;  // deviations.csv; default: the run's loop-0/deviations.csv
-  std::string load;        // optional: {"N120": load, ...} (e.g. mean I − I_0 per block from Level 2)
-  std::string log;         // inspection log (JSON Lines) to append the §3.5 record to
-  double tolerance_mm = 0;  // t_p; 0: the part's (2 x its ± tolerance)
+  std::string program;               // default: the run's toolpath program
+  std::string inspection;            // deviations.csv; default: the run's loop-0/deviations.csv
+  std::string load;                  // optional: {"N120": load, ...} (e.g. mean I − I_0 per block from Level 2)
+  std::string log;                   // inspection log (JSON Lines) to append the §3.5 record to
+  double tolerance_mm = 0;           // t_p; 0: the part's (2 x its ± tolerance)
   std::string inspection_id, part_id, operation_id, probe_calibration_id;
 };
 Result<nlohmann::json> RunOptimiseProgram(const OptimiseProgramArgs& args);

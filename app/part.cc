@@ -42,13 +42,12 @@ constexpr NumberRange kPositive{.min = 0, .exclusive_min = true};
 constexpr NumberRange kNonNegative{.min = 0};
 // Upper bounds of the fields that steer the machine or the probe: far beyond any real 3-axis job, well
 // short of the values a wrong unit or a typo gives (core/work_estimate.h bounds the job's size).
-constexpr NumberRange kLength{.min = 0, .max = 1000, .exclusive_min = true};            // mm: clearances, spacing
-constexpr NumberRange kBallRadius{.min = 0, .max = 50, .exclusive_min = true};          // mm: tools and styli
-constexpr NumberRange kMicrons{.min = 0, .max = 1000, .exclusive_min = true};           // um: scallop, chord
-constexpr NumberRange kFeed{.min = 0, .max = 200000, .exclusive_min = true};            // mm/min
-constexpr NumberRange kSpindle{.min = 0, .max = 200000, .exclusive_min = true};         // rpm
-constexpr NumberRange kEffectMicrons{.min = -1000, .max = 1000};                        // um of a simulated effect
-
+constexpr NumberRange kLength{.min = 0, .max = 1000, .exclusive_min = true};     // mm: clearances, spacing
+constexpr NumberRange kBallRadius{.min = 0, .max = 50, .exclusive_min = true};   // mm: tools and styli
+constexpr NumberRange kMicrons{.min = 0, .max = 1000, .exclusive_min = true};    // um: scallop, chord
+constexpr NumberRange kFeed{.min = 0, .max = 200000, .exclusive_min = true};     // mm/min
+constexpr NumberRange kSpindle{.min = 0, .max = 200000, .exclusive_min = true};  // rpm
+constexpr NumberRange kEffectMicrons{.min = -1000, .max = 1000};                 // um of a simulated effect
 
 // The material must be a concept (or alias) of data/taxonomies/material.txt, spelled as there: the case
 // library and retrieval know no other (a "h13 " stored in a case breaks every later retrieval).
@@ -108,7 +107,8 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
                                      "toolpath", "machine", "probing", "analysis", "loops", "comment", "shape_family",
                                      "finish_ra_um", "batch_size"}));
   FL_RETURN_IF_ERROR(top.OptionalString("shape_family", &part.shape_family));
-  FL_RETURN_IF_ERROR(top.OptionalNumber("finish_ra_um", &part.finish_ra_um, {.min = 0, .max = 100, .exclusive_min = true}));
+  FL_RETURN_IF_ERROR(
+      top.OptionalNumber("finish_ra_um", &part.finish_ra_um, {.min = 0, .max = 100, .exclusive_min = true}));
   FL_RETURN_IF_ERROR(ReadInt(top, "batch_size", &part.batch_size, 1, 1000000));
   FL_RETURN_IF_ERROR(top.String("name", &part.name));
   if (part.name.empty() || part.name.find_first_of("/\\()") != std::string::npos) {
@@ -159,7 +159,8 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
     FL_RETURN_IF_ERROR(f->CheckKnown({"samples_u", "samples_v", "tolerance_mm", "check_points"}));
     FL_RETURN_IF_ERROR(ReadInt(*f, "samples_u", &part.fit_samples_u, 4, 2000));
     FL_RETURN_IF_ERROR(ReadInt(*f, "samples_v", &part.fit_samples_v, 4, 2000));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("tolerance_mm", &part.fit.tolerance_mm, {.min = 0, .max = 1, .exclusive_min = true}));
+    FL_RETURN_IF_ERROR(
+        f->OptionalNumber("tolerance_mm", &part.fit.tolerance_mm, {.min = 0, .max = 1, .exclusive_min = true}));
     FL_RETURN_IF_ERROR(ReadInt(*f, "check_points", &part.fit_check_points, 0, 1000000));
   }
 
@@ -190,14 +191,15 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
   FL_RETURN_IF_ERROR(top.Object("toolpath", &f));
   if (f) {
     auto& t = part.toolpath;
-    FL_RETURN_IF_ERROR(f->CheckKnown({"scallop_um", "chord_tolerance_um", "max_point_spacing_mm", "raster_angle_deg",
-                                      "zigzag", "lead_mm", "feed_mm_per_min", "plunge_feed_mm_per_min", "spindle_rpm",
-                                      "clearance_mm"}));
+    FL_RETURN_IF_ERROR(
+        f->CheckKnown({"scallop_um", "chord_tolerance_um", "max_point_spacing_mm", "raster_angle_deg", "zigzag",
+                       "lead_mm", "feed_mm_per_min", "plunge_feed_mm_per_min", "spindle_rpm", "clearance_mm"}));
     FL_RETURN_IF_ERROR(f->OptionalNumber("raster_angle_deg", &t.raster_angle_deg, {.min = -360, .max = 360}));
     FL_RETURN_IF_ERROR(f->OptionalNumber("lead_mm", &t.lead_mm, {.min = 0, .max = 100}));
     FL_RETURN_IF_ERROR(f->OptionalNumber("scallop_um", &t.scallop_um, kMicrons));
     FL_RETURN_IF_ERROR(f->OptionalNumber("chord_tolerance_um", &t.chord_tolerance_um, kMicrons));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("max_point_spacing_mm", &t.max_point_spacing_mm, {.min = 0, .max = 100, .exclusive_min = true}));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("max_point_spacing_mm", &t.max_point_spacing_mm,
+                                         {.min = 0, .max = 100, .exclusive_min = true}));
     FL_RETURN_IF_ERROR(f->OptionalBool("zigzag", &t.zigzag));
     FL_RETURN_IF_ERROR(f->OptionalNumber("feed_mm_per_min", &t.feed_mm_per_min, kFeed));
     FL_RETURN_IF_ERROR(f->OptionalNumber("plunge_feed_mm_per_min", &t.plunge_feed_mm_per_min, kFeed));
@@ -208,8 +210,8 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
   if (f) {
     FL_RETURN_IF_ERROR(f->OptionalString("name", &part.machine_name));
     FL_RETURN_IF_ERROR(f->OptionalString("class", &part.machine_class));
-    FL_RETURN_IF_ERROR(f->CheckKnown({"name", "class", "dialect", "travel_min_mm", "travel_max_mm", "max_feed_mm_per_min",
-                                      "max_spindle_rpm", "effects", "probe"}));
+    FL_RETURN_IF_ERROR(f->CheckKnown({"name", "class", "dialect", "travel_min_mm", "travel_max_mm",
+                                      "max_feed_mm_per_min", "max_spindle_rpm", "effects", "probe"}));
     FL_RETURN_IF_ERROR(ReadVec3(*f, "travel_min_mm", &part.limits.travel_min_mm));
     FL_RETURN_IF_ERROR(ReadVec3(*f, "travel_max_mm", &part.limits.travel_max_mm));
     FL_RETURN_IF_ERROR(f->OptionalString("dialect", &part.dialect));
@@ -236,15 +238,17 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
       FL_RETURN_IF_ERROR(e->OptionalNumber("tool_radius_error_um", &x.tool_radius_error_um, kEffectMicrons));
       FL_RETURN_IF_ERROR(e->OptionalNumber("deflection_um", &x.deflection_um, kEffectMicrons));
       FL_RETURN_IF_ERROR(e->OptionalNumber("thermal_amplitude_um", &x.thermal_amplitude_um, kEffectMicrons));
-      FL_RETURN_IF_ERROR(e->OptionalNumber("thermal_tau_s", &x.thermal_tau_s, {.min = 0, .max = 1e6, .exclusive_min = true}));
+      FL_RETURN_IF_ERROR(
+          e->OptionalNumber("thermal_tau_s", &x.thermal_tau_s, {.min = 0, .max = 1e6, .exclusive_min = true}));
       FL_RETURN_IF_ERROR(e->OptionalNumber("surface_noise_um", &x.surface_noise_um, {.min = 0, .max = 100}));
       FL_RETURN_IF_ERROR(e->OptionalNumber("probe_noise_um", &x.probe_noise_um, {.min = 0, .max = 100}));
       FL_RETURN_IF_ERROR(x.Validate().WithContext(source + ": machine.effects"));
       part.effects = x.ToModel();
-      log::Warn("{}: machine.effects with the fields tool_radius_error_um, deflection_um, ... is deprecated and will "
-                "not be read in a later version; give the effects as the catalogue's model JSON (simulation/model.h), "
-                "here: {}",
-                source, part.effects->ToJson().dump());
+      log::Warn(
+          "{}: machine.effects with the fields tool_radius_error_um, deflection_um, ... is deprecated and will "
+          "not be read in a later version; give the effects as the catalogue's model JSON (simulation/model.h), "
+          "here: {}",
+          source, part.effects->ToJson().dump());
     }
     std::optional<JsonFields> p;
     FL_RETURN_IF_ERROR(f->Object("probe", &p));
@@ -286,8 +290,10 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
     FL_RETURN_IF_ERROR(f->OptionalNumber("inset_fraction", &part.probe_inset_fraction, {.min = 0, .max = 0.45}));
     FL_RETURN_IF_ERROR(f->OptionalNumber("ball_radius_mm", &part.probe.ball_radius_mm, kBallRadius));
     FL_RETURN_IF_ERROR(f->OptionalNumber("pretravel_mm", &part.probe.pretravel_mm, {.min = -1, .max = 1}));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("clearance_mm", &part.probe_program.clearance_mm, {.min = 0, .max = 100, .exclusive_min = true}));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("search_mm", &part.probe_program.search_mm, {.min = 0, .max = 50, .exclusive_min = true}));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("clearance_mm", &part.probe_program.clearance_mm,
+                                         {.min = 0, .max = 100, .exclusive_min = true}));
+    FL_RETURN_IF_ERROR(
+        f->OptionalNumber("search_mm", &part.probe_program.search_mm, {.min = 0, .max = 50, .exclusive_min = true}));
     FL_RETURN_IF_ERROR(f->OptionalNumber("feed_mm_per_min", &part.probe_program.probe_feed_mm_per_min, kFeed));
   }
   if (!true_probe_given) part.true_probe = part.probe;
@@ -297,13 +303,15 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
     FL_RETURN_IF_ERROR(f->CheckKnown({"neighbours", "max_control_net", "coverage_factor"}));
     FL_RETURN_IF_ERROR(ReadInt(*f, "neighbours", &part.analysis.neighbours, 1, 64));
     FL_RETURN_IF_ERROR(ReadInt(*f, "max_control_net", &part.analysis.max_control_net, 3, 20));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("coverage_factor", &part.analysis.coverage_factor, {.min = 0, .max = 10, .exclusive_min = true}));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("coverage_factor", &part.analysis.coverage_factor,
+                                         {.min = 0, .max = 10, .exclusive_min = true}));
   }
   FL_RETURN_IF_ERROR(top.Object("loops", &f));
   if (f) {
     FL_RETURN_IF_ERROR(f->CheckKnown({"max", "max_offset_um"}));
     FL_RETURN_IF_ERROR(ReadInt(*f, "max", &part.max_loops, 1, 20));
-    FL_RETURN_IF_ERROR(f->OptionalNumber("max_offset_um", &part.compensation.max_offset_um, {.min = 0, .max = 5000, .exclusive_min = true}));
+    FL_RETURN_IF_ERROR(f->OptionalNumber("max_offset_um", &part.compensation.max_offset_um,
+                                         {.min = 0, .max = 5000, .exclusive_min = true}));
   }
   // The magazine always holds the part's own tool.
   bool has_own_tool = false;
@@ -363,13 +371,12 @@ Status CheckPartWork(const PartSpec& part, const nc::ToolpathOptions& plan, cons
   }
   const double probe_points = static_cast<double>(part.probe_nu) * part.probe_nv;
   const double probing_s = nc::ProbingSeconds(probe_points, part.probe_program.clearance_mm,
-                                              part.probe_program.search_mm,
-                                              part.probe_program.probe_feed_mm_per_min);
+                                              part.probe_program.search_mm, part.probe_program.probe_feed_mm_per_min);
   WorkEstimate work;
   work.what = "part '" + part.name + "' (" + FormatSignificant(raster.passes, 3) + " passes of a ball r " +
-              FormatSignificant(plan.tool.radius_mm, 4) + " mm at a scallop of " + FormatSignificant(plan.scallop_um, 4) +
-              " um, " + FormatSignificant(probe_points, 7) + " probe points, up to " + std::to_string(part.max_loops) +
-              " cycles)";
+              FormatSignificant(plan.tool.radius_mm, 4) + " mm at a scallop of " +
+              FormatSignificant(plan.scallop_um, 4) + " um, " + FormatSignificant(probe_points, 7) +
+              " probe points, up to " + std::to_string(part.max_loops) + " cycles)";
   work.points = raster.cl_points + probe_points;
   work.memory_bytes = 60e6 + nc::kRunBytesPerClPoint * raster.cl_points + 2e3 * probe_points;
   work.machining_s = part.max_loops * (raster.cutting_s + probing_s);
@@ -386,66 +393,65 @@ Result<PartSpec> ReadPart(const std::filesystem::path& path) {
 nlohmann::json PartSpec::ToJson() const {
   const auto& t = toolpath;
   nlohmann::json surface = {{"reference", surface_reference}};
-  if (!surface_kind.empty()) surface = {{"kind", surface_kind}, {"params", surface_params}, {"samples", surface_samples}};
+  if (!surface_kind.empty())
+    surface = {{"kind", surface_kind}, {"params", surface_params}, {"samples", surface_samples}};
   // A file is named by its copy beside the resolved part in the run folder (inputs/).
   if (surface_file) surface = surface_file->ToJson(surface_file->CopyName());
   nlohmann::json magazine = nlohmann::json::array();
   for (const auto& tool : tools) magazine.push_back({{"number", tool.number}, {"radius_mm", tool.radius_mm}});
-  nlohmann::json out = {{"name", name},
-                       {"surface", surface},
-                       {"shape_family", ShapeConcept()},
-                       {"finish_ra_um", finish_ra_um},
-                       {"batch_size", batch_size},
-                       {"tools", magazine},
-                       {"material", material},
-                       {"tolerance_mm", tolerance_mm},
-                       {"seed", seed},
-                       {"fit",
-                        {{"samples_u", fit_samples_u},
-                         {"samples_v", fit_samples_v},
-                         {"tolerance_mm", fit.tolerance_mm},
-                         {"check_points", fit_check_points}}},
-                       {"tool", {{"number", t.tool.number}, {"radius_mm", t.tool.radius_mm}, {"flutes", flutes}}},
-                       {"toolpath",
-                        {{"scallop_um", t.scallop_um},
-                         {"chord_tolerance_um", t.chord_tolerance_um},
-                         {"max_point_spacing_mm", t.max_point_spacing_mm},
-                         {"raster_angle_deg", t.raster_angle_deg},
-                         {"zigzag", t.zigzag},
-                         {"lead_mm", t.lead_mm},
-                         {"feed_mm_per_min", t.feed_mm_per_min},
-                         {"plunge_feed_mm_per_min", t.plunge_feed_mm_per_min},
-                         {"spindle_rpm", t.spindle_rpm},
-                         {"clearance_mm", t.clearance_mm}}},
-                       {"machine",
-                        {{"name", machine_name},
-                         {"class", machine_class},
-                         {"dialect", dialect},
-                         {"travel_min_mm",
-                          {limits.travel_min_mm.x(), limits.travel_min_mm.y(), limits.travel_min_mm.z()}},
-                         {"travel_max_mm",
-                          {limits.travel_max_mm.x(), limits.travel_max_mm.y(), limits.travel_max_mm.z()}},
-                         {"max_feed_mm_per_min", limits.max_feed_mm_per_min},
-                         {"max_spindle_rpm", limits.max_spindle_rpm},
-                         {"probe",
-                          {{"ball_radius_mm", true_probe.ball_radius_mm}, {"pretravel_mm", true_probe.pretravel_mm}}}}},
-                       {"probing",
-                        {{"grid", {probe_nu, probe_nv}},
-                         {"inset_fraction", probe_inset_fraction},
-                         {"ball_radius_mm", probe.ball_radius_mm},
-                         {"pretravel_mm", probe.pretravel_mm},
-                         {"clearance_mm", probe_program.clearance_mm},
-                         {"search_mm", probe_program.search_mm},
-                         {"feed_mm_per_min", probe_program.probe_feed_mm_per_min},
-                         {"tool", probe_program.probe_tool},
-                         {"fanuc_result_base", probe_program.fanuc_result_base},
-                         {"sinumerik_r_base", probe_program.sinumerik_r_base},
-                         {"sinumerik_r_last", probe_program.sinumerik_r_last}}},
-                       {"analysis",
-                        {{"neighbours", analysis.neighbours},
-                         {"max_control_net", analysis.max_control_net},
-                         {"coverage_factor", analysis.coverage_factor}}},
-                       {"loops", {{"max", max_loops}, {"max_offset_um", compensation.max_offset_um}}}};
+  nlohmann::json out = {
+      {"name", name},
+      {"surface", surface},
+      {"shape_family", ShapeConcept()},
+      {"finish_ra_um", finish_ra_um},
+      {"batch_size", batch_size},
+      {"tools", magazine},
+      {"material", material},
+      {"tolerance_mm", tolerance_mm},
+      {"seed", seed},
+      {"fit",
+       {{"samples_u", fit_samples_u},
+        {"samples_v", fit_samples_v},
+        {"tolerance_mm", fit.tolerance_mm},
+        {"check_points", fit_check_points}}},
+      {"tool", {{"number", t.tool.number}, {"radius_mm", t.tool.radius_mm}, {"flutes", flutes}}},
+      {"toolpath",
+       {{"scallop_um", t.scallop_um},
+        {"chord_tolerance_um", t.chord_tolerance_um},
+        {"max_point_spacing_mm", t.max_point_spacing_mm},
+        {"raster_angle_deg", t.raster_angle_deg},
+        {"zigzag", t.zigzag},
+        {"lead_mm", t.lead_mm},
+        {"feed_mm_per_min", t.feed_mm_per_min},
+        {"plunge_feed_mm_per_min", t.plunge_feed_mm_per_min},
+        {"spindle_rpm", t.spindle_rpm},
+        {"clearance_mm", t.clearance_mm}}},
+      {"machine",
+       {{"name", machine_name},
+        {"class", machine_class},
+        {"dialect", dialect},
+        {"travel_min_mm", {limits.travel_min_mm.x(), limits.travel_min_mm.y(), limits.travel_min_mm.z()}},
+        {"travel_max_mm", {limits.travel_max_mm.x(), limits.travel_max_mm.y(), limits.travel_max_mm.z()}},
+        {"max_feed_mm_per_min", limits.max_feed_mm_per_min},
+        {"max_spindle_rpm", limits.max_spindle_rpm},
+        {"probe", {{"ball_radius_mm", true_probe.ball_radius_mm}, {"pretravel_mm", true_probe.pretravel_mm}}}}},
+      {"probing",
+       {{"grid", {probe_nu, probe_nv}},
+        {"inset_fraction", probe_inset_fraction},
+        {"ball_radius_mm", probe.ball_radius_mm},
+        {"pretravel_mm", probe.pretravel_mm},
+        {"clearance_mm", probe_program.clearance_mm},
+        {"search_mm", probe_program.search_mm},
+        {"feed_mm_per_min", probe_program.probe_feed_mm_per_min},
+        {"tool", probe_program.probe_tool},
+        {"fanuc_result_base", probe_program.fanuc_result_base},
+        {"sinumerik_r_base", probe_program.sinumerik_r_base},
+        {"sinumerik_r_last", probe_program.sinumerik_r_last}}},
+      {"analysis",
+       {{"neighbours", analysis.neighbours},
+        {"max_control_net", analysis.max_control_net},
+        {"coverage_factor", analysis.coverage_factor}}},
+      {"loops", {{"max", max_loops}, {"max_offset_um", compensation.max_offset_um}}}};
   // Only effects the part gave: without them `--machine virtual` takes the machine's profile, and a
   // resolved part read again must do the same.
   out["probing"]["edge_margin_mm"] = probe_edge_margin_mm;

@@ -17,7 +17,8 @@
 //   "tool": {"number": 1, "radius_mm": 3.0, "flutes": 2},
 //   "tools": [{"number": 2, "radius_mm": 1.5}, ...],   // magazine for the simulation-correction step
 //   "toolpath": {"scallop_um": 3, "chord_tolerance_um": 1, "feed_mm_per_min": 1500, ...},
-//   "machine": {"name": "vm-1", "class": "3-axis", "travel_min_mm": [..], "travel_max_mm": [..], "max_feed_mm_per_min": ..,
+//   "machine": {"name": "vm-1", "class": "3-axis", "travel_min_mm": [..], "travel_max_mm": [..], "max_feed_mm_per_min":
+//   ..,
 //               "effects": {"format": "formloop-model", "version": 1, "effects": [..]}},   // simulation/model.h
 //   "probing": {"grid": [20, 20], "inset_fraction": 0.05, "edge_margin_mm": 2, "ball_radius_mm": 1.0, ...,
 //               "profile": "probe.json"},        // a probe profile from `formloop calibrate sphere` (or inline)
@@ -49,10 +50,10 @@ namespace formloop::app {
 
 struct PartSpec {
   std::string name = "part";
-  std::string surface_reference;        // name of an analytic reference surface, or ...
-  std::string surface_kind;             // ... a parametric kind (reconstruction/surface_family.h) with its parameters
+  std::string surface_reference;  // name of an analytic reference surface, or ...
+  std::string surface_kind;       // ... a parametric kind (reconstruction/surface_family.h) with its parameters
   std::map<std::string, double> surface_params;
-  int surface_samples = 41;             // grid samples per direction of a parametric kind's fit
+  int surface_samples = 41;                 // grid samples per direction of a parametric kind's fit
   std::optional<SurfaceFile> surface_file;  // ... or CAD faces or a scan (app/surface_source.h)
   // Retrieval description (retrieval::PartDescription): the shape concept defaults from the surface.
   std::string shape_family;
@@ -60,23 +61,23 @@ struct PartSpec {
   int batch_size = 1;
   std::string machine_class = "3-axis";
   std::string machine_name = "virtual-3axis";  // key of learned models in the case library
-  int flutes = 2;                       // of the ball-end tools (feed per tooth)
-  std::vector<nc::BallEndTool> tools;   // the magazine the planner may choose from (default: the part's tool)
+  int flutes = 2;                              // of the ball-end tools (feed per tooth)
+  std::vector<nc::BallEndTool> tools;          // the magazine the planner may choose from (default: the part's tool)
   std::string material = "unspecified";
   double tolerance_mm = 0.010;
   unsigned long long seed = 1;
   int fit_samples_u = 50, fit_samples_v = 50;  // sampling of the ideal surface for the B-spline fit
   recon::GridFitOptions fit;
-  int fit_check_points = 2000;          // random points where the fit is checked against the truth
+  int fit_check_points = 2000;  // random points where the fit is checked against the truth
   nc::ToolpathOptions toolpath;
   nc::MachineLimits limits;
-  std::string dialect = "linuxcnc";     // controller dialect of the NC and probing programs (machine.dialect)
+  std::string dialect = "linuxcnc";  // controller dialect of the NC and probing programs (machine.dialect)
   // machine.effects: what the virtual machine does that the plan does not know, as the effect catalogue's
   // model JSON (simulation/model.h); absent: `--machine virtual` takes the machine's profile. The old
   // fields (tool_radius_error_um, deflection_um, thermal_amplitude_um, thermal_tau_s, surface_noise_um,
   // probe_noise_um) are still read, turned into the model, with a deprecation note in the log.
   std::optional<sim::Model> effects;
-  metrology::ProbeModel true_probe;     // the probe the virtual machine really has
+  metrology::ProbeModel true_probe;  // the probe the virtual machine really has
   int probe_nu = 20, probe_nv = 20;
   double probe_inset_fraction = 0.05;
   double probe_edge_margin_mm = metrology::kProbeEdgeMarginMm;  // from a trimmed face's edge (metrology/probe.h)
@@ -84,14 +85,14 @@ struct PartSpec {
   // the resolved part then carries them inline.
   bool probe_profile_given = false, true_probe_profile_given = false;
   nc::ProbeProgramOptions probe_program;
-  metrology::ProbeModel probe;          // the probe model the analysis applies
+  metrology::ProbeModel probe;  // the probe model the analysis applies
   metrology::DecompositionOptions analysis;
   int max_loops = 3;
   nc::CompensationOptions compensation;
 
-  nlohmann::json ToJson() const;  // fully resolved
-  std::string SurfaceName() const;  // the reference name, "<kind>(p=v, ...)", "cad:FILE[faces]" or "scan:FILE"
-  std::string ShapeConcept() const; // shape_family, else the shape taxonomy leaf of the surface
+  nlohmann::json ToJson() const;     // fully resolved
+  std::string SurfaceName() const;   // the reference name, "<kind>(p=v, ...)", "cad:FILE[faces]" or "scan:FILE"
+  std::string ShapeConcept() const;  // shape_family, else the shape taxonomy leaf of the surface
 };
 
 Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source);

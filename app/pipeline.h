@@ -30,16 +30,16 @@
 namespace formloop::app {
 
 struct RunOptions {
-  std::filesystem::path out;            // run folder
-  bool force = false;                   // replace an existing run folder
-  std::string part_source;              // path of the part file, recorded in the summary
-  std::string kb;                       // case library; empty: no retrieval (default plan, flagged)
-  std::string machine;                  // "virtual" (the part's machine.effects), "virtual:NAME|PATH.json" or "linuxcnc:CONFIG"
-  std::vector<std::string> measured;    // measured probe logs, one per cycle, instead of the virtual machine
-  bool retain = true;                   // store the outcome in the case library (needs kb)
-  bool learn = true;                    // pre-compensate with the case's learned model
-  bool report = true;                   // write report.html
-  std::filesystem::path data_dir;       // taxonomies, machines (default: retrieval::DefaultDataDir())
+  std::filesystem::path out;  // run folder
+  bool force = false;         // replace an existing run folder
+  std::string part_source;    // path of the part file, recorded in the summary
+  std::string kb;             // case library; empty: no retrieval (default plan, flagged)
+  std::string machine;        // "virtual" (the part's machine.effects), "virtual:NAME|PATH.json" or "linuxcnc:CONFIG"
+  std::vector<std::string> measured;  // measured probe logs, one per cycle, instead of the virtual machine
+  bool retain = true;                 // store the outcome in the case library (needs kb)
+  bool learn = true;                  // pre-compensate with the case's learned model
+  bool report = true;                 // write report.html
+  std::filesystem::path data_dir;     // taxonomies, machines (default: retrieval::DefaultDataDir())
   // Retrieve with this model instead of the library's stored GHSOM (the leave-one-out rerun of
   // app/route_calibration.h: a model trained without the part's own case); the cases are still read from kb.
   std::shared_ptr<const retrieval::RetrievalModel> retrieval_model;
@@ -61,7 +61,7 @@ struct LoopSummary {
   bool within_tolerance = false;
   bool compensated = false;
   std::string chosen_model;
-  double residual_moran_z = 0;        // of d_u
+  double residual_moran_z = 0;  // of d_u
   bool residual_independent = false;
   double field_residual_moran_z = 0;  // of y − d_s (differs when the spatial filter ran)
   double fine_scale_rms_um = 0;       // d_f: correlated structure finer than the field, not compensated
@@ -75,19 +75,19 @@ struct RunSummary {
   std::string surface;
   double tolerance_um = 0;
   double fit_check_max_um = 0;
-  std::string route = "default";        // direct | simulate | default
-  double similarity = -1;               // A of the best case (-1: no library)
-  std::string case_uid;                 // the retrieved case
+  std::string route = "default";  // direct | simulate | default
+  double similarity = -1;         // A of the best case (-1: no library)
+  std::string case_uid;           // the retrieved case
   bool flag_engineer = true;
-  std::string plan_source;              // "case X", "case X, simulation-corrected", "default plan"
+  std::string plan_source;  // "case X", "case X, simulation-corrected", "default plan"
   bool precompensated = false;
   double precompensation_scale = 0;
-  std::vector<std::string> causes;      // named by the diagnosis of loop 0
-  std::string retained;                 // "added <uid>", "updated <uid>", "" (not retained)
+  std::vector<std::string> causes;  // named by the diagnosis of loop 0
+  std::string retained;             // "added <uid>", "updated <uid>", "" (not retained)
   std::vector<LoopSummary> loops;
   bool within_tolerance = false;
   std::filesystem::path out;
-  int LoopsToTolerance() const;         // compensation loops until within tolerance, -1 if never
+  int LoopsToTolerance() const;  // compensation loops until within tolerance, -1 if never
   nlohmann::json ToJson() const;
 };
 

@@ -125,11 +125,20 @@ std::string Esc(std::string_view text) {
   out.reserve(text.size());
   for (char c : text) {
     switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      default: out += c;
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
     }
   }
   return out;
@@ -255,7 +264,8 @@ void CloseSection(std::string& html) { html += "</section>\n"; }
 
 // "<what>: not available (<why>)." — why may be empty (the file simply does not exist).
 void NotAvailable(std::string& html, const std::string& what, const std::string& why) {
-  html += fmt::format("<p class=\"na\">{}: {}{}.</p>\n", Esc(what), kNotAvailable, why.empty() ? "" : " (" + Esc(why) + ")");
+  html += fmt::format("<p class=\"na\">{}: {}{}.</p>\n", Esc(what), kNotAvailable,
+                      why.empty() ? "" : " (" + Esc(why) + ")");
 }
 
 // Table with a header row; cells are already HTML.
@@ -401,11 +411,15 @@ void HeaderSection(std::string& html, const RunData& run) {
   html += fmt::format("<header>\n<h1>{} report: {}</h1>\n", run.analysis_folder ? "Analysis" : "Run",
                       Esc(StringOr(Member(s, "part"), "")));
   const bool has_tolerance = Member(s, "tolerance_um").is_number();
-  html += fmt::format("<p class=\"verdict {}\">{}</p>\n", !has_tolerance ? "na" : ok ? "ok" : "bad", Esc(VerdictText(s)));
+  html += fmt::format("<p class=\"verdict {}\">{}</p>\n",
+                      !has_tolerance ? "na"
+                      : ok           ? "ok"
+                                     : "bad",
+                      Esc(VerdictText(s)));
   if (!run.analysis_folder) {
-    html += fmt::format("<p><span class=\"badge route-{0}\">route: {0}</span>{1}</p>\n", Esc(route_name),
-                        Member(route, "flag_engineer") == Json(true) ? " <span class=\"badge flag\">engineer review</span>"
-                                                                     : "");
+    html += fmt::format(
+        "<p><span class=\"badge route-{0}\">route: {0}</span>{1}</p>\n", Esc(route_name),
+        Member(route, "flag_engineer") == Json(true) ? " <span class=\"badge flag\">engineer review</span>" : "");
   }
   const Json last = loops.empty() ? Json() : loops.back();
   html += Table({"surface", "form tolerance α", "loops run", "final form error", "fit check max"},
@@ -422,8 +436,8 @@ void RetrievalSection(std::string& html, const RunData& run) {
   const Json route = RouteOf(run);
   html += Table({"route", "similarity A", "closest case", "rule", "engineer review"},
                 {{Esc(StringOr(Member(route, "name"), "—")), Num(Member(route, "similarity"), 3),
-                  Esc(Scalar(Member(route, "case_uid"))),
-                  Esc(Scalar(Member(route, "rule"))), Esc(Scalar(Member(route, "flag_engineer")))}});
+                  Esc(Scalar(Member(route, "case_uid"))), Esc(Scalar(Member(route, "rule"))),
+                  Esc(Scalar(Member(route, "flag_engineer")))}});
   if (!run.retrieval.value) {
     NotAvailable(html, "Ranked candidates (retrieval.json)", run.retrieval.note);
     CloseSection(html);
@@ -442,15 +456,17 @@ void RetrievalSection(std::string& html, const RunData& run) {
     if (!facets.is_array() || facets.empty()) rows.push_back({lead + "<td colspan=\"5\">no facets</td>"});
     for (std::size_t k = 0; facets.is_array() && k < facets.size(); ++k) {
       const Json& f = facets[k];
-      rows.push_back({(k == 0 ? lead : "") +
-                      fmt::format("<td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>", Esc(Scalar(Member(f, "facet"))),
-                                  Esc(Scalar(Member(f, "query_concept"))), Esc(Scalar(Member(f, "case_concept"))),
-                                  Esc(Scalar(Member(f, "common_node"))), Num(Member(f, "lin"), 3))});
+      rows.push_back(
+          {(k == 0 ? lead : "") + fmt::format("<td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>",
+                                              Esc(Scalar(Member(f, "facet"))), Esc(Scalar(Member(f, "query_concept"))),
+                                              Esc(Scalar(Member(f, "case_concept"))),
+                                              Esc(Scalar(Member(f, "common_node"))), Num(Member(f, "lin"), 3))});
     }
   }
   // Rows carry their own <td>s (rowspan), so the table is assembled here rather than by Table().
-  html += "<table>\n<tr><th>rank</th><th>case uid</th><th>family</th><th>similarity A</th><th>facet</th>"
-          "<th>query concept</th><th>case concept</th><th>common node</th><th>Lin similarity</th></tr>\n";
+  html +=
+      "<table>\n<tr><th>rank</th><th>case uid</th><th>family</th><th>similarity A</th><th>facet</th>"
+      "<th>query concept</th><th>case concept</th><th>common node</th><th>Lin similarity</th></tr>\n";
   for (const auto& row : rows) html += "<tr>" + row[0] + "</tr>\n";
   html += "</table>\n";
   CloseSection(html);
@@ -477,10 +493,11 @@ Status LoopHistorySection(std::string& html, const RunData& run) {
   std::vector<std::string> labels;
   std::vector<double> errors;
   for (const Json& l : loops) {  // an array: CheckSummary
-    rows.push_back({Esc(Scalar(Member(l, "loop"))), Num(Member(l, "form_error_um"), 2), Num(Member(l, "systematic_peak_um"), 2),
-                    Num(Member(l, "random_sigma_um"), 2), Num(Member(l, "raw_moran_z"), 2),
-                    Esc(Scalar(Member(l, "chosen_model"))), Num(Member(l, "residual_moran_z"), 2),
-                    Esc(Scalar(Member(l, "within_tolerance"))), Esc(Scalar(Member(l, "decision")))});
+    rows.push_back({Esc(Scalar(Member(l, "loop"))), Num(Member(l, "form_error_um"), 2),
+                    Num(Member(l, "systematic_peak_um"), 2), Num(Member(l, "random_sigma_um"), 2),
+                    Num(Member(l, "raw_moran_z"), 2), Esc(Scalar(Member(l, "chosen_model"))),
+                    Num(Member(l, "residual_moran_z"), 2), Esc(Scalar(Member(l, "within_tolerance"))),
+                    Esc(Scalar(Member(l, "decision")))});
     labels.push_back("LOOP " + Scalar(Member(l, "loop")));
     errors.push_back(Member(l, "form_error_um").is_number() ? Member(l, "form_error_um").get<double>() : 0.0);
   }
@@ -488,13 +505,14 @@ Status LoopHistorySection(std::string& html, const RunData& run) {
                  "chosen model", "residual Moran z", "within tolerance", "decision"},
                 rows);
   const double tol = ToleranceUm(run.summary);
-  FL_ASSIGN_OR_RETURN(std::string figure,
-                      Figure(DrawBars(labels, errors, tol, "TOLERANCE " + FormatFixed(tol, 1) + " µm", "FORM ERROR (µm)",
-                                      "FORM ERROR PER LOOP"),
-                             "Bar chart of the form error of each loop with the tolerance as a dashed line",
-                             std::isfinite(tol) ? "Form error per loop (µm). Green bars are within the tolerance α = " +
-                                                      FormatFixed(tol, 2) + " µm (dashed red line), orange bars are not."
-                                                : std::string("Form error per loop (µm); no tolerance was given.")));
+  FL_ASSIGN_OR_RETURN(
+      std::string figure,
+      Figure(DrawBars(labels, errors, tol, "TOLERANCE " + FormatFixed(tol, 1) + " µm", "FORM ERROR (µm)",
+                      "FORM ERROR PER LOOP"),
+             "Bar chart of the form error of each loop with the tolerance as a dashed line",
+             std::isfinite(tol) ? "Form error per loop (µm). Green bars are within the tolerance α = " +
+                                      FormatFixed(tol, 2) + " µm (dashed red line), orange bars are not."
+                                : std::string("Form error per loop (µm); no tolerance was given.")));
   html += figure;
   CloseSection(html);
   return Status::Ok();
@@ -507,8 +525,12 @@ std::vector<std::string> DeviationStats(const LoopData& loop) {
   for (double v : d) sum += v, sum_sq += v * v;
   const double n = std::max<double>(static_cast<double>(d.size()), 1);
   const auto [lo, hi] = std::minmax_element(d.begin(), d.end());
-  return {std::to_string(loop.loop), std::to_string(d.size()), FormatFixed(sum / n, 2), FormatFixed(std::sqrt(sum_sq / n), 2),
-          d.empty() ? "—" : FormatFixed(*lo, 2), d.empty() ? "—" : FormatFixed(*hi, 2)};
+  return {std::to_string(loop.loop),
+          std::to_string(d.size()),
+          FormatFixed(sum / n, 2),
+          FormatFixed(std::sqrt(sum_sq / n), 2),
+          d.empty() ? "—" : FormatFixed(*lo, 2),
+          d.empty() ? "—" : FormatFixed(*hi, 2)};
 }
 
 Status DeviationFigures(std::string& html, const LoopData& first, const LoopData& last, double tol,
@@ -517,8 +539,9 @@ Status DeviationFigures(std::string& html, const LoopData& first, const LoopData
   const PointSet& p1 = *last.points;
   const std::vector<double> d0 = Column(p0, "deviation_um"), d1 = Column(p1, "deviation_um");
   const double scale = std::max({MaxAbs(d0), MaxAbs(d1), 1e-3});
-  const std::string common = "Both maps share one symmetric colour scale (±" + FormatFixed(scale, 2) +
-                             " µm): red = material left, blue = material removed beyond nominal; dots are probe points.";
+  const std::string common =
+      "Both maps share one symmetric colour scale (±" + FormatFixed(scale, 2) +
+      " µm): red = material left, blue = material removed beyond nominal; dots are probe points.";
   std::vector<const LoopData*> shown{&first};
   if (last.loop != first.loop) shown.push_back(&last);
   for (const LoopData* loop : shown) {
@@ -547,13 +570,14 @@ Status DeviationFigures(std::string& html, const LoopData& first, const LoopData
   }
   std::vector<HistogramSeries> series{{d0, "LOOP " + std::to_string(first.loop), HexColour(0xe66101)}};
   if (last.loop != first.loop) series.push_back({d1, "LOOP " + std::to_string(last.loop), HexColour(0x5e3c99)});
-  FL_ASSIGN_OR_RETURN(std::string hist,
-                      Figure(DrawHistogram(series, tol, "DEVIATION HISTOGRAM"),
-                             "Histogram of the deviations before and after compensation with the tolerance limits",
-                             "Distribution of the deviations (µm), loop " + std::to_string(first.loop) + " (orange)" +
-                                 (last.loop != first.loop ? " and loop " + std::to_string(last.loop) + " (purple)" : "") +
-                                 (std::isfinite(tol) ? "; dashed lines at ±α = ±" + FormatFixed(tol, 2) + " µm."
-                                                     : std::string("; no tolerance was given."))));
+  FL_ASSIGN_OR_RETURN(
+      std::string hist,
+      Figure(DrawHistogram(series, tol, "DEVIATION HISTOGRAM"),
+             "Histogram of the deviations before and after compensation with the tolerance limits",
+             "Distribution of the deviations (µm), loop " + std::to_string(first.loop) + " (orange)" +
+                 (last.loop != first.loop ? " and loop " + std::to_string(last.loop) + " (purple)" : "") +
+                 (std::isfinite(tol) ? "; dashed lines at ±α = ±" + FormatFixed(tol, 2) + " µm."
+                                     : std::string("; no tolerance was given."))));
   html += hist;
   return Status::Ok();
 }
@@ -605,8 +629,8 @@ Status MoranScatter(std::string& html, const LoopData& loop, double moran_i) {
                                               "MORAN SCATTER LOOP 0  I = " + FormatFixed(moran_i, 3)),
                              "Moran scatter plot of loop 0: standardised deviation against its spatial lag",
                              "Moran scatter of loop 0: each point's standardised deviation z against the average z of "
-                             "its neighbours; the red line has slope I = " + FormatFixed(moran_i, 3) +
-                                 ". Points in HH/LL quadrants sit in like neighbourhoods."));
+                             "its neighbours; the red line has slope I = " +
+                                 FormatFixed(moran_i, 3) + ". Points in HH/LL quadrants sit in like neighbourhoods."));
   html += fig;
   return Status::Ok();
 }
@@ -617,12 +641,12 @@ Status LisaMap(std::string& html, const LoopData& loop) {
     NotAvailable(html, "LISA cluster map", "deviations.csv of loop 0 has no lisa column");
     return Status::Ok();
   }
-  FL_ASSIGN_OR_RETURN(std::string fig,
-                      Figure(DrawClusterMap(Column(*loop.points, "x"), Column(*loop.points, "y"), clusters,
-                                            "LISA CLUSTERS LOOP 0"),
-                             "Map of the local Moran (LISA) clusters of loop 0",
-                             "LISA clusters of loop 0: HH = high deviation among high neighbours (red), LL = low among "
-                             "low (blue), LH/HL = outliers, grey = not significant or island."));
+  FL_ASSIGN_OR_RETURN(
+      std::string fig,
+      Figure(DrawClusterMap(Column(*loop.points, "x"), Column(*loop.points, "y"), clusters, "LISA CLUSTERS LOOP 0"),
+             "Map of the local Moran (LISA) clusters of loop 0",
+             "LISA clusters of loop 0: HH = high deviation among high neighbours (red), LL = low among "
+             "low (blue), LH/HL = outliers, grey = not significant or island."));
   html += fig;
   std::vector<int> counts(kLisaClusterCount, 0);
   for (int k : clusters) {
@@ -678,9 +702,10 @@ std::string Parameters(const Json& cause) {
 }
 
 void DiagnosisSection(std::string& html, const RunData& run) {
-  OpenSection(html, "diagnosis", "Diagnosis",
-              "Which physical effects of the machine, tool, set-up or probe explain the systematic deviation of loop 0, "
-              "with their fitted parameters, and how much a model of them reduces the error.");
+  OpenSection(
+      html, "diagnosis", "Diagnosis",
+      "Which physical effects of the machine, tool, set-up or probe explain the systematic deviation of loop 0, "
+      "with their fitted parameters, and how much a model of them reduces the error.");
   if (!run.diagnosis.value) {
     NotAvailable(html, "Diagnosis (loop-0/diagnosis/diagnosis.json)", run.diagnosis.note);
     CloseSection(html);
@@ -704,10 +729,10 @@ void DiagnosisSection(std::string& html, const RunData& run) {
                                 : GenericJson(unexplained);
   const Json& gain = Member(d, "gain");
   html += "<h3>Gain</h3>\n";
-  html += Table({"", "before (µm)", "after (µm)"},
-                {{"rms", Num(Member(gain, "rms_before_um"), 2), Num(Member(gain, "rms_after_um"), 2)},
-                 {"held-out rms", Num(Member(gain, "heldout_rms_before_um"), 2),
-                  Num(Member(gain, "heldout_rms_after_um"), 2)}});
+  html += Table(
+      {"", "before (µm)", "after (µm)"},
+      {{"rms", Num(Member(gain, "rms_before_um"), 2), Num(Member(gain, "rms_after_um"), 2)},
+       {"held-out rms", Num(Member(gain, "heldout_rms_before_um"), 2), Num(Member(gain, "heldout_rms_after_um"), 2)}});
   CloseSection(html);
 }
 
@@ -774,9 +799,10 @@ Result<std::string> RenderRunReport(const fs::path& run_dir) {
             "</code> (the report names no folder, so the same analysis gives the same bytes wherever it is "
             "written)</footer>\n";
   } else {
-    html += "<footer>formloop " + Esc(StringOr(Member(run.summary, "formloop_version"), "unknown version")) +
-            " — report of part <code>" + Esc(StringOr(Member(run.summary, "part"), "?")) +
-            "</code> (the report names no folder, so the same run gives the same bytes wherever it is written)</footer>\n";
+    html +=
+        "<footer>formloop " + Esc(StringOr(Member(run.summary, "formloop_version"), "unknown version")) +
+        " — report of part <code>" + Esc(StringOr(Member(run.summary, "part"), "?")) +
+        "</code> (the report names no folder, so the same run gives the same bytes wherever it is written)</footer>\n";
   }
   html += "</body>\n</html>\n";
   return html;

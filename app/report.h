@@ -3,9 +3,9 @@
 //
 // Reads a run folder written by `formloop run` (and the optional files of `retrieve`, `diagnose`,
 // simulation correction and retain), or a folder written by `formloop analyse` (analysis.json and
-// deviations.csv: one cycle, drawn like a run's loop 0, without the run-only sections), and renders: the verdict, retrieval, plan, simulation
-// correction, loop history, deviations before/after, spatial analysis, diagnosis and retain. Pictures
-// are PNGs drawn by app/report_charts.h and embedded as data: URIs; CSS is inline; the only script is
+// deviations.csv: one cycle, drawn like a run's loop 0, without the run-only sections), and renders: the verdict,
+// retrieval, plan, simulation correction, loop history, deviations before/after, spatial analysis, diagnosis and
+// retain. Pictures are PNGs drawn by app/report_charts.h and embedded as data: URIs; CSS is inline; the only script is
 // a few lines that record in <body data-images-loaded="loaded/total"> how many pictures decoded, so a
 // headless browser can check the file. Nothing is fetched from a network.
 //

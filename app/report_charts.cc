@@ -48,8 +48,14 @@ Bounds BoundsOf(const std::vector<double>& x, const std::vector<double>& y) {
 // The plot frame of a map: equal mm per pixel on both axes, at most max_w × max_h pixels.
 Frame MapFrame(const Bounds& b, int left, int top, int max_w, int max_h) {
   const double px_per_mm = std::min(max_w / (b.x_hi - b.x_lo), max_h / (b.y_hi - b.y_lo));
-  Frame f{left, top, std::max(1, static_cast<int>(std::lround((b.x_hi - b.x_lo) * px_per_mm))),
-          std::max(1, static_cast<int>(std::lround((b.y_hi - b.y_lo) * px_per_mm))), b.x_lo, b.x_hi, b.y_lo, b.y_hi};
+  Frame f{left,
+          top,
+          std::max(1, static_cast<int>(std::lround((b.x_hi - b.x_lo) * px_per_mm))),
+          std::max(1, static_cast<int>(std::lround((b.y_hi - b.y_lo) * px_per_mm))),
+          b.x_lo,
+          b.x_hi,
+          b.y_lo,
+          b.y_hi};
   return f;
 }
 
@@ -176,7 +182,9 @@ void DrawColourBar(Canvas& c, int centre_x, int top, int width, double max_abs, 
   c.Text(centre_x, top + 36, label, kInk, kLabelScale, TextAlign::kCentre);
 }
 
-void DrawTitle(Canvas& c, const std::string& title) { c.Text(c.width() / 2, 8, title, kInk, kTitleScale, TextAlign::kCentre); }
+void DrawTitle(Canvas& c, const std::string& title) {
+  c.Text(c.width() / 2, 8, title, kInk, kTitleScale, TextAlign::kCentre);
+}
 
 void NoData(Canvas& c, const Frame& f) {
   c.Text(f.left + f.width / 2, f.top + f.height / 2, "NO POINTS", kAxisGrey, 2, TextAlign::kCentre);
@@ -221,8 +229,8 @@ Canvas DrawFieldMap(const std::vector<double>& x_mm, const std::vector<double>& 
   return c;
 }
 
-Canvas DrawClusterMap(const std::vector<double>& x_mm, const std::vector<double>& y_mm, const std::vector<int>& clusters,
-                      const std::string& title) {
+Canvas DrawClusterMap(const std::vector<double>& x_mm, const std::vector<double>& y_mm,
+                      const std::vector<int>& clusters, const std::string& title) {
   const Frame f = MapFrame(BoundsOf(x_mm, y_mm), 70, 40, 480, 360);
   Canvas c(f.left + f.width + 40 < 600 ? 600 : f.left + f.width + 40, f.top + f.height + 90);
   DrawTitle(c, title);
@@ -288,7 +296,7 @@ Canvas DrawHistogram(const std::vector<HistogramSeries>& series, double toleranc
            t < 0 ? TextAlign::kRight : TextAlign::kLeft);
   }
   DrawAxes(c, f, "DEVIATION (µm)", "POINTS");
-  for (std::size_t s = 0; s < series.size(); ++s) {  // legend, top right inside the frame
+  for (std::size_t s = 0; s < series.size(); ++s) {       // legend, top right inside the frame
     const int y = f.top + 24 + static_cast<int>(s) * 14;  // below the ±TOL labels
     c.FillRect(f.left + f.width - 80, y, f.left + f.width - 70, y + 10, series[s].colour);
     c.Text(f.left + f.width - 64, y + 2, series[s].label, kInk);
@@ -296,8 +304,8 @@ Canvas DrawHistogram(const std::vector<HistogramSeries>& series, double toleranc
   return c;
 }
 
-Canvas DrawMoranScatter(const std::vector<double>& z, const std::vector<double>& lag_z, const std::vector<int>& clusters,
-                        double moran_i, const std::string& title) {
+Canvas DrawMoranScatter(const std::vector<double>& z, const std::vector<double>& lag_z,
+                        const std::vector<int>& clusters, double moran_i, const std::string& title) {
   double range = 1;
   for (std::size_t i = 0; i < z.size(); ++i) range = std::max({range, std::abs(z[i]), std::abs(lag_z[i])});
   range *= 1.1;
@@ -343,7 +351,8 @@ Canvas DrawBars(const std::vector<std::string>& labels, const std::vector<double
     const int x0 = static_cast<int>(std::lround(f.left + (i + 0.2) * slot_px));
     const int x1 = static_cast<int>(std::lround(f.left + (i + 0.8) * slot_px));
     const int y0 = static_cast<int>(std::lround(f.Py(std::max(values[i], 0.0))));
-    c.FillRect(x0, y0, x1, f.top + f.height, !has_limit || values[i] <= limit ? HexColour(0x4daf4a) : HexColour(0xff7f00));
+    c.FillRect(x0, y0, x1, f.top + f.height,
+               !has_limit || values[i] <= limit ? HexColour(0x4daf4a) : HexColour(0xff7f00));
     c.Text((x0 + x1) / 2, y0 - 11, FormatFixed(values[i], 1), kInk, 1, TextAlign::kCentre);
     c.Text((x0 + x1) / 2, f.top + f.height + 8, i < labels.size() ? labels[i] : "", kInk, 1, TextAlign::kCentre);
   }
@@ -381,8 +390,7 @@ Canvas DrawTimePanels(const std::vector<TimePanel>& panels, const std::string& t
       for (double v : s.values) y_hi = std::max(y_hi, v);
     }
     for (const LevelLine& l : p.levels) y_hi = std::max(y_hi, l.value);
-    const Frame f{kLeft, kTop + k * (kPanelHeight + kGap), kWidth, kPanelHeight, 0, t_hi, 0,
-                  y_hi > 0 ? y_hi * 1.1 : 1};
+    const Frame f{kLeft, kTop + k * (kPanelHeight + kGap), kWidth, kPanelHeight, 0, t_hi, 0, y_hi > 0 ? y_hi * 1.1 : 1};
     for (double t : NiceTicks(f.y_lo, f.y_hi, 5)) c.Line(f.left, f.Py(t), f.left + f.width, f.Py(t), kGridGrey);
     for (const TimeSeries& s : p.series) {
       for (std::size_t i = 1; i < s.t_s.size() && i < s.values.size(); ++i) {

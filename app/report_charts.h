@@ -27,8 +27,8 @@ Canvas DrawFieldMap(const std::vector<double>& x_mm, const std::vector<double>& 
                     const std::string& bar_label, const MapMask& inside = {});
 
 // LISA clusters at the point positions (same frame as DrawFieldMap), with a legend and counts.
-Canvas DrawClusterMap(const std::vector<double>& x_mm, const std::vector<double>& y_mm, const std::vector<int>& clusters,
-                      const std::string& title);
+Canvas DrawClusterMap(const std::vector<double>& x_mm, const std::vector<double>& y_mm,
+                      const std::vector<int>& clusters, const std::string& title);
 
 // One histogram series: values and how to draw and name them.
 struct HistogramSeries {
@@ -43,8 +43,8 @@ Canvas DrawHistogram(const std::vector<HistogramSeries>& series, double toleranc
 // Moran scatter plot (Anselin 1996): x = standardised value z_i, y = standardised spatial lag,
 // points coloured by LISA cluster (clusters may be empty), axes through 0 and the line through the
 // origin with slope moran_i (the slope of the lag on z for row-standardised weights).
-Canvas DrawMoranScatter(const std::vector<double>& z, const std::vector<double>& lag_z, const std::vector<int>& clusters,
-                        double moran_i, const std::string& title);
+Canvas DrawMoranScatter(const std::vector<double>& z, const std::vector<double>& lag_z,
+                        const std::vector<int>& clusters, double moran_i, const std::string& title);
 
 // Bars per category (e.g. form error per loop) with a dashed horizontal line at limit; bars above
 // the limit are drawn in a warning colour. A NaN limit (none given) draws no line and no warning.

@@ -98,7 +98,8 @@ Canvas::Canvas(int width_px, int height_px, Rgb background)
 
 void Canvas::Set(int x, int y, Rgb colour) {
   if (x < 0 || y < 0 || x >= width_ || y >= height_) return;
-  const std::size_t at = (static_cast<std::size_t>(y) * static_cast<std::size_t>(width_) + static_cast<std::size_t>(x)) * 3;
+  const std::size_t at =
+      (static_cast<std::size_t>(y) * static_cast<std::size_t>(width_) + static_cast<std::size_t>(x)) * 3;
   pixels_[at] = colour.r;
   pixels_[at + 1] = colour.g;
   pixels_[at + 2] = colour.b;
@@ -106,7 +107,8 @@ void Canvas::Set(int x, int y, Rgb colour) {
 
 Rgb Canvas::Get(int x, int y) const {
   if (x < 0 || y < 0 || x >= width_ || y >= height_) return {};
-  const std::size_t at = (static_cast<std::size_t>(y) * static_cast<std::size_t>(width_) + static_cast<std::size_t>(x)) * 3;
+  const std::size_t at =
+      (static_cast<std::size_t>(y) * static_cast<std::size_t>(width_) + static_cast<std::size_t>(x)) * 3;
   return Rgb{pixels_[at], pixels_[at + 1], pixels_[at + 2]};
 }
 
@@ -196,12 +198,18 @@ Rgb DivergingColour(double value, double max_abs) {
 
 Rgb LisaColour(int cluster) {
   switch (cluster) {
-    case 1: return HexColour(0xd7191c);  // HH
-    case 2: return HexColour(0xabd9e9);  // LH
-    case 3: return HexColour(0x2c7bb6);  // LL
-    case 4: return HexColour(0xfdae61);  // HL
-    case 5: return HexColour(0x555555);  // island (no neighbours)
-    default: return HexColour(0xd9d9d9);  // not significant
+    case 1:
+      return HexColour(0xd7191c);  // HH
+    case 2:
+      return HexColour(0xabd9e9);  // LH
+    case 3:
+      return HexColour(0x2c7bb6);  // LL
+    case 4:
+      return HexColour(0xfdae61);  // HL
+    case 5:
+      return HexColour(0x555555);  // island (no neighbours)
+    default:
+      return HexColour(0xd9d9d9);  // not significant
   }
 }
 

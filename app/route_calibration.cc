@@ -164,8 +164,9 @@ json OutcomesByRoute(const std::vector<kb::CaseRecord>& cases) {
   }
   return {{"by_route", tally.ToJson()},
           {"cases_without_pipeline_outcome", without},
-          {"method", "outcomes recorded by formloop run's retain step (part.outcome): the route the run took and "
-                     "its form error per cycle"}};
+          {"method",
+           "outcomes recorded by formloop run's retain step (part.outcome): the route the run took and "
+           "its form error per cycle"}};
 }
 
 Result<json> CalibrationReport(const std::string& kb_path, const CalibrationOptions& options_in) {
@@ -181,7 +182,7 @@ Result<json> CalibrationReport(const std::string& kb_path, const CalibrationOpti
   retrieval::RetrieveOptions ro;
   ro.breadth = options.breadth;
   FL_ASSIGN_OR_RETURN(json report, retrieval::RetrievalModel::LeaveOneOut(cases, ghsom, rules.rules, taxonomies, ro,
-                                                                                 options.max_cases));
+                                                                          options.max_cases));
   json out = {{"library", kb_path}, {"retrieval", std::move(report)}, {"outcomes", OutcomesByRoute(cases)}};
   if (options.rerun) {
     FL_ASSIGN_OR_RETURN(out["rerun"], Rerun(kb_path, cases, ghsom, rules.rules, taxonomies, options));

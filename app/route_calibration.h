@@ -34,11 +34,11 @@ namespace formloop::app {
 nlohmann::json OutcomesByRoute(const std::vector<kb::CaseRecord>& cases);
 
 struct CalibrationOptions {
-  int breadth = 1;                    // candidate breadth of the retrieval (RetrieveOptions::breadth)
-  int max_cases = 1000;               // "retrieval": at most this many cases left out (0: all; one training each)
-  bool rerun = false;                 // run the retained virtual-machine parts again (see above)
-  std::filesystem::path work_dir;     // their run folders; empty: a temporary folder, removed afterwards
-  std::filesystem::path data_dir;     // taxonomies and machine profiles (default: retrieval::DefaultDataDir())
+  int breadth = 1;                 // candidate breadth of the retrieval (RetrieveOptions::breadth)
+  int max_cases = 1000;            // "retrieval": at most this many cases left out (0: all; one training each)
+  bool rerun = false;              // run the retained virtual-machine parts again (see above)
+  std::filesystem::path work_dir;  // their run folders; empty: a temporary folder, removed afterwards
+  std::filesystem::path data_dir;  // taxonomies and machine profiles (default: retrieval::DefaultDataDir())
 };
 
 // The report of `formloop kb calibrate` (JSON; see the header comment).

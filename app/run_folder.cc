@@ -81,7 +81,8 @@ Result<PlanWithApproaches> ReadPlanCsv(const fs::path& path) {
   const std::vector<double>* u = set.FindScalar("u");
   const std::vector<double>* v = set.FindScalar("v");
   if (u == nullptr || v == nullptr || !set.has_ids() || set.normals.empty()) {
-    return Status::BadInput(Where{.file = source, .line = 1}, "a probing plan CSV needs the columns id, u, v, x, y, z, nx, ny, nz",
+    return Status::BadInput(Where{.file = source, .line = 1},
+                            "a probing plan CSV needs the columns id, u, v, x, y, z, nx, ny, nz",
                             "add the missing columns (ax, ay, az are optional)");
   }
   const std::vector<double>* ax = set.FindScalar("ax");
@@ -89,7 +90,8 @@ Result<PlanWithApproaches> ReadPlanCsv(const fs::path& path) {
   const std::vector<double>* az = set.FindScalar("az");
   const bool approaches = ax != nullptr || ay != nullptr || az != nullptr;
   if (approaches && (ax == nullptr || ay == nullptr || az == nullptr)) {
-    return Status::BadInput(Where{.file = source, .line = 1, .field = "ax,ay,az"}, "give all three approach columns or none");
+    return Status::BadInput(Where{.file = source, .line = 1, .field = "ax,ay,az"},
+                            "give all three approach columns or none");
   }
   PlanWithApproaches out;
   std::set<std::int64_t> ids;
@@ -102,16 +104,19 @@ Result<PlanWithApproaches> ReadPlanCsv(const fs::path& path) {
     p.point = set.points[i];
     p.normal = set.normals[i];
     if (std::abs(p.normal.norm() - 1.0) > 1e-5) {
-      return Status::BadInput(Where{.file = source, .line = line, .field = "nx,ny,nz"}, "the normal is not a unit vector");
+      return Status::BadInput(Where{.file = source, .line = line, .field = "nx,ny,nz"},
+                              "the normal is not a unit vector");
     }
     if (!ids.insert(p.id).second) {
-      return Status::BadInput(Where{.file = source, .line = line, .field = "id"}, "duplicated id " + std::to_string(p.id));
+      return Status::BadInput(Where{.file = source, .line = line, .field = "id"},
+                              "duplicated id " + std::to_string(p.id));
     }
     out.plan.points.push_back(p);
     if (approaches) {
       const Eigen::Vector3d a((*ax)[i], (*ay)[i], (*az)[i]);
       if (std::abs(a.norm() - 1.0) > 1e-5) {
-        return Status::BadInput(Where{.file = source, .line = line, .field = "ax,ay,az"}, "the approach is not a unit vector");
+        return Status::BadInput(Where{.file = source, .line = line, .field = "ax,ay,az"},
+                                "the approach is not a unit vector");
       }
       if (-a.dot(p.normal) < 0.2) {
         return Status::BadInput(Where{.file = source, .line = line, .field = "ax,ay,az"},
@@ -220,7 +225,8 @@ std::vector<NamedPath> RunFolderInputs(const std::string& option, const fs::path
 
 Result<RunFolder> ReadRunFolder(const fs::path& dir) {
   if (!fs::is_directory(dir)) {
-    return Status::NotFound("run folder '" + dir.string() + "' does not exist. Fix: give the --out folder of `formloop run`");
+    return Status::NotFound("run folder '" + dir.string() +
+                            "' does not exist. Fix: give the --out folder of `formloop run`");
   }
   RunFolder run;
   run.dir = dir;

@@ -10,8 +10,8 @@
 #include "core/log.h"
 #include "core/output_folder.h"
 #include "core/point_io.h"
-#include "core/work_estimate.h"
 #include "core/random.h"
+#include "core/work_estimate.h"
 #include "reconstruction/analytic_surface.h"
 #include "reconstruction/foot_point.h"
 #include "reconstruction/quadric_fit.h"
@@ -88,8 +88,8 @@ Result<std::pair<int, int>> GridLayout(const FitRequest& request, std::size_t n,
                             "give --grid NUxNV (NU points per row, rows one after the other), or use "
                             "--method scattered");
   }
-  notes->push_back("grid layout inferred from the point count: " + std::to_string(side) + " x " +
-                   std::to_string(side) + ", row-major");
+  notes->push_back("grid layout inferred from the point count: " + std::to_string(side) + " x " + std::to_string(side) +
+                   ", row-major");
   return std::make_pair(side, side);
 }
 
@@ -139,8 +139,7 @@ Status CheckAgainstTruth(const recon::AnalyticSurface& truth, const recon::BSpli
 Result<FitOutcome> FitCad(const FitRequest& request, FitMethod method) {
   if (method != FitMethod::kCad) {
     return Status::BadInput(Where{.file = request.input, .field = "--method"},
-                            "a CAD face is taken as it is; --method " + FitMethodName(method) +
-                                " fits points",
+                            "a CAD face is taken as it is; --method " + FitMethodName(method) + " fits points",
                             "leave out --method (or use --method cad), or sample the face into points first");
   }
   FL_ASSIGN_OR_RETURN(recon::CadFace face, recon::ReadCadFace(request.input, request.face));
@@ -168,8 +167,8 @@ Result<FitOutcome> FitCad(const FitRequest& request, FitMethod method) {
 Result<FitOutcome> FitPoints(const FitRequest& request, FitMethod method, const std::vector<Eigen::Vector3d>& points,
                              nlohmann::json input_json, const recon::AnalyticSurface* truth) {
   if (method == FitMethod::kCad) {
-    return Status::BadInput(Where{.file = request.input, .field = "--method"},
-                            "--method cad needs a STEP or IGES file", "use grid, scattered or a quadric method");
+    return Status::BadInput(Where{.file = request.input, .field = "--method"}, "--method cad needs a STEP or IGES file",
+                            "use grid, scattered or a quadric method");
   }
   recon::FitReport fit;
   recon::BSplineSurface q;
@@ -265,8 +264,9 @@ Result<FitOutcome> FitSurface(const FitRequest& request) {
   if (request.input.empty()) return Status::BadInput(Where{.field = "input"}, "no input given");
   const bool analytic = request.input.rfind(kAnalyticPrefix, 0) == 0;
   const bool cad = !analytic && recon::IsCadPath(request.input);
-  const FitMethod method =
-      request.method.value_or(analytic ? FitMethod::kGrid : cad ? FitMethod::kCad : FitMethod::kScattered);
+  const FitMethod method = request.method.value_or(analytic ? FitMethod::kGrid
+                                                   : cad    ? FitMethod::kCad
+                                                            : FitMethod::kScattered);
   Result<FitOutcome> outcome = Status::Internal("fit: no branch taken");
   if (analytic) {
     FL_ASSIGN_OR_RETURN(const auto truth, AnalyticInput(request.input));
@@ -295,12 +295,9 @@ Result<FitOutcome> FitSurface(const FitRequest& request) {
         points.push_back(truth->Point(u, v));
       }
     }
-    nlohmann::json input = {{"kind", "analytic"},
-                            {"surface", truth->name()},
-                            {"description", truth->description()},
-                            {"domain", DomainJson(dom)},
-                            {"n_points", points.size()},
-                            {"seed", request.seed}};
+    nlohmann::json input = {
+        {"kind", "analytic"},        {"surface", truth->name()},  {"description", truth->description()},
+        {"domain", DomainJson(dom)}, {"n_points", points.size()}, {"seed", request.seed}};
     outcome = FitPoints(request, method, points, std::move(input), truth.get());
   } else if (cad) {
     outcome = FitCad(request, method);
@@ -322,7 +319,7 @@ Status RunFit(const FitRequest& request) {
   std::string name = request.name;
   if (name.empty()) {
     name = request.input.rfind(kAnalyticPrefix, 0) == 0 ? request.input.substr(std::string(kAnalyticPrefix).size())
-                                                         : fs::path(request.input).stem().string();
+                                                        : fs::path(request.input).stem().string();
   }
   // Both files or neither: the report waits in its temporary file until the STEP file is in place.
   std::unique_ptr<AtomicFile> report;
@@ -422,9 +419,10 @@ Status RunProject(const ProjectRequest& request) {
   std::cout.flush();
   if (!std::cout) return Status::IoError("project: writing the summary to stdout failed");
   if (outcome.summary["n_on_boundary"].get<long>() > 0) {
-    log::Warn("project: {} of {} points have their foot point on the edge of the surface (on_boundary = 1): "
-              "they lie beyond Q and their deviation is not a normal distance",
-              outcome.summary["n_on_boundary"].get<long>(), outcome.summary["n_points"].get<std::size_t>());
+    log::Warn(
+        "project: {} of {} points have their foot point on the edge of the surface (on_boundary = 1): "
+        "they lie beyond Q and their deviation is not a normal distance",
+        outcome.summary["n_on_boundary"].get<long>(), outcome.summary["n_points"].get<std::size_t>());
   }
   if (outcome.summary.value("n_outside_trim", 0L) > 0) {
     log::Warn(

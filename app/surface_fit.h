@@ -64,10 +64,10 @@ Result<FitOutcome> FitSurface(const FitRequest& request);
 Status RunFit(const FitRequest& request);
 
 struct ProjectRequest {
-  std::string surface;         // STEP/IGES file holding Q (e.g. from `formloop fit`)
+  std::string surface;  // STEP/IGES file holding Q (e.g. from `formloop fit`)
   recon::CadFaceSelector face;
-  std::string points;          // point file
-  std::string out;             // deviations: .csv .ply .xyz .pcd
+  std::string points;  // point file
+  std::string out;     // deviations: .csv .ply .xyz .pcd
 };
 
 // Foot points of every input point: the output keeps the input points, ids and times, sets the

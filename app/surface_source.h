@@ -41,21 +41,21 @@ namespace formloop::app {
 struct SurfaceFile {
   enum class Kind { kCad, kPoints };
   Kind kind = Kind::kCad;
-  std::string name;                   // as the part file gives it ("part.step", "../cad/part.step")
-  std::filesystem::path path;         // resolved against the part file's folder
-  std::string sha256;                 // of the file, computed when the part is parsed
-  std::vector<int> faces;             // CAD: chosen by index ...
+  std::string name;                     // as the part file gives it ("part.step", "../cad/part.step")
+  std::filesystem::path path;           // resolved against the part file's folder
+  std::string sha256;                   // of the file, computed when the part is parsed
+  std::vector<int> faces;               // CAD: chosen by index ...
   std::vector<std::string> face_names;  // ... or by name (neither: the file's only face)
-  double sample_spacing_mm = 1.0;     // CAD region
+  double sample_spacing_mm = 1.0;       // CAD region
   double max_deviation_fraction = 0.1;
-  std::string method = "scattered";   // scan: scattered | adaptive
-  int u_poles = 0, v_poles = 0;       // scan: control net (0: automatic)
-  double fit_tolerance_mm = 1e-3;     // scan, adaptive: residual limit for knot insertion
+  std::string method = "scattered";  // scan: scattered | adaptive
+  int u_poles = 0, v_poles = 0;      // scan: control net (0: automatic)
+  double fit_tolerance_mm = 1e-3;    // scan, adaptive: residual limit for knot insertion
   // The file's name inside a run folder's inputs/ (its base name).
   std::string CopyName() const;
   // The resolved "surface" member; `name` is written as given (inputs/part.json gives CopyName()).
   nlohmann::json ToJson(const std::string& name) const;
-  std::string Describe() const;       // "cad:part.step[3,4]", "scan:scan.ply"
+  std::string Describe() const;  // "cad:part.step[3,4]", "scan:scan.ply"
 };
 
 // True when a part's "surface" object names a file ("cad" or "points").

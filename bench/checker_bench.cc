@@ -153,19 +153,22 @@ void Summary() {
   std::vector<double> brute(kBrute);
   for (std::size_t i = 0; i < kBrute; ++i) brute[i] = m.BruteForceHeight(f.xy[i].x(), f.xy[i].y());
   const double brute_rate = kBrute / Seconds(t0);
-  for (std::size_t i = 0; i < kBrute; ++i) worst = std::max(worst, std::abs(brute[i] - m.Height(f.xy[i].x(), f.xy[i].y())));
+  for (std::size_t i = 0; i < kBrute; ++i)
+    worst = std::max(worst, std::abs(brute[i] - m.Height(f.xy[i].x(), f.xy[i].y())));
 
   const recon::ParamDomain dom = f.q.domain();
   const double spacing = f.path.min_step_over_mm / 10;
   const double full = std::floor(dom.u_span() / spacing + 1) * std::floor(dom.v_span() / spacing + 1);
-  std::printf("\nchecker summary: franke fit 61x61, r = %.1f mm, scallop %.0f um: %zu CL, %d passes, step-over "
-              "%.4f..%.4f mm, %zu capsules in %zu hash cells\n",
-              f.path.options.tool.radius_mm, f.path.options.scallop_um, f.path.points.size(), f.path.passes,
-              f.path.min_step_over_mm, f.path.max_step_over_mm, m.capsule_count(), m.cell_count());
+  std::printf(
+      "\nchecker summary: franke fit 61x61, r = %.1f mm, scallop %.0f um: %zu CL, %d passes, step-over "
+      "%.4f..%.4f mm, %zu capsules in %zu hash cells\n",
+      f.path.options.tool.radius_mm, f.path.options.scallop_um, f.path.points.size(), f.path.passes,
+      f.path.min_step_over_mm, f.path.max_step_over_mm, m.capsule_count(), m.cell_count());
   std::printf("  build capsule hash                 %10.3f s\n", build_s);
-  std::printf("  hash: full sample (Q, n, height)   %10.3g samples/s  (%zu samples: max scallop %.2f um, max gouge "
-              "%.2f um, %d uncovered)\n",
-              hash_rate, f.uv.size(), r.max_scallop_um, r.max_gouge_um, r.uncovered);
+  std::printf(
+      "  hash: full sample (Q, n, height)   %10.3g samples/s  (%zu samples: max scallop %.2f um, max gouge "
+      "%.2f um, %d uncovered)\n",
+      hash_rate, f.uv.size(), r.max_scallop_um, r.max_gouge_um, r.uncovered);
   std::printf("  reference: brute force height      %10.3g samples/s  (%zu samples; max |hash - brute| %.3g mm)\n",
               brute_rate, kBrute, worst);
   std::printf("  full-surface check at step-over/10 = %.4f mm in u and v: %.3g samples\n", spacing, full);

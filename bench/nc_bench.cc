@@ -12,6 +12,7 @@
 #include <sys/resource.h>
 #include <sys/wait.h>
 
+#include <unistd.h>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -19,7 +20,6 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
-#include <unistd.h>
 
 #include "nc-gen/moves.h"
 #include "nc-gen/post.h"
@@ -38,9 +38,7 @@ double PeakRssMb() {
 
 class Stopwatch {
  public:
-  double Seconds() const {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
-  }
+  double Seconds() const { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count(); }
 
  private:
   std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
@@ -99,7 +97,8 @@ int Run(long target) {
   nc::PostOptions post;
   post.title = "formloop bench";
   post.limits.max_feed_mm_per_min = 20000;
-  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("formloop_bench_nc_" + std::to_string(getpid()));
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("formloop_bench_nc_" + std::to_string(getpid()));
   std::filesystem::create_directories(dir);
   std::filesystem::path linuxcnc_file;
   for (const std::string& dialect : nc::PostNames()) {

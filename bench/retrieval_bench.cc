@@ -14,8 +14,8 @@
 #include <cstdlib>
 #include <vector>
 
-#include <filesystem>
 #include <unistd.h>
+#include <filesystem>
 
 #include "core/json_io.h"
 #include "core/random.h"
@@ -123,10 +123,11 @@ int LibraryBench(int library_cases, int adds, double big_tau2) {
     const auto n = model->ghsom().InputIds(leaf).size();
     if (n > 0) leaf_sizes.push_back(static_cast<double>(n));
   }
-  std::printf("Retrieval library: %d cases, GHSOM tau1 %.2f tau2 %.3f trained + indexed in %.1f s: %zu maps, "
-              "%zu non-empty leaves, leaf size median %.0f, p99 %.0f\n",
-              library_cases, big_options.tau1, big_options.tau2, Seconds(t0, t1), model->ghsom().maps().size(),
-              leaf_sizes.size(), Percentile(leaf_sizes, 0.5), Percentile(leaf_sizes, 0.99));
+  std::printf(
+      "Retrieval library: %d cases, GHSOM tau1 %.2f tau2 %.3f trained + indexed in %.1f s: %zu maps, "
+      "%zu non-empty leaves, leaf size median %.0f, p99 %.0f\n",
+      library_cases, big_options.tau1, big_options.tau2, Seconds(t0, t1), model->ghsom().maps().size(),
+      leaf_sizes.size(), Percentile(leaf_sizes, 0.5), Percentile(leaf_sizes, 0.99));
   struct Setting {
     int breadth, max_scored;
   };
@@ -152,10 +153,11 @@ int LibraryBench(int library_cases, int adds, double big_tau2) {
       cands.push_back(r->candidates);
       direct += r->route == "direct" ? 1 : 0;
     }
-    std::printf("  retrieve breadth %d, max_scored %d, %d queries: median %.3f ms, p99 %.3f ms (goal median <= 1 ms); "
-                "scored median %.0f, p99 %.0f; routed direct %d\n",
-                breadth, setting.max_scored, n_queries, Percentile(ms, 0.5), Percentile(ms, 0.99), Percentile(cands, 0.5),
-                Percentile(cands, 0.99), direct);
+    std::printf(
+        "  retrieve breadth %d, max_scored %d, %d queries: median %.3f ms, p99 %.3f ms (goal median <= 1 ms); "
+        "scored median %.0f, p99 %.0f; routed direct %d\n",
+        breadth, setting.max_scored, n_queries, Percentile(ms, 0.5), Percentile(ms, 0.99), Percentile(cands, 0.5),
+        Percentile(cands, 0.99), direct);
   }
 
   // kb add throughput into a temporary library.

@@ -262,9 +262,9 @@ void PrintTable() {
   std::printf("noise drawn: grid %.4f um rms, scatter %.4f um rms\n", grid_noise_rms_um, scatter_noise_rms_um);
   for (const Row* row : {&ours_row, &ours_fixed_row}) {
     if (!row->done) continue;
-    std::printf("%-56s edge spans: %s (largest initial gap %.3f spans), knots %s, lambda %.2e\n",
-                row->name.c_str(), row->edge_spans.c_str(), row->gap_spans,
-                row->knots_redistributed ? "redistributed" : "as laid", row->lambda);
+    std::printf("%-56s edge spans: %s (largest initial gap %.3f spans), knots %s, lambda %.2e\n", row->name.c_str(),
+                row->edge_spans.c_str(), row->gap_spans, row->knots_redistributed ? "redistributed" : "as laid",
+                row->lambda);
   }
 }
 

@@ -88,11 +88,11 @@ struct Instr {
     kProbe,      // probing move to axes; result in the measured variables
     kCall,       // to `jump`, pushing the return address
     kReturn,
-    kEnd,      // program end (M30 / M2)
-    kAlarm,    // alarm `number` with `text`; the program stops
-    kMessage,  // operator message `text`; the program goes on
-    kPortOut,  // LinuxCNC M68 E<number> Q<value>
-    kPortIn,   // LinuxCNC M66 E<number> L0 → #5399
+    kEnd,         // program end (M30 / M2)
+    kAlarm,       // alarm `number` with `text`; the program stops
+    kMessage,     // operator message `text`; the program goes on
+    kPortOut,     // LinuxCNC M68 E<number> Q<value>
+    kPortIn,      // LinuxCNC M66 E<number> L0 → #5399
     kDigitalOut,  // LinuxCNC M64 P<number> (on, value 1) / M65 P<number> (off, value 0)
     kDigitalIn,   // LinuxCNC M66 P<number> L0 → #5399 (0 or 1)
   };

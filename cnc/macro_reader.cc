@@ -457,7 +457,7 @@ struct Words {
   std::array<std::optional<Expr>, 3> axes;
   std::optional<Expr> f, p, e, q, l;
   std::optional<Expr> t, h, d;  // tool, its length offset (G43 H), Sinumerik's cutting edge (D1)
-  bool meas = false;  // Sinumerik MEAS=1
+  bool meas = false;            // Sinumerik MEAS=1
 };
 
 // Parses the rest of the line as words. Fanuc/LinuxCNC: letter + value (number, #n, [expr], -...).

@@ -53,7 +53,8 @@ Status CheckText(std::string_view text, const std::string& source) {
   const std::size_t nul = text.find('\0');
   if (nul == std::string_view::npos) return Status::Ok();
   std::string encoding = "binary data, not text";
-  if (text.substr(0, 4) == std::string_view("\xFF\xFE\0\0", 4) || text.substr(0, 4) == std::string_view("\0\0\xFE\xFF", 4)) {
+  if (text.substr(0, 4) == std::string_view("\xFF\xFE\0\0", 4) ||
+      text.substr(0, 4) == std::string_view("\0\0\xFE\xFF", 4)) {
     encoding = "UTF-32 text";
   } else if (text.substr(0, 2) == "\xFF\xFE" || text.substr(0, 2) == "\xFE\xFF" ||
              (text.size() >= 2 && (text[0] == '\0' || text[1] == '\0'))) {

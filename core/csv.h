@@ -96,11 +96,11 @@ class CsvReader {
 // A whole small table: header, rows as strings, line numbers, comments. `source` names it in messages.
 struct CsvTable {
   std::string source;
-  long header_line = 0;                  // 0: no header
-  std::string header_text;               // the header line as written (trimmed)
+  long header_line = 0;     // 0: no header
+  std::string header_text;  // the header line as written (trimmed)
   std::vector<std::string> header;
-  std::vector<std::vector<std::string>> rows;  // every row has header.size() cells
-  std::vector<long> lines;               // file line of each row
+  std::vector<std::vector<std::string>> rows;          // every row has header.size() cells
+  std::vector<long> lines;                             // file line of each row
   std::vector<std::pair<long, std::string>> comments;  // '#' lines (trimmed) with their line numbers
 
   // Index of a header column, or -1.

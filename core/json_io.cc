@@ -159,8 +159,8 @@ Status JsonFields::Unsigned(const std::string& key, std::uint64_t* out) const {
   return Status::Ok();
 }
 
-Status ReadNumberArray(const Json& value, const std::string& source, const std::string& field,
-                       std::vector<double>* out, std::optional<std::size_t> size, const NumberRange& range) {
+Status ReadNumberArray(const Json& value, const std::string& source, const std::string& field, std::vector<double>* out,
+                       std::optional<std::size_t> size, const NumberRange& range) {
   const JsonFields wrapper(value, source);
   return wrapper.CheckNumberArray(value, field, size, range, out);
 }

@@ -37,8 +37,8 @@ struct NumberRange {
 
 // A JSON value that must be an array of finite numbers in `range` (of length `size` when given); the
 // messages name `source` and `field` (and "field[i]" for an element). JsonFields::NumberArray for members.
-Status ReadNumberArray(const Json& value, const std::string& source, const std::string& field,
-                       std::vector<double>* out, std::optional<std::size_t> size = {}, const NumberRange& range = {});
+Status ReadNumberArray(const Json& value, const std::string& source, const std::string& field, std::vector<double>* out,
+                       std::optional<std::size_t> size = {}, const NumberRange& range = {});
 
 // The same for an array of integers in [min, max].
 Status ReadIntegerArray(const Json& value, const std::string& source, const std::string& field,
@@ -93,8 +93,7 @@ class JsonFields {
   Status TypeError(const std::string& key, const char* expected) const;
   Status Missing(const std::string& key, const char* what) const;
   Status CheckNumber(const Json& value, const std::string& field, const NumberRange& range, double* out) const;
-  Status CheckInteger(const Json& value, const std::string& field, long long min, long long max,
-                      long long* out) const;
+  Status CheckInteger(const Json& value, const std::string& field, long long min, long long max, long long* out) const;
   Status CheckNumberArray(const Json& value, const std::string& field, std::optional<std::size_t> size,
                           const NumberRange& range, std::vector<double>* out) const;
   Status CheckIntegerArray(const Json& value, const std::string& field, long long min, long long max,

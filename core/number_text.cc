@@ -9,8 +9,7 @@ namespace formloop {
 std::string FormatFixed(double value, int decimals) {
   decimals = std::max(decimals, 0);
   std::string out(static_cast<std::size_t>(decimals) + 330, '\0');
-  const auto result =
-      std::to_chars(out.data(), out.data() + out.size(), value, std::chars_format::fixed, decimals);
+  const auto result = std::to_chars(out.data(), out.data() + out.size(), value, std::chars_format::fixed, decimals);
   out.resize(static_cast<std::size_t>(result.ptr - out.data()));
   // "-0.000" (a tiny negative or -0) reads as a sign error in a report or an NC block: drop the sign.
   if (!out.empty() && out.front() == '-' && out.find_first_not_of("0.", 1) == std::string::npos) {

@@ -132,8 +132,8 @@ struct ColumnPlan {
   bool has_t = false;
 };
 
-Status MakeColumnPlan(const std::vector<std::string>& names, const Where& where,
-                      const std::string& what_columns, ColumnPlan* plan) {
+Status MakeColumnPlan(const std::vector<std::string>& names, const Where& where, const std::string& what_columns,
+                      ColumnPlan* plan) {
   plan->roles.clear();
   plan->scalar_index.clear();
   plan->scalar_names.clear();
@@ -166,9 +166,9 @@ Status MakeColumnPlan(const std::vector<std::string>& names, const Where& where,
     if (!seen[static_cast<int>(RoleOf(axis))]) {
       Where at = where;
       at.field = axis;
-      return Status::BadInput(
-          at, std::string("no ") + what_columns + " '" + axis + "' (found: " + JoinNames(names) + ")",
-          "name the coordinate " + what_columns + "s x, y and z (lowercase)");
+      return Status::BadInput(at,
+                              std::string("no ") + what_columns + " '" + axis + "' (found: " + JoinNames(names) + ")",
+                              "name the coordinate " + what_columns + "s x, y and z (lowercase)");
     }
   }
   const int normal_count = seen[3] + seen[4] + seen[5];
@@ -412,8 +412,7 @@ Status ParsePlyHeader(const std::string& file, std::string_view text, PlyHeader*
                             "export the point cloud again; a PLY file starts with the line 'ply'");
   }
   if (TrimBlanks(line) != "ply") {
-    return Status::BadInput(Where{.file = file, .line = 1},
-                            "not a PLY file: the first line is " + Quote(line),
+    return Status::BadInput(Where{.file = file, .line = 1}, "not a PLY file: the first line is " + Quote(line),
                             "a PLY file starts with the line 'ply'; check the file or its extension");
   }
   bool have_format = false;
@@ -448,9 +447,8 @@ Status ParsePlyHeader(const std::string& file, std::string_view text, PlyHeader*
       have_format = true;
     } else if (keyword == "element") {
       std::uint64_t count = 0;
-      if (tokens.size() != 3 ||
-          std::from_chars(tokens[2].data(), tokens[2].data() + tokens[2].size(), count).ptr !=
-              tokens[2].data() + tokens[2].size()) {
+      if (tokens.size() != 3 || std::from_chars(tokens[2].data(), tokens[2].data() + tokens[2].size(), count).ptr !=
+                                    tokens[2].data() + tokens[2].size()) {
         return Status::BadInput(where, "element line " + Quote(line) + " is not understood",
                                 "write 'element <name> <count>', e.g. 'element vertex 1000'");
       }
@@ -474,10 +472,9 @@ Status ParsePlyHeader(const std::string& file, std::string_view text, PlyHeader*
       if (!ok) {
         Where at = where;
         at.field = tokens.size() >= 3 ? std::string(tokens.back()) : "";
-        return Status::BadInput(
-            at, "property line " + Quote(line) + " is not understood",
-            "use 'property <type> <name>' with type char, uchar, short, ushort, int, uint, "
-            "float or double (or int8 ... float64)");
+        return Status::BadInput(at, "property line " + Quote(line) + " is not understood",
+                                "use 'property <type> <name>' with type char, uchar, short, ushort, int, uint, "
+                                "float or double (or int8 ... float64)");
       }
       header->elements.back().properties.push_back(std::move(property));
     } else {
@@ -485,8 +482,8 @@ Status ParsePlyHeader(const std::string& file, std::string_view text, PlyHeader*
     }
   }
   if (!have_end) {
-    return Status::BadInput(Where{.file = file, .line = lines.line_number()},
-                            "the header has no 'end_header' line", "the file is truncated or not a PLY file");
+    return Status::BadInput(Where{.file = file, .line = lines.line_number()}, "the header has no 'end_header' line",
+                            "the file is truncated or not a PLY file");
   }
   if (!have_format) {
     return Status::BadInput(Where{.file = file}, "the header has no 'format' line",
@@ -540,10 +537,9 @@ Result<PointFormat> PointFormatFromPath(const std::filesystem::path& path) {
   if (extension == ".xyz" || extension == ".txt") return PointFormat::kXyz;
   if (extension == ".ply") return PointFormat::kPly;
   if (extension == ".pcd") return PointFormat::kPcd;
-  const std::string what = extension.empty() ? "the point file name has no extension"
-                                             : "unknown point file extension " + Quote(extension);
-  return Status::BadInput(Where{.file = path.string()}, what,
-                          "use a name ending in .csv, .xyz, .txt, .ply or .pcd");
+  const std::string what =
+      extension.empty() ? "the point file name has no extension" : "unknown point file extension " + Quote(extension);
+  return Status::BadInput(Where{.file = path.string()}, what, "use a name ending in .csv, .xyz, .txt, .ply or .pcd");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -574,9 +570,8 @@ Result<PointSet> ReadCsv(const std::filesystem::path& path, CsvLayout* layout) {
     const std::vector<std::string_view>& fields = rows.cells();
     if (fields.size() != names.size()) {
       return Status::BadInput(Where{.file = file, .line = number},
-                              "the row has " + std::to_string(fields.size()) +
-                                  " fields but the header (line " + std::to_string(header_line) + ") has " +
-                                  std::to_string(names.size()) + " columns",
+                              "the row has " + std::to_string(fields.size()) + " fields but the header (line " +
+                                  std::to_string(header_line) + ") has " + std::to_string(names.size()) + " columns",
                               RaggedRowFix(rows.separator(), fields.size(), names.size()));
     }
     std::int64_t id = 0;
@@ -608,8 +603,7 @@ Status WriteCsv(const std::filesystem::path& path, const PointSet& points, const
   if (points.has_times()) out += ",t";
   for (const auto& column : points.scalars) out += "," + column.name;
   out += '\n';
-  out.reserve(out.size() +
-              points.size() * (3 + (points.has_normals() ? 3 : 0) + points.scalars.size() + 2) * 16);
+  out.reserve(out.size() + points.size() * (3 + (points.has_normals() ? 3 : 0) + points.scalars.size() + 2) * 16);
   for (std::size_t i = 0; i < points.size(); ++i) {
     AppendTextRow(points, i, ',', options.precision, /*with_attributes=*/true, &out);
   }
@@ -635,12 +629,11 @@ Result<PointSet> ReadXyz(const std::filesystem::path& path) {
     SplitWhitespace(line, &tokens);
     if (columns == 0) {
       if (tokens.size() != 3 && tokens.size() != 6) {
-        return Status::BadInput(
-            Where{.file = file, .line = number},
-            "the line has " + std::to_string(tokens.size()) +
-                " values; an XYZ file has 3 (x y z) or 6 (x y z nx ny nz) per line",
-            "write 'x y z' or 'x y z nx ny nz' separated by spaces, or use CSV with a header "
-            "for other columns");
+        return Status::BadInput(Where{.file = file, .line = number},
+                                "the line has " + std::to_string(tokens.size()) +
+                                    " values; an XYZ file has 3 (x y z) or 6 (x y z nx ny nz) per line",
+                                "write 'x y z' or 'x y z nx ny nz' separated by spaces, or use CSV with a header "
+                                "for other columns");
       }
       columns = tokens.size();
       first_line = number;
@@ -668,9 +661,8 @@ Status WriteXyz(const std::filesystem::path& path, const PointSet& points, const
   const std::string file = path.string();
   FL_RETURN_IF_ERROR(points.Validate(file));
   if (points.has_ids() || points.has_times() || !points.scalars.empty()) {
-    log::Warn(
-        "{}: XYZ holds positions and normals only; ids, times and scalars are not written (use CSV or PLY)",
-        file);
+    log::Warn("{}: XYZ holds positions and normals only; ids, times and scalars are not written (use CSV or PLY)",
+              file);
   }
   std::string out;
   out.reserve(points.size() * (points.has_normals() ? 6 : 3) * 16);
@@ -750,8 +742,8 @@ Result<PointSet> ReadPly(const std::filesystem::path& path) {
       if (tokens.size() != columns) {
         return Status::BadInput(Where{.file = file, .line = number},
                                 "vertex " + std::to_string(i) + " has " + std::to_string(tokens.size()) +
-                                    " values but the header declares " + std::to_string(columns) +
-                                    " properties (" + JoinNames(names) + ")",
+                                    " values but the header declares " + std::to_string(columns) + " properties (" +
+                                    JoinNames(names) + ")",
                                 "write one value per vertex property on each line");
       }
       std::int64_t id = 0;
@@ -776,8 +768,8 @@ Result<PointSet> ReadPly(const std::filesystem::path& path) {
   for (std::size_t e = 0; e < vertex_index; ++e) {
     if (!SkipBinaryElement(data, header.elements[e], swap, &pos)) {
       return Status::BadInput(Where{.file = file},
-                              "binary data ends inside element '" + header.elements[e].name +
-                                  "' (before byte " + std::to_string(data.size()) + ")",
+                              "binary data ends inside element '" + header.elements[e].name + "' (before byte " +
+                                  std::to_string(data.size()) + ")",
                               "the file is truncated; export it again");
     }
   }
@@ -794,11 +786,10 @@ Result<PointSet> ReadPly(const std::filesystem::path& path) {
                                      ? "more than 2^64"
                                      : std::to_string(vertex.count * stride);
     return Status::BadInput(Where{.file = file},
-                            "binary vertex data is truncated at vertex " + std::to_string(complete) +
-                                " (byte offset " + std::to_string(pos + complete * stride) + "): expected " +
-                                expected + " bytes for " + std::to_string(vertex.count) + " vertices of " +
-                                std::to_string(stride) + " bytes, only " + std::to_string(available) +
-                                " bytes are available",
+                            "binary vertex data is truncated at vertex " + std::to_string(complete) + " (byte offset " +
+                                std::to_string(pos + complete * stride) + "): expected " + expected + " bytes for " +
+                                std::to_string(vertex.count) + " vertices of " + std::to_string(stride) +
+                                " bytes, only " + std::to_string(available) + " bytes are available",
                             "the file is incomplete (interrupted copy or export?); export it again");
   }
   points = EmptySetFor(plan, vertex.count);
@@ -814,8 +805,8 @@ Result<PointSet> ReadPly(const std::filesystem::path& path) {
       }
       const bool finite = std::isfinite(values[c]);
       if (finite && (plan.roles[c] != Role::kId || DoubleToId(values[c], &id))) continue;
-      const std::string at = "vertex " + std::to_string(i) + " (byte offset " +
-                             std::to_string(pos + i * stride + offsets[c]) + "): ";
+      const std::string at =
+          "vertex " + std::to_string(i) + " (byte offset " + std::to_string(pos + i * stride + offsets[c]) + "): ";
       if (!finite) {
         return Status::BadInput(Where{.file = file, .field = property.name},
                                 at + "value " + FormatExact(values[c]) + " is not finite (NaN or infinity)",
@@ -944,8 +935,7 @@ Result<PointSet> ReadPoints(const std::filesystem::path& path) {
   return Status::Internal("ReadPoints: unhandled point format");
 }
 
-Status WritePoints(const std::filesystem::path& path, const PointSet& points,
-                   const PointWriteOptions& options) {
+Status WritePoints(const std::filesystem::path& path, const PointSet& points, const PointWriteOptions& options) {
   FL_ASSIGN_OR_RETURN(const PointFormat format, PointFormatFromPath(path));
   switch (format) {
     case PointFormat::kCsv:

@@ -31,9 +31,9 @@ enum class PointFormat { kCsv, kXyz, kPly, kPcd };
 Result<PointFormat> PointFormatFromPath(const std::filesystem::path& path);
 
 struct PointWriteOptions {
-  bool binary = true;   // PLY and PCD: binary (little-endian) rather than ASCII
-  int precision = 9;    // CSV/XYZ/ASCII PLY/ASCII PCD: digits after the decimal point (mm -> 1 nm at 6);
-                        // negative: shortest text that reads back exactly (FormatExact)
+  bool binary = true;  // PLY and PCD: binary (little-endian) rather than ASCII
+  int precision = 9;   // CSV/XYZ/ASCII PLY/ASCII PCD: digits after the decimal point (mm -> 1 nm at 6);
+                       // negative: shortest text that reads back exactly (FormatExact)
 };
 
 // Every reader refuses a coordinate beyond ±kMaxCoordinateMm (1 km): no machine or part is that large, and

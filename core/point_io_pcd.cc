@@ -27,9 +27,7 @@ namespace {
 // level on destruction.
 class QuietPcl {
  public:
-  QuietPcl() : previous_(pcl::console::getVerbosityLevel()) {
-    pcl::console::setVerbosityLevel(pcl::console::L_ALWAYS);
-  }
+  QuietPcl() : previous_(pcl::console::getVerbosityLevel()) { pcl::console::setVerbosityLevel(pcl::console::L_ALWAYS); }
   ~QuietPcl() { pcl::console::setVerbosityLevel(previous_); }
   QuietPcl(const QuietPcl&) = delete;
   QuietPcl& operator=(const QuietPcl&) = delete;
@@ -167,19 +165,17 @@ Result<PointSet> ReadPcdQuiet(const std::filesystem::path& path) {
     if (available < expected) {
       const std::uint64_t complete = cloud.point_step == 0 ? 0 : available / cloud.point_step;
       return Status::BadInput(Where{.file = file},
-                              "binary point data is truncated at point " + std::to_string(complete) +
-                                  " (byte offset " +
+                              "binary point data is truncated at point " + std::to_string(complete) + " (byte offset " +
                                   std::to_string(data_index + complete * cloud.point_step) + "): expected " +
-                                  std::to_string(expected) + " bytes for " + std::to_string(count) +
-                                  " points of " + std::to_string(cloud.point_step) + " bytes, only " +
-                                  std::to_string(available) + " bytes are available",
+                                  std::to_string(expected) + " bytes for " + std::to_string(count) + " points of " +
+                                  std::to_string(cloud.point_step) + " bytes, only " + std::to_string(available) +
+                                  " bytes are available",
                               "the file is incomplete (interrupted copy or export?); export it again");
     }
   }
   cloud = pcl::PCLPointCloud2();
   if (reader.read(file, cloud, origin, orientation, version) < 0) {
-    return Status::BadInput(Where{.file = file}, "PCL cannot read the PCD data (corrupt or truncated)",
-                            FixCheckPcd());
+    return Status::BadInput(Where{.file = file}, "PCL cannot read the PCD data (corrupt or truncated)", FixCheckPcd());
   }
   const std::uint64_t n = static_cast<std::uint64_t>(cloud.width) * cloud.height;
   if (n == 0) {
@@ -188,9 +184,8 @@ Result<PointSet> ReadPcdQuiet(const std::filesystem::path& path) {
   }
   if (cloud.data.size() < n * cloud.point_step) {
     return Status::BadInput(Where{.file = file},
-                            "PCL returned " + std::to_string(cloud.data.size()) + " bytes for " +
-                                std::to_string(n) + " points of " + std::to_string(cloud.point_step) +
-                                " bytes",
+                            "PCL returned " + std::to_string(cloud.data.size()) + " bytes for " + std::to_string(n) +
+                                " points of " + std::to_string(cloud.point_step) + " bytes",
                             FixCheckPcd());
   }
 
@@ -207,23 +202,21 @@ Result<PointSet> ReadPcdQuiet(const std::filesystem::path& path) {
     if (role == PcdRole::kSkip) continue;
     const Where where{.file = file, .field = field.name};
     for (std::size_t g = 0; g < f; ++g) {
-      if (cloud.fields[g].name == field.name ||
-          (role != PcdRole::kScalar && PcdRoleOf(cloud.fields[g].name) == role)) {
-        return Status::BadInput(
-            where, "the field appears twice (as '" + cloud.fields[g].name + "' and '" + field.name + "')",
-            "rename or remove one of the two fields");
+      if (cloud.fields[g].name == field.name || (role != PcdRole::kScalar && PcdRoleOf(cloud.fields[g].name) == role)) {
+        return Status::BadInput(where,
+                                "the field appears twice (as '" + cloud.fields[g].name + "' and '" + field.name + "')",
+                                "rename or remove one of the two fields");
       }
     }
     if (field.count != 1) {
-      return Status::BadInput(where,
-                              "the field has " + std::to_string(field.count) +
-                                  " values per point; only single-value fields are read",
-                              "export the points without multi-value fields (e.g. descriptors)");
+      return Status::BadInput(
+          where,
+          "the field has " + std::to_string(field.count) + " values per point; only single-value fields are read",
+          "export the points without multi-value fields (e.g. descriptors)");
     }
     if (PcdTypeSize(field.datatype) == 0 ||
         field.offset + PcdTypeSize(field.datatype) > static_cast<std::size_t>(cloud.point_step)) {
-      return Status::BadInput(where,
-                              "the field has an unsupported type (" + std::to_string(field.datatype) + ")",
+      return Status::BadInput(where, "the field has an unsupported type (" + std::to_string(field.datatype) + ")",
                               "store the field as I, U or F of size 1, 2, 4 or 8");
     }
     if (role == PcdRole::kScalar) {
@@ -275,13 +268,12 @@ Result<PointSet> ReadPcdQuiet(const std::filesystem::path& path) {
       }
       const double value = LoadPcd(at, field.datatype);
       if (!std::isfinite(value)) {
-        return Status::BadInput(
-            Where{.file = file, .field = field.name},
-            "point " + std::to_string(i) + " (byte offset " +
-                std::to_string(data_index + i * cloud.point_step + field.offset) +
-                " for binary data): value is not finite (NaN or infinity)",
-            "remove invalid points first (PCL marks missing points of organized clouds with "
-            "NaN; pcl::removeNaNFromPointCloud drops them)");
+        return Status::BadInput(Where{.file = file, .field = field.name},
+                                "point " + std::to_string(i) + " (byte offset " +
+                                    std::to_string(data_index + i * cloud.point_step + field.offset) +
+                                    " for binary data): value is not finite (NaN or infinity)",
+                                "remove invalid points first (PCL marks missing points of organized clouds with "
+                                "NaN; pcl::removeNaNFromPointCloud drops them)");
       }
       switch (roles[f]) {
         case PcdRole::kX:
@@ -307,10 +299,9 @@ Result<PointSet> ReadPcdQuiet(const std::filesystem::path& path) {
           break;
         case PcdRole::kId:
           if (std::floor(value) != value || std::abs(value) >= 0x1p63) {
-            return Status::BadInput(
-                Where{.file = file, .field = field.name},
-                "point " + std::to_string(i) + ": id " + FormatExact(value) + " is not an integer",
-                "store ids as whole numbers");
+            return Status::BadInput(Where{.file = file, .field = field.name},
+                                    "point " + std::to_string(i) + ": id " + FormatExact(value) + " is not an integer",
+                                    "store ids as whole numbers");
           }
           id = static_cast<std::int64_t>(value);
           break;
@@ -340,8 +331,7 @@ void AddField(const std::string& name, std::uint8_t datatype, pcl::PCLPointCloud
   cloud->point_step += static_cast<pcl::uindex_t>(PcdTypeSize(datatype));
 }
 
-Status WritePcdQuiet(const std::filesystem::path& path, const PointSet& points,
-                     const PointWriteOptions& options) {
+Status WritePcdQuiet(const std::filesystem::path& path, const PointSet& points, const PointWriteOptions& options) {
   const std::string file = path.string();
   FL_RETURN_IF_ERROR(points.Validate(file));
   for (const auto& column : points.scalars) {
@@ -411,8 +401,8 @@ Status WritePcdQuiet(const std::filesystem::path& path, const PointSet& points,
       return options.precision < 0 ? FormatExact(value) : FormatFixed(value, options.precision);
     };
     for (std::size_t i = 0; i < n; ++i) {
-      std::string line = number(points.points[i].x()) + " " + number(points.points[i].y()) + " " +
-                         number(points.points[i].z());
+      std::string line =
+          number(points.points[i].x()) + " " + number(points.points[i].y()) + " " + number(points.points[i].z());
       if (points.has_normals()) {
         for (int k = 0; k < 3; ++k) line += " " + number(points.normals[i][k]);
       }
@@ -433,8 +423,8 @@ Result<PointSet> ReadPcd(const std::filesystem::path& path) {
   try {
     return ReadPcdQuiet(path);
   } catch (const std::exception& e) {
-    return Status::BadInput(Where{.file = path.string()},
-                            std::string("PCL failed to read the file: ") + e.what(), FixCheckPcd());
+    return Status::BadInput(Where{.file = path.string()}, std::string("PCL failed to read the file: ") + e.what(),
+                            FixCheckPcd());
   }
 }
 

@@ -37,8 +37,8 @@ bool IsReservedColumn(const std::string& name) {
 Status PointSet::Validate(const std::string& source) const {
   const std::size_t n = points.size();
   auto size_error = [&](const std::string& what, std::size_t got) {
-    return Status::Internal(source + ": " + what + " has " + std::to_string(got) + " entries for " +
-                            std::to_string(n) + " points");
+    return Status::Internal(source + ": " + what + " has " + std::to_string(got) + " entries for " + std::to_string(n) +
+                            " points");
   };
   if (!normals.empty() && normals.size() != n) return size_error("normals", normals.size());
   if (!ids.empty() && ids.size() != n) return size_error("ids", ids.size());

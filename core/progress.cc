@@ -47,8 +47,8 @@ void Progress::Draw(bool final) {
     const int filled = static_cast<int>(fraction * kWidth);
     std::string bar(static_cast<std::size_t>(filled), '#');
     bar.resize(kWidth, '.');
-    std::fprintf(stderr, "\r%s [%s] %3.0f%% (%zu/%zu, %.1f s)%s", label_.c_str(), bar.c_str(), 100.0 * fraction,
-                 done_, total_, elapsed, final ? "\n" : "");
+    std::fprintf(stderr, "\r%s [%s] %3.0f%% (%zu/%zu, %.1f s)%s", label_.c_str(), bar.c_str(), 100.0 * fraction, done_,
+                 total_, elapsed, final ? "\n" : "");
   } else if (final || fraction < 1.0) {
     std::fprintf(stderr, "%s: %zu/%zu (%.0f%%) %.1f s\n", label_.c_str(), done_, total_, 100.0 * fraction, elapsed);
   }

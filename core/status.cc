@@ -4,13 +4,20 @@ namespace formloop {
 
 const char* StatusCodeName(StatusCode code) {
   switch (code) {
-    case StatusCode::kOk: return "ok";
-    case StatusCode::kBadInput: return "bad input";
-    case StatusCode::kNotFound: return "not found";
-    case StatusCode::kIoError: return "i/o error";
-    case StatusCode::kSafetyLimit: return "refused (safety limit)";
-    case StatusCode::kFailed: return "failed";
-    case StatusCode::kInternal: return "internal error";
+    case StatusCode::kOk:
+      return "ok";
+    case StatusCode::kBadInput:
+      return "bad input";
+    case StatusCode::kNotFound:
+      return "not found";
+    case StatusCode::kIoError:
+      return "i/o error";
+    case StatusCode::kSafetyLimit:
+      return "refused (safety limit)";
+    case StatusCode::kFailed:
+      return "failed";
+    case StatusCode::kInternal:
+      return "internal error";
   }
   return "unknown";
 }
@@ -46,10 +53,13 @@ Status Status::WithContext(const std::string& context) const {
 
 int Status::ExitCode() const {
   switch (code_) {
-    case StatusCode::kOk: return 0;
+    case StatusCode::kOk:
+      return 0;
     case StatusCode::kBadInput:
-    case StatusCode::kNotFound: return 2;
-    default: return 1;
+    case StatusCode::kNotFound:
+      return 2;
+    default:
+      return 1;
   }
 }
 

@@ -21,21 +21,21 @@ namespace formloop {
 
 enum class StatusCode {
   kOk = 0,
-  kBadInput,       // the user's input is wrong (file content, option value, missing field): exit 2
-  kNotFound,       // a named file, surface, table or id does not exist: exit 2
-  kIoError,        // the operating system refused a read or write: exit 1
-  kSafetyLimit,    // an output would exceed a configured machine limit and is refused: exit 1
-  kFailed,         // the job ran but did not reach its goal (e.g. out of tolerance with --strict): exit 1
-  kInternal,       // a broken invariant or a library failure that is not the user's fault: exit 1
+  kBadInput,     // the user's input is wrong (file content, option value, missing field): exit 2
+  kNotFound,     // a named file, surface, table or id does not exist: exit 2
+  kIoError,      // the operating system refused a read or write: exit 1
+  kSafetyLimit,  // an output would exceed a configured machine limit and is refused: exit 1
+  kFailed,       // the job ran but did not reach its goal (e.g. out of tolerance with --strict): exit 1
+  kInternal,     // a broken invariant or a library failure that is not the user's fault: exit 1
 };
 
 const char* StatusCodeName(StatusCode code);
 
 // Where an input problem sits. Every member is optional; set what you know.
 struct Where {
-  std::string file;    // path as the user gave it
-  long line = 0;       // 1-based; 0 = unknown
-  std::string field;   // column, JSON key path ("tool.radius_mm") or option name ("--out")
+  std::string file;   // path as the user gave it
+  long line = 0;      // 1-based; 0 = unknown
+  std::string field;  // column, JSON key path ("tool.radius_mm") or option name ("--out")
 };
 
 class [[nodiscard]] Status {
@@ -75,7 +75,7 @@ std::string FormatWhere(const Where& where);
 template <typename T>
 class [[nodiscard]] Result {
  public:
-  Result(T value) : data_(std::move(value)) {}  // NOLINT(google-explicit-constructor)
+  Result(T value) : data_(std::move(value)) {}        // NOLINT(google-explicit-constructor)
   Result(Status status) : data_(std::move(status)) {  // NOLINT(google-explicit-constructor)
     if (std::get<Status>(data_).ok()) {
       data_ = Status::Internal("Result constructed from an ok Status without a value");
@@ -105,10 +105,10 @@ class [[nodiscard]] Result {
 #define FL_CONCAT_(a, b) FL_CONCAT_INNER_(a, b)
 
 // Returns the Status from the enclosing function when expr is not ok.
-#define FL_RETURN_IF_ERROR(expr)                       \
-  do {                                                 \
-    ::formloop::Status fl_status_ = (expr);            \
-    if (!fl_status_.ok()) return fl_status_;           \
+#define FL_RETURN_IF_ERROR(expr)             \
+  do {                                       \
+    ::formloop::Status fl_status_ = (expr);  \
+    if (!fl_status_.ok()) return fl_status_; \
   } while (false)
 
 // FL_ASSIGN_OR_RETURN(auto x, ComputeX()); returns the Status when the Result is not ok.

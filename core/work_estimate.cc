@@ -65,16 +65,21 @@ Status CheckWork(const WorkEstimate& e, const std::string& source, const std::st
   }
   std::string exceeded;
   const WorkLimits& limit = kWorkLimits;
-  if (e.points > limit.points) exceeded = "more than " + Count(limit.points) + " points";
-  else if (e.memory_bytes > limit.memory_bytes) exceeded = "more than " + Bytes(limit.memory_bytes) + " of memory";
-  else if (e.machining_s > limit.machining_s) exceeded = "more than " + Duration(limit.machining_s) + " on the machine";
-  else if (e.output_bytes > limit.output_bytes) exceeded = "more than " + Bytes(limit.output_bytes) + " of output";
+  if (e.points > limit.points)
+    exceeded = "more than " + Count(limit.points) + " points";
+  else if (e.memory_bytes > limit.memory_bytes)
+    exceeded = "more than " + Bytes(limit.memory_bytes) + " of memory";
+  else if (e.machining_s > limit.machining_s)
+    exceeded = "more than " + Duration(limit.machining_s) + " on the machine";
+  else if (e.output_bytes > limit.output_bytes)
+    exceeded = "more than " + Bytes(limit.output_bytes) + " of output";
   if (exceeded.empty()) return Status::Ok();
   if (LargeWorkConfirmed()) {
     log::Warn("{} will need {} ({}); going ahead because --yes was given", e.what, e.Describe(), exceeded);
     return Status::Ok();
   }
-  return Status::BadInput(where, e.what + " would need " + e.Describe() + ": " + exceeded + " (formloop's stated limit)",
+  return Status::BadInput(where,
+                          e.what + " would need " + e.Describe() + ": " + exceeded + " (formloop's stated limit)",
                           fix_value + ", or pass --yes to go ahead");
 }
 

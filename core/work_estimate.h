@@ -16,11 +16,11 @@
 namespace formloop {
 
 struct WorkEstimate {
-  std::string what;           // "the tool path of part 'demo'", in the message
-  double points = 0;          // samples, cutter locations or probe points the job creates
-  double memory_bytes = 0;    // peak memory, roughly
-  double machining_s = 0;     // time on the machine (cutting and probing), 0 when none
-  double output_bytes = 0;    // bytes written, roughly
+  std::string what;         // "the tool path of part 'demo'", in the message
+  double points = 0;        // samples, cutter locations or probe points the job creates
+  double memory_bytes = 0;  // peak memory, roughly
+  double machining_s = 0;   // time on the machine (cutting and probing), 0 when none
+  double output_bytes = 0;  // bytes written, roughly
 
   std::string Describe() const;  // "2.4 million points, about 3.1 GB of memory, 11.4 h on the machine, ..."
 };

@@ -20,8 +20,8 @@ Status Database::Check(int rc, const std::string& what) const {
     return Status::BadInput(message + ". Fix: the file is not a formloop case library; check the path");
   }
   if (primary == SQLITE_CONSTRAINT) return Status::BadInput(message);
-  if (primary == SQLITE_CANTOPEN || primary == SQLITE_READONLY || primary == SQLITE_IOERR ||
-      primary == SQLITE_FULL || primary == SQLITE_BUSY || primary == SQLITE_LOCKED) {
+  if (primary == SQLITE_CANTOPEN || primary == SQLITE_READONLY || primary == SQLITE_IOERR || primary == SQLITE_FULL ||
+      primary == SQLITE_BUSY || primary == SQLITE_LOCKED) {
     return Status::IoError(message);
   }
   return Status::Internal(message);
@@ -47,8 +47,7 @@ Result<std::unique_ptr<Database>> Database::Open(const std::filesystem::path& pa
     in.read(header, sizeof header);
     // Bytes 18 and 19 are 2 in a WAL-mode database. Without a -wal file nobody has it open and the main
     // file holds everything.
-    wal_without_log = in && header[18] == 2 && header[19] == 2 &&
-                      !std::filesystem::exists(path.string() + "-wal", ec);
+    wal_without_log = in && header[18] == 2 && header[19] == 2 && !std::filesystem::exists(path.string() + "-wal", ec);
     static const char kMagic[16] = {'S', 'Q', 'L', 'i', 't', 'e', ' ', 'f', 'o', 'r', 'm', 'a', 't', ' ', '3', '\0'};
     if (!in || std::memcmp(header, kMagic, sizeof kMagic) != 0) {
       return Status::BadInput("'" + path.string() +
@@ -56,9 +55,8 @@ Result<std::unique_ptr<Database>> Database::Open(const std::filesystem::path& pa
                               "Fix: check the path");
     }
   }
-  const int flags = mode == Mode::kReadOnly
-                        ? SQLITE_OPEN_READONLY
-                        : SQLITE_OPEN_READWRITE | (mode == Mode::kCreate ? SQLITE_OPEN_CREATE : 0);
+  const int flags = mode == Mode::kReadOnly ? SQLITE_OPEN_READONLY
+                                            : SQLITE_OPEN_READWRITE | (mode == Mode::kCreate ? SQLITE_OPEN_CREATE : 0);
   sqlite3* raw = nullptr;
   std::string name = path.string();
   int open_flags = flags;

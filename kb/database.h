@@ -71,7 +71,7 @@ class Statement {
   // True while a row is available; false when done.
   Result<bool> Step();
   Status Reset();
-  long long ColumnInt(int column) const;      // 0-based like SQLite's
+  long long ColumnInt(int column) const;  // 0-based like SQLite's
   double ColumnDouble(int column) const;
   std::string ColumnText(int column) const;
   bool ColumnIsNull(int column) const;

@@ -27,8 +27,7 @@ Result<json> ParseJsonColumn(const std::string& text, const std::string& what) {
 std::string UtcNow() {
   const auto now = std::chrono::system_clock::now();
   const std::time_t seconds = std::chrono::system_clock::to_time_t(now);
-  const long long ms =
-      std::chrono::duration_cast<std::chrono::milliseconds>(now.time_since_epoch()).count() % 1000;
+  const long long ms = std::chrono::duration_cast<std::chrono::milliseconds>(now.time_since_epoch()).count() % 1000;
   std::tm tm{};
   gmtime_r(&seconds, &tm);
   char buffer[64];
@@ -50,9 +49,8 @@ Result<std::unique_ptr<Library>> Library::Open(const std::filesystem::path& path
   // The probe read without locks; confirm on the real connection.
   FL_ASSIGN_OR_RETURN(long long actual, db->QueryInt("PRAGMA user_version;"));
   if (actual != LatestSchemaVersion()) {
-    return Status::BadInput("case library '" + path.string() + "' changed to schema version " +
-                            std::to_string(actual) + " while being opened; this formloop uses " +
-                            std::to_string(LatestSchemaVersion()));
+    return Status::BadInput("case library '" + path.string() + "' changed to schema version " + std::to_string(actual) +
+                            " while being opened; this formloop uses " + std::to_string(LatestSchemaVersion()));
   }
   return std::unique_ptr<Library>(new Library(std::move(db)));
 }
@@ -99,10 +97,10 @@ Status Library::WriteCase(const CaseRecord& record, bool replace, const std::str
   FL_RETURN_IF_ERROR(find.Reset());
   const std::string descriptor = record.descriptor ? json(*record.descriptor).dump() : "";
   if (exists) {
-    FL_ASSIGN_OR_RETURN(Statement up, db_->Prepare(
-                                          "UPDATE cases SET name = ?2, family = ?3, created_at = ?4, updated_at = ?5, "
-                                          "part_json = ?6, simulation_json = ?7, manufacturing_json = ?8, "
-                                          "descriptor_json = ?9 WHERE id = ?1;"));
+    FL_ASSIGN_OR_RETURN(Statement up,
+                        db_->Prepare("UPDATE cases SET name = ?2, family = ?3, created_at = ?4, updated_at = ?5, "
+                                     "part_json = ?6, simulation_json = ?7, manufacturing_json = ?8, "
+                                     "descriptor_json = ?9 WHERE id = ?1;"));
     FL_RETURN_IF_ERROR(up.Bind(1, id));
     FL_RETURN_IF_ERROR(up.Bind(2, record.name));
     FL_RETURN_IF_ERROR(up.Bind(3, record.family));
@@ -209,8 +207,8 @@ Result<CaseRecord> Library::GetCase(const std::string& uid) {
 }
 
 Result<std::vector<CaseRecord>> Library::ListCases(const std::string& family) {
-  FL_ASSIGN_OR_RETURN(Statement stmt, db_->Prepare(std::string(kCaseColumns) +
-                                                   "WHERE ?1 = '' OR family = ?1 ORDER BY uid;"));
+  FL_ASSIGN_OR_RETURN(Statement stmt,
+                      db_->Prepare(std::string(kCaseColumns) + "WHERE ?1 = '' OR family = ?1 ORDER BY uid;"));
   FL_RETURN_IF_ERROR(stmt.Bind(1, family));
   std::vector<CaseRecord> cases;
   std::map<long long, std::size_t> by_id;
@@ -311,8 +309,7 @@ Result<CheckReport> Library::Check() {
     while (true) {
       FL_ASSIGN_OR_RETURN(bool row, s.Step());
       if (!row) break;
-      report.foreign_key_violations.push_back(s.ColumnText(0) + " rowid " + s.ColumnText(1) + " -> " +
-                                              s.ColumnText(2));
+      report.foreign_key_violations.push_back(s.ColumnText(0) + " rowid " + s.ColumnText(1) + " -> " + s.ColumnText(2));
     }
     if (!report.foreign_key_violations.empty()) {
       report.problems.push_back(std::to_string(report.foreign_key_violations.size()) +
@@ -344,7 +341,8 @@ Result<CheckReport> Library::Check() {
     FL_ASSIGN_OR_RETURN(RuleSet rules, GetRules());
     report.rule_problems = RuleSetProblems(rules.rules);
     for (const std::string& p : report.rule_problems) report.problems.push_back("rule base: " + p);
-    FL_ASSIGN_OR_RETURN(long long versions, db_->QueryInt("SELECT COUNT(DISTINCT version) FROM rules WHERE active = 1;"));
+    FL_ASSIGN_OR_RETURN(long long versions,
+                        db_->QueryInt("SELECT COUNT(DISTINCT version) FROM rules WHERE active = 1;"));
     if (versions > 1) report.problems.push_back("rule base: more than one version is active");
   }
   FL_ASSIGN_OR_RETURN(report.ghsom, Ghsom());
@@ -376,7 +374,6 @@ Result<Rule> RuleFromRow(const Statement& s, bool active) {
 }
 
 }  // namespace
-
 
 Result<RuleSet> Library::GetRules() {
   RuleSet set;
@@ -613,15 +610,16 @@ Result<ImportReport> Library::ImportText(const std::string& text, const std::str
       }
       const int format_version = j["format_version"].get<int>();
       if (format_version > kExportFormatVersion) {
-        return Status::BadInput(where, "format version " + std::to_string(format_version) +
-                                           " is newer than this formloop reads (" +
-                                           std::to_string(kExportFormatVersion) + ")",
+        return Status::BadInput(where,
+                                "format version " + std::to_string(format_version) +
+                                    " is newer than this formloop reads (" + std::to_string(kExportFormatVersion) + ")",
                                 "upgrade formloop; nothing was imported");
       }
       const int schema_version = j.value("schema_version", 0);
       if (schema_version > LatestSchemaVersion()) {
-        return Status::BadInput(where, "written by a library at schema version " + std::to_string(schema_version) +
-                                           ", newer than this formloop's " + std::to_string(LatestSchemaVersion()),
+        return Status::BadInput(where,
+                                "written by a library at schema version " + std::to_string(schema_version) +
+                                    ", newer than this formloop's " + std::to_string(LatestSchemaVersion()),
                                 "upgrade formloop; nothing was imported");
       }
       have_header = true;
@@ -629,11 +627,12 @@ Result<ImportReport> Library::ImportText(const std::string& text, const std::str
     }
     const std::string type = j.value("type", "");
     if (type == "case") {
-      if (!j.contains("case")) return Status::BadInput(Where{.file = source, .line = line_no, .field = "case"}, "missing");
+      if (!j.contains("case"))
+        return Status::BadInput(Where{.file = source, .line = line_no, .field = "case"}, "missing");
       FL_ASSIGN_OR_RETURN(CaseRecord record, CaseRecord::FromJson(j["case"], where));
       if (options.check_case) {
-        FL_RETURN_IF_ERROR(options.check_case(record).WithContext(source + ":" + std::to_string(line_no) +
-                                                                  " (nothing was imported)"));
+        FL_RETURN_IF_ERROR(
+            options.check_case(record).WithContext(source + ":" + std::to_string(line_no) + " (nothing was imported)"));
       }
       cases.emplace_back(line_no, std::move(record));
     } else if (type == "rule") {

@@ -112,14 +112,14 @@ struct TaxonomyNode {
 
 // A trained GHSOM tree as stored (the structure of map/parameters/quality belongs to retrieval/).
 struct GhsomRecord {
-  long long id = 0;                 // set by StoreGhsom
-  std::string created_at;           // set by StoreGhsom
+  long long id = 0;        // set by StoreGhsom
+  std::string created_at;  // set by StoreGhsom
   long long seed = 0;
   nlohmann::json parameters = nlohmann::json::object();  // tau1, tau2, epochs, scaling ...
   nlohmann::json quality = nlohmann::json::object();     // MQE, QE, TE per map ...
   nlohmann::json map = nlohmann::json::object();         // the tree
-  long long case_count = -1;        // cases trained on; -1: the library's count at StoreGhsom
-  long long change_counter = -1;    // ChangeCounter() read with the training snapshot; -1: current value
+  long long case_count = -1;                             // cases trained on; -1: the library's count at StoreGhsom
+  long long change_counter = -1;  // ChangeCounter() read with the training snapshot; -1: current value
 };
 
 struct GhsomStatus {
@@ -146,10 +146,10 @@ struct LibraryStats {
 };
 
 struct CheckReport {
-  std::string integrity = "ok";                      // PRAGMA integrity_check
-  std::vector<std::string> foreign_key_violations;   // "table rowid N -> parent"
-  long long orphan_concepts = 0;                     // case_concepts rows without a case
-  std::vector<std::string> cases_missing_descriptor; // uids (a warning: retrieval cannot place them)
+  std::string integrity = "ok";                       // PRAGMA integrity_check
+  std::vector<std::string> foreign_key_violations;    // "table rowid N -> parent"
+  long long orphan_concepts = 0;                      // case_concepts rows without a case
+  std::vector<std::string> cases_missing_descriptor;  // uids (a warning: retrieval cannot place them)
   std::vector<std::string> rule_problems;
   GhsomStatus ghsom;
   std::vector<std::string> problems;  // what makes the library not clean

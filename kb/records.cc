@@ -19,8 +19,7 @@ namespace {
 
 using nlohmann::json;
 
-Status FieldError(const Where& source, const std::string& field, const std::string& what,
-                  const std::string& fix = "") {
+Status FieldError(const Where& source, const std::string& field, const std::string& what, const std::string& fix = "") {
   Where where = source;
   where.field = field;
   return Status::BadInput(where, what, fix);
@@ -107,9 +106,12 @@ const std::vector<std::string>& KnownFacets() {
 // ---------------------------------------------------------------------------------------------- CaseRecord
 
 json CaseRecord::ToJson() const {
-  json j = {{"uid", uid},           {"name", name},
-            {"family", family},     {"part", part},
-            {"simulation", simulation}, {"manufacturing", manufacturing}};
+  json j = {{"uid", uid},
+            {"name", name},
+            {"family", family},
+            {"part", part},
+            {"simulation", simulation},
+            {"manufacturing", manufacturing}};
   if (descriptor) j["descriptor"] = *descriptor;
   if (!concepts.empty()) j["concepts"] = concepts;
   if (!created_at.empty()) j["created_at"] = created_at;
@@ -179,7 +181,8 @@ json Rule::ToJson() const {
 
 json RuleSet::ToJson() const {
   json rules_json = json::array();
-  for (const Rule& r : rules) rules_json.push_back({{"name", r.name}, {"condition", r.condition}, {"choice", r.choice}});
+  for (const Rule& r : rules)
+    rules_json.push_back({{"name", r.name}, {"condition", r.condition}, {"choice", r.choice}});
   return {{"version", version}, {"rules", rules_json}};
 }
 
@@ -220,7 +223,8 @@ std::vector<std::string> RuleSetProblems(const std::vector<Rule>& rules) {
   const auto low = Bound(simulate, "ge");
   const auto sim_high = Bound(simulate, "le");
   const auto default_low = Bound(fallback, "lt");
-  if (direct != nullptr && !high) problems.push_back("rule 'route.direct' needs condition {\"similarity\": {\"gt\": high}}");
+  if (direct != nullptr && !high)
+    problems.push_back("rule 'route.direct' needs condition {\"similarity\": {\"gt\": high}}");
   if (simulate != nullptr && (!low || !sim_high)) {
     problems.push_back("rule 'route.simulate' needs condition {\"similarity\": {\"ge\": low, \"le\": high}}");
   }

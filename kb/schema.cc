@@ -221,9 +221,9 @@ Result<MigrationReport> Migrate(Database* db, const std::vector<Migration>& migr
   report.from_version = static_cast<int>(version);
   const int latest = static_cast<int>(migrations.size());
   if (version > latest) {
-    return Status::BadInput("case library '" + db->path().string() + "' has schema version " +
-                            std::to_string(version) + ", newer than this formloop understands (" +
-                            std::to_string(latest) + "). Fix: upgrade formloop; the library was not changed");
+    return Status::BadInput("case library '" + db->path().string() + "' has schema version " + std::to_string(version) +
+                            ", newer than this formloop understands (" + std::to_string(latest) +
+                            "). Fix: upgrade formloop; the library was not changed");
   }
   if (version < 0) {
     return Status::BadInput("case library '" + db->path().string() + "' has a negative schema version");
@@ -268,8 +268,10 @@ Result<int> ProbeLibraryFile(const std::filesystem::path& path, bool allow_unver
   }
   if (std::filesystem::file_size(path, ec) == 0) {
     if (allow_unversioned) return 0;
-    return Status::BadInput("'" + path.string() + "' is an empty file, not a formloop case library. Fix: run "
-                            "`formloop kb init " + path.string() + "` or check the path");
+    return Status::BadInput("'" + path.string() +
+                            "' is an empty file, not a formloop case library. Fix: run "
+                            "`formloop kb init " +
+                            path.string() + "` or check the path");
   }
   FL_ASSIGN_OR_RETURN(std::unique_ptr<Database> db, Database::Open(path, Database::Mode::kReadOnly));
   FL_ASSIGN_OR_RETURN(long long version, db->QueryInt("PRAGMA user_version;"));
@@ -283,8 +285,10 @@ Result<int> ProbeLibraryFile(const std::filesystem::path& path, bool allow_unver
   if (version <= 0) {
     if (tables.empty() && allow_unversioned) return 0;
     if (tables.empty()) {
-      return Status::BadInput("'" + path.string() + "' is an empty SQLite database, not a formloop case library. "
-                              "Fix: run `formloop kb init " + path.string() + "`");
+      return Status::BadInput("'" + path.string() +
+                              "' is an empty SQLite database, not a formloop case library. "
+                              "Fix: run `formloop kb init " +
+                              path.string() + "`");
     }
     return Status::BadInput("'" + path.string() + "' holds tables (" + tables.front() +
                             ", ...) but no formloop schema version: not a formloop case library (a foreign SQLite "
@@ -292,14 +296,17 @@ Result<int> ProbeLibraryFile(const std::filesystem::path& path, bool allow_unver
   }
   if (std::find(tables.begin(), tables.end(), "library_info") == tables.end()) {
     return Status::BadInput("'" + path.string() + "' is an SQLite database without formloop's tables (user_version " +
-                            std::to_string(version) + " but no library_info): not a formloop case library; the file "
+                            std::to_string(version) +
+                            " but no library_info): not a formloop case library; the file "
                             "was not changed");
   }
   FL_ASSIGN_OR_RETURN(std::string format,
                       db->QueryText("SELECT coalesce((SELECT value FROM library_info WHERE key = 'format'), '');"));
   if (format != "formloop case library") {
-    return Status::BadInput("'" + path.string() + "' is an SQLite database whose library_info does not name a "
-                            "formloop case library (format '" + format + "'); the file was not changed");
+    return Status::BadInput("'" + path.string() +
+                            "' is an SQLite database whose library_info does not name a "
+                            "formloop case library (format '" +
+                            format + "'); the file was not changed");
   }
   return static_cast<int>(version);
 }

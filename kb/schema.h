@@ -45,7 +45,7 @@ Result<int> ProbeLibraryFile(const std::filesystem::path& path, bool allow_unver
 
 struct InitReport {
   std::string path;
-  bool created = false;       // the file did not exist before
+  bool created = false;  // the file did not exist before
   MigrationReport migration;
   std::vector<std::string> tables;
   std::string journal_mode;

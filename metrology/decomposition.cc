@@ -589,9 +589,9 @@ Result<Decomposition> Decompose(const std::vector<Deviation>& deviations, const 
     result.fine_scale_peak_um = 1e3 * PeakAbs(result.fine_scale_mm);
     result.fine_scale_assessment = FineScaleAssessment(f.z_before);
     result.stop_reason += f.independent
-                              ? "; a spatial filter of " + std::to_string(f.vectors) +
-                                    " Moran eigenvector" + (f.vectors == 1 ? "" : "s") +
-                                    " takes the correlated fine-scale part d_f (RMS " + Num(result.fine_scale_rms_um) +
+                              ? "; a spatial filter of " + std::to_string(f.vectors) + " Moran eigenvector" +
+                                    (f.vectors == 1 ? "" : "s") + " takes the correlated fine-scale part d_f (RMS " +
+                                    Num(result.fine_scale_rms_um) +
                                     " um) out of the residual, leaving d_u independent (z = " + Num(f.final.z) +
                                     "); d_f is " + result.fine_scale_assessment
                               : "; the spatial filter did not make the residual independent (" + f.stop_reason +
@@ -652,7 +652,8 @@ nlohmann::json Decomposition::ToJson() const {
       {"spatial_filter", filter ? filter->ToJson() : nlohmann::json(nullptr)},
       {"fine_scale_rms_um", fine_scale_rms_um},
       {"fine_scale_peak_um", fine_scale_peak_um},
-      {"fine_scale_assessment", fine_scale_assessment.empty() ? nlohmann::json(nullptr) : nlohmann::json(fine_scale_assessment)},
+      {"fine_scale_assessment",
+       fine_scale_assessment.empty() ? nlohmann::json(nullptr) : nlohmann::json(fine_scale_assessment)},
       {"fine_scale_note",
        "d_f: spatially correlated structure finer than the field (chance at the 1 % level, or a real error finer than "
        "the probe spacing); at the probe points only, never compensated"},

@@ -160,10 +160,10 @@ class FieldModel {
 // (Δ = paired difference of the held-out mean-square errors, m minus c; SE its standard error over
 // the replicates, see the header comment).
 enum class CvGuard {
-  kLowerHeldOutError,                 // accept iff CV(m) < CV(c) (the rule up to issue 5's first note)
-  kOneStandardError,                  // accept iff Δ ≤ SE, the CV blocks being the replicates
-  kOneStandardErrorFolds,             // accept iff Δ ≤ SE, the CV folds being the replicates
-  kIndependentWithinOneStandardError, // accept iff CV(m) < CV(c), or m's residual is independent and Δ ≤ SE
+  kLowerHeldOutError,                  // accept iff CV(m) < CV(c) (the rule up to issue 5's first note)
+  kOneStandardError,                   // accept iff Δ ≤ SE, the CV blocks being the replicates
+  kOneStandardErrorFolds,              // accept iff Δ ≤ SE, the CV folds being the replicates
+  kIndependentWithinOneStandardError,  // accept iff CV(m) < CV(c), or m's residual is independent and Δ ≤ SE
 };
 const char* CvGuardName(CvGuard guard);  // "one standard error (blocks)", ...
 const char* CvGuardRule(CvGuard guard);  // the rule in words
@@ -179,8 +179,8 @@ struct DecompositionOptions {
   // When the field the guard accepts leaves a correlated residual, filter it (see "The fine-scale
   // part" above); false leaves d_u correlated and says so.
   bool spatial_filter = true;
-  SpatialFilterOptions filter;       // its z_critical is always kMoranZCritical
-  double coverage_factor = 2.0;      // k in form error = max|d_s| + k σ (σ as below); 2 ≈ 95 % if normal
+  SpatialFilterOptions filter;         // its z_critical is always kMoranZCritical
+  double coverage_factor = 2.0;        // k in form error = max|d_s| + k σ (σ as below); 2 ≈ 95 % if normal
   std::optional<double> tolerance_mm;  // α; when given, Decompose also fills Decomposition::evaluation
   Status Validate() const;
 };
@@ -193,11 +193,11 @@ struct DecompositionStep {
   double residual_moran_i = 0;
   double residual_moran_expected = 0;  // Cliff–Ord E[I] for this design
   double residual_moran_z = 0;
-  double cv_rms_um = 0;      // spatial block CV error
+  double cv_rms_um = 0;             // spatial block CV error
   double cv_difference_um2 = 0;     // Δ: held-out mean-square error minus the current model's (0 for the first)
   double cv_difference_se_um2 = 0;  // its standard error over the replicates (blocks or folds)
-  bool accepted = false;     // became the current model (the constant always is)
-  bool independent = false;  // z ≤ kMoranZCritical
+  bool accepted = false;            // became the current model (the constant always is)
+  bool independent = false;         // z ≤ kMoranZCritical
 };
 
 // §8: the decomposition measured against α.
@@ -226,7 +226,7 @@ struct Decomposition {
   std::vector<double> random_mm;         // d_u at each point
   std::optional<SpatialFilter> filter;   // when the field's residual was correlated and filtering is on
   double fine_scale_rms_um = 0, fine_scale_peak_um = 0;
-  std::string fine_scale_assessment;     // FineScaleAssessment of the field's z, when the filter ran
+  std::string fine_scale_assessment;  // FineScaleAssessment of the field's z, when the filter ran
   double deviation_rms_um = 0, deviation_peak_um = 0;
   double systematic_peak_um = 0, systematic_rms_um = 0;
   double random_rms_um = 0, random_peak_um = 0;

@@ -14,8 +14,8 @@ Result<std::vector<Deviation>> ComputeDeviations(const recon::BSplineSurface& su
   for (const ProbeRecord& record : log.records) {
     auto it = by_id.find(record.id);
     if (it == by_id.end()) {
-      return Status::BadInput(Where{.field = "id"}, "probe log id " + std::to_string(record.id) +
-                                                        " is not in the probing plan",
+      return Status::BadInput(Where{.field = "id"},
+                              "probe log id " + std::to_string(record.id) + " is not in the probing plan",
                               "use the log written for this plan");
     }
     Deviation d;

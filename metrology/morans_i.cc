@@ -436,7 +436,8 @@ nlohmann::json ResidualMoranResult::ToJson() const {
 }
 
 Result<Eigen::VectorXd> SpatialLag(const Eigen::VectorXd& values, const SpatialWeights& weights) {
-  FL_ASSIGN_OR_RETURN(const CentredValues centred, CentreValues(values, weights, IslandPolicy::kRefuse, 0, "spatial lag"));
+  FL_ASSIGN_OR_RETURN(const CentredValues centred,
+                      CentreValues(values, weights, IslandPolicy::kRefuse, 0, "spatial lag"));
   return Eigen::VectorXd(centred.w() * centred.z);
 }
 

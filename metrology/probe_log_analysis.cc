@@ -80,8 +80,8 @@ Status ProbeLogAnalysisOptions::Validate() const {
 }
 
 nlohmann::json FlaggedPoint::ToJson() const {
-  return {{"id", id}, {"line", line}, {"distance_mm", distance_mm}, {"deviation_um", deviation_um},
-          {"u", u},   {"v", v},       {"reason", reason}};
+  return {{"id", id}, {"line", line},    {"distance_mm", distance_mm}, {"deviation_um", deviation_um}, {"u", u},
+          {"v", v},   {"reason", reason}};
 }
 
 Result<ProbeLogAnalysis> AnalyseProbeLog(const recon::BSplineSurface& q, const ProbeLog& log, const ProbeModel& probe,
@@ -160,9 +160,10 @@ Result<ProbeLogAnalysis> AnalyseProbeLog(const recon::BSplineSurface& q, const P
         "registration (--register) can align a part that is only shifted");
   }
   if (!a.flagged.empty()) {
-    log::Warn("analyse: {} of {} points flagged (beyond {} mm of Q or past its edge) and left out; see "
-              "flagged_points in analysis.json",
-              a.flagged.size(), measured.size(), options.max_distance_mm);
+    log::Warn(
+        "analyse: {} of {} points flagged (beyond {} mm of Q or past its edge) and left out; see "
+        "flagged_points in analysis.json",
+        a.flagged.size(), measured.size(), options.max_distance_mm);
   }
 
   // 4. Decomposition (raw Moran, the ladder, d_s, d_f, d_u, the evaluation against the tolerance).

@@ -57,15 +57,15 @@ struct FlaggedPoint {
 };
 
 struct ProbeLogAnalysis {
-  std::size_t records = 0;                   // in the log
-  std::vector<std::int64_t> not_measured;    // planned ids without a record (with a plan)
-  std::vector<FlaggedPoint> flagged;         // left out, in log order
+  std::size_t records = 0;                         // in the log
+  std::vector<std::int64_t> not_measured;          // planned ids without a record (with a plan)
+  std::vector<FlaggedPoint> flagged;               // left out, in log order
   std::optional<RegistrationReport> registration;  // when registration was asked for
-  std::vector<Deviation> deviations;         // the points used, in log order
-  std::vector<long> lines;                   // their probe-log lines
+  std::vector<Deviation> deviations;               // the points used, in log order
+  std::vector<long> lines;                         // their probe-log lines
   Decomposition decomposition;
-  std::vector<double> lag_um;                // spatial lag of the centred deviations, µm
-  LocalMoranResult lisa;                     // of the deviations
+  std::vector<double> lag_um;                   // spatial lag of the centred deviations, µm
+  LocalMoranResult lisa;                        // of the deviations
   std::optional<LocalMoranResult> lisa_random;  // of d_u; absent when d_u is identically zero
 
   // n_records, n_used, n_flagged, mean/rms/max |deviation| (µm) and where the largest is.

@@ -61,8 +61,8 @@ Result<ProbingPlan> PlanProbingCurvatureWeighted(const recon::BSplineSurface& q,
   const double v0 = dom.v_min + inset_fraction * dom.v_span(), v1 = dom.v_max - inset_fraction * dom.v_span();
 
   // Candidate grid, aspect from the 3-D lengths of the middle iso-lines.
-  const long long wanted = std::min<long long>(static_cast<long long>(kProbingCandidatesPerPoint) * count,
-                                               kMaxProbingCandidates);
+  const long long wanted =
+      std::min<long long>(static_cast<long long>(kProbingCandidatesPerPoint) * count, kMaxProbingCandidates);
   const double length_u = IsoLineLength(q, u0, 0.5 * (v0 + v1), u1, 0.5 * (v0 + v1));
   const double length_v = IsoLineLength(q, 0.5 * (u0 + u1), v0, 0.5 * (u0 + u1), v1);
   double aspect = length_u > 0 && length_v > 0 ? length_u / length_v : 1.0;

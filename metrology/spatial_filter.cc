@@ -78,8 +78,8 @@ Result<SpatialFilter> FilterResidual(const Eigen::VectorXd& y, const Eigen::Matr
   // Lanczos with full reorthogonalisation, started at e.
   const int m_max = static_cast<int>(std::min<Eigen::Index>(options.krylov_dimension, n - p - 4));
   if (m_max < 1) {
-    filter.stop_reason = "no degrees of freedom left for a filter vector (n = " + std::to_string(n) +
-                         ", p = " + std::to_string(p) + ")";
+    filter.stop_reason =
+        "no degrees of freedom left for a filter vector (n = " + std::to_string(n) + ", p = " + std::to_string(p) + ")";
     return filter;
   }
   Eigen::MatrixXd v(n, m_max);

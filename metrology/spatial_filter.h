@@ -41,24 +41,24 @@
 namespace formloop::metrology {
 
 struct SpatialFilterOptions {
-  double z_critical = 2.326;         // stop when the residual Moran z is at or below this
-  int max_vectors = 20;              // the budget of filter vectors
-  int krylov_dimension = 150;        // Lanczos steps (at most n − p − 1)
-  double min_relative_mc = 0.25;     // candidates: θ_j ≥ this · θ_max
+  double z_critical = 2.326;      // stop when the residual Moran z is at or below this
+  int max_vectors = 20;           // the budget of filter vectors
+  int krylov_dimension = 150;     // Lanczos steps (at most n − p − 1)
+  double min_relative_mc = 0.25;  // candidates: θ_j ≥ this · θ_max
 };
 
 struct SpatialFilter {
-  int vectors = 0;                   // filter vectors added (s)
+  int vectors = 0;                         // filter vectors added (s)
   std::vector<double> moran_coefficients;  // MC of each added vector, in the order added
-  std::vector<double> z_after;       // residual Moran z after each addition
-  double z_before = 0;               // the field's residual z
-  ResidualMoranResult final;         // residual Moran of the augmented design [X, Y_S]
-  Eigen::VectorXd fitted;            // d_f at the points (n), 0 when no vector was added
-  Eigen::MatrixXd basis;             // the filter vectors as columns (n × vectors), orthonormal, ⟂ the design
-  bool independent = false;          // final.z ≤ z_critical
-  int candidates = 0;                // Ritz vectors that passed the MC threshold
+  std::vector<double> z_after;             // residual Moran z after each addition
+  double z_before = 0;                     // the field's residual z
+  ResidualMoranResult final;               // residual Moran of the augmented design [X, Y_S]
+  Eigen::VectorXd fitted;                  // d_f at the points (n), 0 when no vector was added
+  Eigen::MatrixXd basis;                   // the filter vectors as columns (n × vectors), orthonormal, ⟂ the design
+  bool independent = false;                // final.z ≤ z_critical
+  int candidates = 0;                      // Ritz vectors that passed the MC threshold
   std::string stop_reason;
-  nlohmann::json ToJson() const;     // without the per-point values
+  nlohmann::json ToJson() const;  // without the per-point values
 };
 
 // y: n values; design: the field's n × p design (full column rank); weights: the n × n spatial

@@ -26,11 +26,10 @@ std::string Vec(const Eigen::Vector3d& v_mm) {
          FormatFixed(1e3 * v_mm.z(), 3) + ") um";
 }
 
-constexpr const char* kSideColumns[] = {"cl_index", "pass",     "nominal_line", "compensated_line",
-                                        "nominal_x", "nominal_y", "nominal_z",   "offset_x",
+constexpr const char* kSideColumns[] = {"cl_index",  "pass",      "nominal_line", "compensated_line",
+                                        "nominal_x", "nominal_y", "nominal_z",    "offset_x",
                                         "offset_y",  "offset_z",  "ds_um"};
 constexpr const char* kFieldColumns[] = {"u", "v", "nx", "ny", "nz"};
-
 
 }  // namespace
 
@@ -95,7 +94,8 @@ Status AssignProgramLines(const std::vector<ProgramMove>& nominal, const std::ve
 }
 
 Status WriteSideFile(const std::filesystem::path& path, const Compensation& compensation) {
-  std::string text = "# formloop compensation side file: per CL point, the nominal tip, the applied offset, its source\n";
+  std::string text =
+      "# formloop compensation side file: per CL point, the nominal tip, the applied offset, its source\n";
   text += "# source: " + compensation.source + "\n";
   text +=
       "cl_index,pass,nominal_line,compensated_line,nominal_x,nominal_y,nominal_z,offset_x,offset_y,offset_z,ds_um,"
@@ -148,8 +148,8 @@ Result<SideFile> ParseSideFile(const std::string& text, const std::string& sourc
       for (std::size_t c = 0; c < cells.size(); ++c) column[cells[c]] = c;
       for (const char* name : kSideColumns) {
         if (!column.count(name)) {
-          return Status::BadInput(Where{.file = source, .line = number, .field = name},
-                                  "the header lacks this column", "use the side file formloop wrote");
+          return Status::BadInput(Where{.file = source, .line = number, .field = name}, "the header lacks this column",
+                                  "use the side file formloop wrote");
         }
       }
       int field_columns = 0;
@@ -233,10 +233,10 @@ Result<SideFile> ParseSideFile(const std::string& text, const std::string& sourc
       }
     }
     if (e.cl_index != side.entries.size()) {
-      return Status::BadInput(Where{.file = source, .line = number, .field = "cl_index"},
-                              "expected CL point " + std::to_string(side.entries.size()) + ", found " +
-                                  std::to_string(e.cl_index),
-                              "rows must list every CL point in order from 0");
+      return Status::BadInput(
+          Where{.file = source, .line = number, .field = "cl_index"},
+          "expected CL point " + std::to_string(side.entries.size()) + ", found " + std::to_string(e.cl_index),
+          "rows must list every CL point in order from 0");
     }
     side.entries.push_back(e);
   }

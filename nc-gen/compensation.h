@@ -26,11 +26,11 @@ struct CompensationOptions {
 
 struct CompensationEntry {
   std::size_t cl_index = 0;
-  long nominal_line = 0;       // line of the move in the nominal program (filled by caller)
-  long compensated_line = 0;   // line in the compensated program (filled by caller)
+  long nominal_line = 0;      // line of the move in the nominal program (filled by caller)
+  long compensated_line = 0;  // line in the compensated program (filled by caller)
   Eigen::Vector3d nominal_tip = Eigen::Vector3d::Zero();
   Eigen::Vector3d offset_mm = Eigen::Vector3d::Zero();  // compensated tip − nominal tip
-  double systematic_um = 0;    // d_s at the CC point
+  double systematic_um = 0;                             // d_s at the CC point
   // Where d_s was taken and along which normal (CompensateToolpath fills them), so a checker can
   // recompute −d_s·n from the field alone.
   int pass = 0;
@@ -44,10 +44,10 @@ struct CompensationEntry {
 };
 
 struct Compensation {
-  Toolpath path;                          // the compensated tool path
-  std::vector<CompensationEntry> entries; // one per CL point
+  Toolpath path;                           // the compensated tool path
+  std::vector<CompensationEntry> entries;  // one per CL point
   double max_offset_um = 0;
-  std::string source;                     // e.g. "systematic field (Legendre degree 2) from loop 0"
+  std::string source;  // e.g. "systematic field (Legendre degree 2) from loop 0"
   // Filled by WriteCompensatedProgram: the program as written, its moves as read back for the check,
   // and the check's largest disagreement between a side-file offset and the offset recomputed from the
   // two programs (µm; the program resolution limits it to about 0.1 µm).
@@ -109,7 +109,7 @@ double ProgramOffsetToleranceUm(int decimals);
 struct BlockCheck {
   std::size_t cl_index = 0;
   int pass = 0;
-  long nominal_line = 0, compensated_line = 0;  // lines in the two programs (as read from them)
+  long nominal_line = 0, compensated_line = 0;                  // lines in the two programs (as read from them)
   Eigen::Vector3d program_offset_mm = Eigen::Vector3d::Zero();  // compensated tip − nominal tip
   Eigen::Vector3d side_offset_mm = Eigen::Vector3d::Zero();     // offset_x..z of the side file
   Eigen::Vector3d field_offset_mm = Eigen::Vector3d::Zero();    // −d_s(u, v)·n from the field
@@ -152,8 +152,9 @@ Result<CheckReport> CheckCompensation(const std::vector<ProgramMove>& nominal,
 // an offset above options.max_offset_um with SafetyLimit), the post of `dialect` (the nominal program
 // must be in the same dialect), read back both programs,
 // AssignProgramLines, CheckCompensation against the field; then the program and the side file are
-// written atomically (the result carries the program, its moves and the check's largest disagreement) (side file first; should the program then fail to write, the side file is
-// removed). On any refusal or failed check neither file is written.
+// written atomically (the result carries the program, its moves and the check's largest disagreement) (side file first;
+// should the program then fail to write, the side file is removed). On any refusal or failed check neither file is
+// written.
 Result<Compensation> WriteCompensatedProgram(const Toolpath& nominal, const std::string& nominal_program,
                                              const SystematicField& systematic, const std::string& source,
                                              const CompensationOptions& options, const PostOptions& post,

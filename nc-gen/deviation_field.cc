@@ -17,7 +17,6 @@ namespace {
 
 double Kernel(double r2) { return r2 > 0 ? 0.5 * r2 * std::log(r2) : 0.0; }  // r² log r
 
-
 }  // namespace
 
 Status DeviationFieldOptions::Validate() const {
@@ -27,21 +26,21 @@ Status DeviationFieldOptions::Validate() const {
   return Status::Ok();
 }
 
-Eigen::Vector2d DeviationField::Scaled(double u, double v) const {
-  return (Eigen::Vector2d(u, v) - centre_) / scale_;
-}
+Eigen::Vector2d DeviationField::Scaled(double u, double v) const { return (Eigen::Vector2d(u, v) - centre_) / scale_; }
 
 Result<DeviationField> DeviationField::Fit(const std::vector<DeviationSample>& samples,
                                            const DeviationFieldOptions& options, const std::string& source) {
   FL_RETURN_IF_ERROR(options.Validate());
   const std::size_t n = samples.size();
   if (n > kMaxDeviationSamples) {
-    return Status::BadInput(Where{.file = source}, std::to_string(n) + " samples exceed the dense solver's limit of " +
-                                                       std::to_string(kMaxDeviationSamples),
-                            "thin the samples (or average them on a grid) before building the field");
+    return Status::BadInput(
+        Where{.file = source},
+        std::to_string(n) + " samples exceed the dense solver's limit of " + std::to_string(kMaxDeviationSamples),
+        "thin the samples (or average them on a grid) before building the field");
   }
   if (n < 3) {
-    return Status::BadInput(Where{.file = source}, "a deviation field needs at least 3 samples, got " + std::to_string(n));
+    return Status::BadInput(Where{.file = source},
+                            "a deviation field needs at least 3 samples, got " + std::to_string(n));
   }
   for (const auto& s : samples) {
     if (!std::isfinite(s.u) || !std::isfinite(s.v) || !std::isfinite(s.ds_um)) {
@@ -148,8 +147,8 @@ Result<std::vector<DeviationSample>> ReadDeviationSamples(const std::filesystem:
     }
     DeviationSample s;
     s.line = number;
-    for (auto [col, name, out] : {std::tuple{col_u, "u", &s.u}, std::tuple{col_v, "v", &s.v},
-                                  std::tuple{col_ds, "ds_um", &s.ds_um}}) {
+    for (auto [col, name, out] :
+         {std::tuple{col_u, "u", &s.u}, std::tuple{col_v, "v", &s.v}, std::tuple{col_ds, "ds_um", &s.ds_um}}) {
       const std::string& cell = cells[static_cast<std::size_t>(col)];
       if (!ParseDouble(cell, out) || !std::isfinite(*out)) {
         return Status::BadInput(Where{.file = file, .line = number, .field = name},

@@ -60,8 +60,8 @@ class DeviationField {
 
  private:
   Eigen::Vector2d Scaled(double u, double v) const;
-  Eigen::MatrixX2d centres_;   // scaled data points
-  Eigen::VectorXd weights_;    // kernel weights w_i
+  Eigen::MatrixX2d centres_;                          // scaled data points
+  Eigen::VectorXd weights_;                           // kernel weights w_i
   Eigen::Vector3d linear_ = Eigen::Vector3d::Zero();  // a_0, a_1, a_2 (scaled coordinates)
   Eigen::Vector2d centre_ = Eigen::Vector2d::Zero();
   double scale_ = 1;

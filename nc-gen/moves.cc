@@ -68,7 +68,7 @@ Result<MoveList> BuildMoveList(const Toolpath& path) {
                           .feed_mm_per_min = tp.feed_mm_per_min,
                           .pass = cl.pass,
                           .cl_index = index,
-                          .source = cl.kind == ClKind::kLeadOut                               ? "lead-out"
+                          .source = cl.kind == ClKind::kLeadOut                           ? "lead-out"
                                     : k > 0 && path.points[k - 1].kind == ClKind::kLeadIn ? "lead-in"
                                                                                           : "cut"});
   }

@@ -277,8 +277,8 @@ Result<std::vector<ProgramMove>> ReadWordAddress(const std::string& text, const 
     if (block.percent && ++percent == 2) break;
     const Where where{.file = source, .line = block.line};
     if (!block.notes.empty()) {
-      return Status::BadInput(where, "unsupported word '" + block.notes.front().word + "' (" +
-                                         block.notes.front().what + ")", fix);
+      return Status::BadInput(
+          where, "unsupported word '" + block.notes.front().word + "' (" + block.notes.front().what + ")", fix);
     }
     if (block.units != Units::kMm || block.incremental) {
       return Status::BadInput(where, "inch or incremental programming is not supported",
@@ -289,8 +289,11 @@ Result<std::vector<ProgramMove>> ReadWordAddress(const std::string& text, const 
                               fix + " (programs with arcs: nc compensate --program, nc distribute)");
     }
     if (block.motion == Motion::kNone) continue;
-    ProgramMove m{.rapid = block.motion == Motion::kRapid, .tip = block.end, .line = block.line,
-                  .feed_mm_per_min = block.feed, .comment = ""};
+    ProgramMove m{.rapid = block.motion == Motion::kRapid,
+                  .tip = block.end,
+                  .line = block.line,
+                  .feed_mm_per_min = block.feed,
+                  .comment = ""};
     if (!block.comments.empty()) {
       const auto [b, e] = block.comments.front();
       std::string_view c = block.text.substr(b, e - b);

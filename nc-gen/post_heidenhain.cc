@@ -192,9 +192,8 @@ class HeidenhainPost : public PostDialect {
     w.Block("BEGIN PGM " + options.post.program_name + " MM");
     w.Comment(PlainComment(options.post.title));
     w.Comment("touch probe T" + std::to_string(options.probe_tool) + " ball radius " +
-              FormatFixed(options.ball_radius_mm, 4) +
-              " mm; cycle 444 at the nominal surface point along -n; " + std::to_string(plan.points.size()) +
-              " points");
+              FormatFixed(options.ball_radius_mm, 4) + " mm; cycle 444 at the nominal surface point along -n; " +
+              std::to_string(plan.points.size()) + " points");
     // formloop has not checked these Q-parameter numbers against a TNC 640 manual: the program says
     // so, so that nobody runs it on a machine before a dry run and a check of the cycle on the control.
     w.Comment("CHECK BEFORE USE: cycle 444 Q-parameter numbers not verified against the TNC manual; dry run first");

@@ -9,7 +9,8 @@
 // written, the probe feed and every position (above, clearance, search end) of every point are checked
 // against MachineLimits; a refusal names the probe point id and no program is returned.
 //
-//   "linuxcnc"   G38.2 probing, results logged between (PROBEOPEN file) and (PROBECLOSE). With touch_feed_mm_per_min > 0 each point is probed twice: the
+//   "linuxcnc"   G38.2 probing, results logged between (PROBEOPEN file) and (PROBECLOSE). With touch_feed_mm_per_min >
+//   0 each point is probed twice: the
 //                G38.2 at probe_feed_mm_per_min finds the surface, a rapid backs off backoff_mm along +n
 //                and a second G38.2 at the slow touch feed measures it (LinuxCNC records the position of
 //                the first servo period after the trigger, so the error is up to feed × period). With a
@@ -40,10 +41,10 @@ namespace formloop::nc {
 
 struct ProbeProgramOptions {
   double ball_radius_mm = 1.0;
-  double clearance_mm = 3.0;          // start this far from the surface along n
-  double search_mm = 2.0;             // probe this far beyond the nominal surface
+  double clearance_mm = 3.0;  // start this far from the surface along n
+  double search_mm = 2.0;     // probe this far beyond the nominal surface
   double probe_feed_mm_per_min = 200;
-  double safe_z_mm = 50;              // rapids between points
+  double safe_z_mm = 50;  // rapids between points
   // The probe's tool number: the program changes to it (T.. M6; TOOL CALL on Heidenhain) and activates its
   // length offset (G43 H<tool> on LinuxCNC and Fanuc, D1 on Sinumerik), which must be measured to the
   // stylus-ball centre, the programmed point.
@@ -51,11 +52,11 @@ struct ProbeProgramOptions {
   std::string results_file = "probe_results.txt";  // LinuxCNC (PROBEOPEN)
   // LinuxCNC: > 0 probes each point twice, the second time at this feed (header comment); 0 = once.
   double touch_feed_mm_per_min = 0;
-  double backoff_mm = 0.2;                 // LinuxCNC, two touches: back off this far along +n between them
-  std::string linuxcnc_log_file;           // LinuxCNC: (LOGOPEN) file with one line per point; empty = none
-  int linuxcnc_time_input = -1;            // LinuxCNC: analog input logged as t_s (M66 E.. L0); -1 = none
-  int fanuc_result_base = 500;   // Fanuc: first macro variable of the result range (#500)
-  int sinumerik_r_base = 10;     // Sinumerik: first R parameter of the result range (R10)
+  double backoff_mm = 0.2;        // LinuxCNC, two touches: back off this far along +n between them
+  std::string linuxcnc_log_file;  // LinuxCNC: (LOGOPEN) file with one line per point; empty = none
+  int linuxcnc_time_input = -1;   // LinuxCNC: analog input logged as t_s (M66 E.. L0); -1 = none
+  int fanuc_result_base = 500;    // Fanuc: first macro variable of the result range (#500)
+  int sinumerik_r_base = 10;      // Sinumerik: first R parameter of the result range (R10)
   // Sinumerik: the last R parameter the control has (MD28050 MM_NUM_R_PARAM − 1; 99 by default).
   int sinumerik_r_last = 99;
   PostOptions post;

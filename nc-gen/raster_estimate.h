@@ -23,9 +23,9 @@ struct RasterEstimate {
   double step_over_mm = 0;  // flat step-over sqrt(8 h r)
   double spacing_mm = 0;    // mean point spacing along a pass
   double passes = 0;
-  double length_mm = 0;     // cutting path
+  double length_mm = 0;  // cutting path
   double cl_points = 0;
-  double cutting_s = 0;     // at the feed, rapids and leads aside
+  double cutting_s = 0;  // at the feed, rapids and leads aside
   // The option that sets the point count: "chord_tolerance_um" when the chord tolerance packs the points
   // closer than the step-over, else "scallop_um".
   const char* driver() const { return spacing_mm < step_over_mm ? "chord_tolerance_um" : "scallop_um"; }

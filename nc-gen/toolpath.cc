@@ -2,14 +2,14 @@
 
 #include <algorithm>
 #include <array>
-#include <optional>
 #include <cmath>
+#include <optional>
 #include <unordered_map>
 #include <vector>
 
+#include <Eigen/Cholesky>
 #include <Eigen/Geometry>
 #include <Eigen/LU>
-#include <Eigen/Cholesky>
 
 #include <BRepBndLib.hxx>
 #include <Bnd_Box.hxx>
@@ -278,8 +278,8 @@ struct Section {
 };
 
 // Curvatures, step-over and centre-path length over the samples of one piece.
-Section PieceGeometry(const recon::BSplineSurface& q, const RasterFrame& f, double c,
-                      std::vector<Eigen::Vector2d> uv, std::vector<double> abscissa, double r, double h) {
+Section PieceGeometry(const recon::BSplineSurface& q, const RasterFrame& f, double c, std::vector<Eigen::Vector2d> uv,
+                      std::vector<double> abscissa, double r, double h) {
   Section sec;
   sec.c = c;
   sec.uv = std::move(uv);

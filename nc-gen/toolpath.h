@@ -61,16 +61,16 @@ struct BallEndTool {
 
 struct ToolpathOptions {
   BallEndTool tool;
-  double scallop_um = 3.0;          // target scallop height between passes
-  double chord_tolerance_um = 1.0;  // max chord error along a pass
-  double max_point_spacing_mm = 0.5;// cap on CC spacing along a pass (feeds the virtual machine's resolution)
-  double raster_angle_deg = 0;      // angle θ of the cutting direction d in the XY plane, from +X
-  bool zigzag = true;               // alternate direction of successive passes (false: one-way)
-  double lead_mm = 2.0;             // radius of the arc lead-in/out at each pass end (0: none)
-  double feed_mm_per_min = 1500;    // cutting feed
+  double scallop_um = 3.0;            // target scallop height between passes
+  double chord_tolerance_um = 1.0;    // max chord error along a pass
+  double max_point_spacing_mm = 0.5;  // cap on CC spacing along a pass (feeds the virtual machine's resolution)
+  double raster_angle_deg = 0;        // angle θ of the cutting direction d in the XY plane, from +X
+  bool zigzag = true;                 // alternate direction of successive passes (false: one-way)
+  double lead_mm = 2.0;               // radius of the arc lead-in/out at each pass end (0: none)
+  double feed_mm_per_min = 1500;      // cutting feed
   double plunge_feed_mm_per_min = 300;
   double spindle_rpm = 12000;
-  double clearance_mm = 5.0;        // above the highest tip point for rapids between passes
+  double clearance_mm = 5.0;  // above the highest tip point for rapids between passes
   Status Validate() const;
 };
 
@@ -84,29 +84,29 @@ enum class ClKind {
 // One cutter location with its provenance.
 struct ClPoint {
   ClKind kind = ClKind::kCut;
-  int pass = 0;                      // pass index from 0
+  int pass = 0;  // pass index from 0
   int index_in_pass = 0;
-  double u = 0, v = 0;               // parameters of the CC point on Q (leads: of the pass end they extend)
-  Eigen::Vector3d cc = Eigen::Vector3d::Zero();      // cutter-contact point i on Q, mm
-  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ(); // unit normal of Q at i
-  Eigen::Vector3d centre = Eigen::Vector3d::Zero();  // ball centre B = i + r n + lift ẑ
-  Eigen::Vector3d tip = Eigen::Vector3d::Zero();     // programmed tip point B − r ẑ
+  double u = 0, v = 0;                           // parameters of the CC point on Q (leads: of the pass end they extend)
+  Eigen::Vector3d cc = Eigen::Vector3d::Zero();  // cutter-contact point i on Q, mm
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  // unit normal of Q at i
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();   // ball centre B = i + r n + lift ẑ
+  Eigen::Vector3d tip = Eigen::Vector3d::Zero();      // programmed tip point B − r ẑ
   // Lift along the tool axis (ẑ) that keeps the ball out of Q where the concave radius is below r (the
   // ball then touches Q only from above, spec §2 "lift and flag"); 0 elsewhere.
   double lift_mm = 0;
-  double path_length_mm = 0;         // cutting path length from the program start to here
-  double time_s = 0;                 // cutting time from the program start (feed moves only)
+  double path_length_mm = 0;  // cutting path length from the program start to here
+  double time_s = 0;          // cutting time from the program start (feed moves only)
 };
 
 struct Toolpath {
   ToolpathOptions options;
-  std::vector<ClPoint> points;       // in cutting order
+  std::vector<ClPoint> points;  // in cutting order
   int passes = 0;
   double safe_z_mm = 0;
   // Report figures.
   double min_step_over_mm = 0, max_step_over_mm = 0;
   double total_length_mm = 0, total_time_s = 0;
-  int gouge_risk_points = 0;         // CC points whose concave radius is below the ball radius
+  int gouge_risk_points = 0;  // CC points whose concave radius is below the ball radius
   // Gouge avoidance (spec §2): CL points lifted along ẑ so the ball stays out of Q. The region they
   // cover is NOT cut to Q ("never cut"): the indices into points, the bounding box of their CC points
   // and the largest lift.

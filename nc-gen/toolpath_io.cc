@@ -6,9 +6,9 @@
 
 #include "core/atomic_file.h"
 #include "core/csv.h"
-#include "core/point_io.h"
 #include "core/json_io.h"
 #include "core/number_text.h"
+#include "core/point_io.h"
 
 namespace formloop::nc {
 namespace {
@@ -50,9 +50,9 @@ nlohmann::json ToolpathOptionsJson(const ToolpathOptions& o) {
 Status ReadToolpathOptions(const nlohmann::json& json, const std::string& source, ToolpathOptions* o) {
   if (!json.is_object()) return Status::BadInput(Where{.file = source}, "the tool-path options are not a JSON object");
   JsonFields f(json, source);
-  FL_RETURN_IF_ERROR(f.CheckKnown({"tool", "scallop_um", "chord_tolerance_um", "max_point_spacing_mm",
-                                   "raster_angle_deg", "zigzag", "lead_mm", "feed_mm_per_min",
-                                   "plunge_feed_mm_per_min", "spindle_rpm", "clearance_mm"}));
+  FL_RETURN_IF_ERROR(
+      f.CheckKnown({"tool", "scallop_um", "chord_tolerance_um", "max_point_spacing_mm", "raster_angle_deg", "zigzag",
+                    "lead_mm", "feed_mm_per_min", "plunge_feed_mm_per_min", "spindle_rpm", "clearance_mm"}));
   std::optional<JsonFields> tool;
   FL_RETURN_IF_ERROR(f.Object("tool", &tool));
   if (tool) {

@@ -7,8 +7,8 @@
 // back posts byte-identically to the planned one:
 //   # formloop tool path: ...
 //   # options: {"tool": {...}, "scallop_um": ..., "raster_angle_deg": ..., ...}   (ToolpathOptionsJson)
-//   # summary: {"passes": ..., "step_over_mm": {"min": ..., "max": ...}, "gouge_risk_points": ...[, "min_safe_z_mm": ...]}
-//   pass,kind,u,v,cc_x,cc_y,cc_z,nx,ny,nz,lift_mm
+//   # summary: {"passes": ..., "step_over_mm": {"min": ..., "max": ...}, "gouge_risk_points": ...[, "min_safe_z_mm":
+//   ...]} pass,kind,u,v,cc_x,cc_y,cc_z,nx,ny,nz,lift_mm
 // kind = cut | lead-in | lead-out. Centres, tips, lengths, times and safe Z are recomputed on reading
 // (UpdateCutterLocations); the lifted-region summary is rebuilt from lift_mm.
 

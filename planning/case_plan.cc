@@ -37,8 +37,8 @@ Result<nc::ToolpathOptions> PlanFromCase(const kb::CaseRecord& record, const Par
     double r = plan.tool.radius_mm;
     FL_RETURN_IF_ERROR(tools.front().OptionalNumber("radius_mm", &r));
     plan.tool = NearestTool(part.plan.tool, part.magazine, r);
-    from_case["tool"] = {{"case_radius_mm", r}, {"magazine_tool", plan.tool.number},
-                         {"radius_mm", plan.tool.radius_mm}};
+    from_case["tool"] = {
+        {"case_radius_mm", r}, {"magazine_tool", plan.tool.number}, {"radius_mm", plan.tool.radius_mm}};
   }
   std::optional<JsonFields> strategy, feeds;
   FL_RETURN_IF_ERROR(m.Object("strategy", &strategy));
@@ -106,7 +106,9 @@ Result<PlanChoice> ChoosePlan(const PlanRequest& request) {
   c.learned = LearnedModelOf(*r.best, r.machine, ToolKey(c.plan.tool.radius_mm), r.material);
   c.source = "case " + r.best->uid;
   c.precompensation_scale = c.learned && r.learn ? 1.0 : 0.0;
-  c.report = {{"source", c.source}, {"route", r.route}, {"case_plan", notes},
+  c.report = {{"source", c.source},
+              {"route", r.route},
+              {"case_plan", notes},
               {"learned_model", c.learned ? c.learned->ToJson() : nlohmann::json(nullptr)}};
   if (r.route != "simulate") return c;
 

@@ -42,8 +42,7 @@ struct PartPlanBasis {
 
 // The magazine tool nearest to `radius_mm` (the smaller one on a tie); `own` (the part's tool) when
 // nothing in the magazine is nearer.
-nc::BallEndTool NearestTool(const nc::BallEndTool& own, const std::vector<nc::BallEndTool>& magazine,
-                            double radius_mm);
+nc::BallEndTool NearestTool(const nc::BallEndTool& own, const std::vector<nc::BallEndTool>& magazine, double radius_mm);
 
 // The part's plan with the case's choices: tool (nearest in the magazine), scallop target, raster angle,
 // feed and spindle speed (capped by the limits). `notes` lists what came from the case and what stayed
@@ -61,11 +60,11 @@ struct PlanRequest {
   PartPlanBasis part;
   int flutes = 2;
   std::string material;
-  std::string machine;          // the machine the part is cut on (key of learned models)
-  double tolerance_mm = 0.010;  // α
-  double coverage_factor = 2;   // k of the form error: e_rand of the correction = k σ(d_u) of the case
-  double probe_inset_fraction = 0.05;  // of the 10 × 10 grid the correction predicts the form error on
-  std::string route = "default";       // direct | simulate | default (retrieval::RetrievalResult::route)
+  std::string machine;                   // the machine the part is cut on (key of learned models)
+  double tolerance_mm = 0.010;           // α
+  double coverage_factor = 2;            // k of the form error: e_rand of the correction = k σ(d_u) of the case
+  double probe_inset_fraction = 0.05;    // of the 10 × 10 grid the correction predicts the form error on
+  std::string route = "default";         // direct | simulate | default (retrieval::RetrievalResult::route)
   const kb::CaseRecord* best = nullptr;  // the retrieved case (none: the default plan)
   double similarity = -1;                // A of the best case
   bool learn = true;                     // pre-compensate with the case's learned model
@@ -74,12 +73,12 @@ struct PlanRequest {
 
 struct PlanChoice {
   nc::ToolpathOptions plan;
-  std::optional<sim::Model> learned;   // the case's model for this machine/tool/material
-  double precompensation_scale = 0;    // 0: no pre-compensation
-  bool flag_engineer = false;          // the default plan, or a correction that could not remove every defect
-  std::string source;                  // "case X", "case X, simulation-corrected", "default plan ..."
+  std::optional<sim::Model> learned;  // the case's model for this machine/tool/material
+  double precompensation_scale = 0;   // 0: no pre-compensation
+  bool flag_engineer = false;         // the default plan, or a correction that could not remove every defect
+  std::string source;                 // "case X", "case X, simulation-corrected", "default plan ..."
   nlohmann::json report = nlohmann::json::object();  // plan.json before the tool path is added
-  std::optional<SimCorrectionResult> correction;      // route simulate
+  std::optional<SimCorrectionResult> correction;     // route simulate
 };
 
 // The plan by route (see the top of this file). The case's learned model is the baseline of the

@@ -19,9 +19,9 @@
 // the group. The spindle speed stays constant in the tool operation: n_op is the (fused) optimum of the
 // group that removes the most volume, rounded to whole rpm; every other group gets f_z = min(f_z,max,
 // cap_g(n_op)). Each cutting block's F becomes f_z z n_op rounded down to whole mm/min (in a G20
-// section inch/min rounded down to 0.01; never above the optimum); non-cutting feed blocks keep their original feed (an F word is added where the modal feed
-// would otherwise carry over). Header comments record the parent's SHA-256, the coefficient set, the
-// seed and w_m. One tool per program (formloop programs change tools never).
+// section inch/min rounded down to 0.01; never above the optimum); non-cutting feed blocks keep their original feed (an
+// F word is added where the modal feed would otherwise carry over). Header comments record the parent's SHA-256, the
+// coefficient set, the seed and w_m. One tool per program (formloop programs change tools never).
 
 #include <cstdint>
 #include <nlohmann/json.hpp>

@@ -112,7 +112,8 @@ SurrogateResult SurrogateBruteForce(const SurrogateInputs& in, int n_s, int n_f,
     for (int a = 0; a < n_s; ++a) {
       const double s = s_lo + (s_max - s_lo) * a / std::max(1, n_s - 1);
       for (int b = 0; b < n_f; ++b) {
-        const double f_z = in.f_z_min_mm * std::pow(f_hi / in.f_z_min_mm, static_cast<double>(b) / std::max(1, n_f - 1));
+        const double f_z =
+            in.f_z_min_mm * std::pow(f_hi / in.f_z_min_mm, static_cast<double>(b) / std::max(1, n_f - 1));
         for (int c = 0; c < n_c; ++c) {
           const double c_pc = in.c_pc_max * c / std::max(1, n_c - 1);
           SurrogateResult e = EvaluateSurrogate(in, r, s, f_z, c_pc);
@@ -128,23 +129,50 @@ SurrogateResult SurrogateBruteForce(const SurrogateInputs& in, int n_s, int n_f,
 }
 
 nlohmann::json SurrogateInputs::ToJson() const {
-  return {{"area_mm2", area_mm2}, {"width_mm", width_mm}, {"t_link_min", t_link_min},
-          {"finish_depth_mm", finish_depth_mm}, {"cutting_speed_m_per_min", cutting_speed_m_per_min},
-          {"n_max_rpm", n_max_rpm}, {"flutes", flutes}, {"youngs_modulus_n_per_mm2", youngs_modulus_n_per_mm2},
-          {"k_n", k_n}, {"rho_cc_min_mm", std::isfinite(rho_cc_min_mm) ? nlohmann::json(rho_cc_min_mm) : nullptr},
-          {"kappa_cvx_max_per_mm", kappa_cvx_max_per_mm}, {"h_tol_mm", h_tol_mm}, {"t_form_mm", t_form_mm},
-          {"e_sys_mm", e_sys_mm}, {"e_rand_mm", e_rand_mm}, {"similarity", similarity}, {"w_e", w_e},
-          {"w_t", w_t}, {"t_ref_min", t_ref_min}, {"f_z_min_mm", f_z_min_mm}, {"f_z_max_mm", f_z_max_mm},
-          {"s_min_mm", s_min_mm}, {"c_pc_max", c_pc_max}, {"gouge_margin", gouge_margin},
+  return {{"area_mm2", area_mm2},
+          {"width_mm", width_mm},
+          {"t_link_min", t_link_min},
+          {"finish_depth_mm", finish_depth_mm},
+          {"cutting_speed_m_per_min", cutting_speed_m_per_min},
+          {"n_max_rpm", n_max_rpm},
+          {"flutes", flutes},
+          {"youngs_modulus_n_per_mm2", youngs_modulus_n_per_mm2},
+          {"k_n", k_n},
+          {"rho_cc_min_mm", std::isfinite(rho_cc_min_mm) ? nlohmann::json(rho_cc_min_mm) : nullptr},
+          {"kappa_cvx_max_per_mm", kappa_cvx_max_per_mm},
+          {"h_tol_mm", h_tol_mm},
+          {"t_form_mm", t_form_mm},
+          {"e_sys_mm", e_sys_mm},
+          {"e_rand_mm", e_rand_mm},
+          {"similarity", similarity},
+          {"w_e", w_e},
+          {"w_t", w_t},
+          {"t_ref_min", t_ref_min},
+          {"f_z_min_mm", f_z_min_mm},
+          {"f_z_max_mm", f_z_max_mm},
+          {"s_min_mm", s_min_mm},
+          {"c_pc_max", c_pc_max},
+          {"gouge_margin", gouge_margin},
           {"max_feed_mm_per_min", std::isfinite(max_feed_mm_per_min) ? nlohmann::json(max_feed_mm_per_min) : nullptr},
-          {"deflection_scale", deflection_scale}, {"scallop_offset_mm", scallop_offset_mm}, {"tool_radii_mm", tool_radii_mm}};
+          {"deflection_scale", deflection_scale},
+          {"scallop_offset_mm", scallop_offset_mm},
+          {"tool_radii_mm", tool_radii_mm}};
 }
 
 nlohmann::json SurrogateResult::ToJson() const {
-  return {{"r_mm", r}, {"s_mm", s}, {"f_z_mm", f_z}, {"c_pc", c_pc}, {"n_rpm", n_rpm},
-          {"v_f_mm_per_min", v_f_mm_per_min}, {"time_min", time_min}, {"deflection_mm", deflection_mm},
-          {"scallop_mm", scallop_mm}, {"e_pred_mm", e_pred}, {"J", J},
-          {"fitness", std::isfinite(fitness) ? nlohmann::json(fitness) : nullptr}, {"tool_index", tool_index},
+  return {{"r_mm", r},
+          {"s_mm", s},
+          {"f_z_mm", f_z},
+          {"c_pc", c_pc},
+          {"n_rpm", n_rpm},
+          {"v_f_mm_per_min", v_f_mm_per_min},
+          {"time_min", time_min},
+          {"deflection_mm", deflection_mm},
+          {"scallop_mm", scallop_mm},
+          {"e_pred_mm", e_pred},
+          {"J", J},
+          {"fitness", std::isfinite(fitness) ? nlohmann::json(fitness) : nullptr},
+          {"tool_index", tool_index},
           {"generations", generations}};
 }
 

@@ -16,13 +16,13 @@ namespace formloop::planning {
 
 // The §4.3 surrogate's constants.
 struct SurrogateInputs {
-  double area_mm2 = 10000;       // S
-  double width_mm = 100;         // W_y: extent across the passes
+  double area_mm2 = 10000;  // S
+  double width_mm = 100;    // W_y: extent across the passes
   double t_link_min = 0.02;
   double finish_depth_mm = 0.3;  // a_p,fin
   double cutting_speed_m_per_min = 200;
   double n_max_rpm = 18000;
-  int flutes = 2;                // z
+  int flutes = 2;  // z
   double youngs_modulus_n_per_mm2 = 6e5;
   double k_n = 2500;
   double rho_cc_min_mm = 5;
@@ -31,7 +31,7 @@ struct SurrogateInputs {
   double t_form_mm = 0.050;
   double e_sys_mm = 0.040;
   double e_rand_mm = 0.006;
-  double similarity = 0.88;      // A
+  double similarity = 0.88;  // A
   double w_e = 0.7, w_t = 0.3;
   double t_ref_min = 10;
   double f_z_min_mm = 0.02, f_z_max_mm = 0.15;

@@ -167,10 +167,10 @@ Result<CheckResult> FullCheck(const SimCorrectionInput& in, const Problem& pb, c
   // bound the GA decodes with (r ≤ margin · ρ_cc,min; the margin covers what the 1 mm grid misses).
   const double bound_mm = in.ga.gouge_margin * pb.rho_cc_min_mm;
   if (path.lifted_points > 0 || r > bound_mm) {
-    const std::string lifted = path.lifted_points > 0 ? std::to_string(path.lifted_points) +
-                                                            " CL points lifted (largest lift " +
-                                                            FormatFixed(path.max_lift_mm, 3) + " mm), region left uncut"
-                                                      : "no CL point lifted, but inside the gouge margin";
+    const std::string lifted = path.lifted_points > 0
+                                   ? std::to_string(path.lifted_points) + " CL points lifted (largest lift " +
+                                         FormatFixed(path.max_lift_mm, 3) + " mm), region left uncut"
+                                   : "no CL point lifted, but inside the gouge margin";
     out.defects.push_back({"gouge",
                            lifted + ": tool r " + FormatFixed(r, 2) + " mm, gouge-free bound " +
                                FormatFixed(in.ga.gouge_margin, 2) + " x smallest concave radius " +
@@ -187,9 +187,10 @@ Result<CheckResult> FullCheck(const SimCorrectionInput& in, const Problem& pb, c
   const double h_tol = HTolMm(in);
   const double scallop_mm = std::max(options.scallop_um / 1000, path.lifted_points > 0 ? 0.0 : out.peak_scallop_mm);
   if (scallop_mm > h_tol) {
-    out.defects.push_back({"scallop",
-                           "scallop " + FormatFixed(scallop_mm * 1000, 2) + " um > h_tol " + FormatFixed(h_tol * 1000, 2) + " um",
-                           scallop_mm, h_tol});
+    out.defects.push_back(
+        {"scallop",
+         "scallop " + FormatFixed(scallop_mm * 1000, 2) + " um > h_tol " + FormatFixed(h_tol * 1000, 2) + " um",
+         scallop_mm, h_tol});
   }
   if (out.e_pred_mm > in.tolerance_mm) {
     out.defects.push_back({"form_error",
@@ -324,7 +325,8 @@ SurrogateInputs InitialSurrogate(const SimCorrectionInput& in, const Problem& pb
   SurrogateInputs sur = SurrogateFor(in, pb, radii);
   const CasePlanTerms cp = CaseTerms(in, pb);
   sur.e_sys_mm = before.peak_sys_mm;
-  if (pb.has_deflection) sur.deflection_scale = before.peak_deflection_mm / SurrogateDeflectionMm(sur, cp.r, cp.s, cp.f_z);
+  if (pb.has_deflection)
+    sur.deflection_scale = before.peak_deflection_mm / SurrogateDeflectionMm(sur, cp.r, cp.s, cp.f_z);
   sur.t_ref_min = EvaluateSurrogate(sur, cp.r, cp.s, cp.f_z, 0).time_min;
   return sur;
 }
@@ -422,8 +424,9 @@ Result<SimCorrectionResult> RunSimulationCorrection(const SimCorrectionInput& in
     last_surrogate = best;
   }
   if (res.why_not.empty()) {
-    res.why_not = "after " + std::to_string(res.rounds) + " rounds the simulated plan still has: " +
-                  DefectKinds(remaining) + " (the GA's best surrogate e_pred " + FormatFixed(last_surrogate.e_pred * 1000, 2) +
+    res.why_not = "after " + std::to_string(res.rounds) +
+                  " rounds the simulated plan still has: " + DefectKinds(remaining) +
+                  " (the GA's best surrogate e_pred " + FormatFixed(last_surrogate.e_pred * 1000, 2) +
                   " um, tolerance " + FormatFixed(input.tolerance_mm * 1000, 2) + " um) -> escalate to a planner";
   }
   return res;
@@ -436,19 +439,34 @@ nlohmann::json Defect::ToJson() const {
 }
 
 nlohmann::json PlanGenes::ToJson() const {
-  return {{"tool_number", tool_number},       {"tool_radius_mm", tool_radius_mm},
-          {"step_over_mm", step_over_mm},     {"scallop_um", scallop_um},
-          {"feed_per_tooth_mm", feed_per_tooth_mm}, {"feed_mm_per_min", feed_mm_per_min},
-          {"spindle_rpm", spindle_rpm},       {"precompensation_scale", precompensation_scale}};
+  return {{"tool_number", tool_number},
+          {"tool_radius_mm", tool_radius_mm},
+          {"step_over_mm", step_over_mm},
+          {"scallop_um", scallop_um},
+          {"feed_per_tooth_mm", feed_per_tooth_mm},
+          {"feed_mm_per_min", feed_mm_per_min},
+          {"spindle_rpm", spindle_rpm},
+          {"precompensation_scale", precompensation_scale}};
 }
 
 nlohmann::json GaOptions::ToJson() const {
-  return {{"population", population}, {"generations", generations}, {"elites", elites},
-          {"max_rounds", max_rounds}, {"w_e", w_e}, {"w_t", w_t}, {"f_z_min_mm", f_z_min_mm},
-          {"f_z_max_mm", f_z_max_mm}, {"cutting_speed_m_per_min", cutting_speed_m_per_min},
-          {"n_max_rpm", n_max_rpm}, {"finish_depth_mm", finish_depth_mm}, {"t_link_min", t_link_min},
-          {"youngs_modulus_n_per_mm2", youngs_modulus_n_per_mm2}, {"k_n", k_n}, {"s_min_mm", s_min_mm},
-          {"c_pc_max", c_pc_max}, {"gouge_margin", gouge_margin}};
+  return {{"population", population},
+          {"generations", generations},
+          {"elites", elites},
+          {"max_rounds", max_rounds},
+          {"w_e", w_e},
+          {"w_t", w_t},
+          {"f_z_min_mm", f_z_min_mm},
+          {"f_z_max_mm", f_z_max_mm},
+          {"cutting_speed_m_per_min", cutting_speed_m_per_min},
+          {"n_max_rpm", n_max_rpm},
+          {"finish_depth_mm", finish_depth_mm},
+          {"t_link_min", t_link_min},
+          {"youngs_modulus_n_per_mm2", youngs_modulus_n_per_mm2},
+          {"k_n", k_n},
+          {"s_min_mm", s_min_mm},
+          {"c_pc_max", c_pc_max},
+          {"gouge_margin", gouge_margin}};
 }
 
 nlohmann::json SimCorrectionResult::ToJson() const {
@@ -462,10 +480,14 @@ nlohmann::json SimCorrectionResult::ToJson() const {
           {"defects_before", list(defects_before)},
           {"defects_after", list(defects_after)},
           {"chosen", has_plan ? chosen.ToJson() : nlohmann::json(nullptr)},
-          {"plan", !has_plan ? nlohmann::json(nullptr) : nlohmann::json{{"tool_number", plan.tool.number}, {"tool_radius_mm", plan.tool.radius_mm},
-                    {"scallop_um", plan.scallop_um}, {"feed_mm_per_min", plan.feed_mm_per_min},
-                    {"spindle_rpm", plan.spindle_rpm}, {"max_point_spacing_mm", plan.max_point_spacing_mm},
-                    {"raster_angle_deg", plan.raster_angle_deg}}},
+          {"plan", !has_plan ? nlohmann::json(nullptr)
+                             : nlohmann::json{{"tool_number", plan.tool.number},
+                                              {"tool_radius_mm", plan.tool.radius_mm},
+                                              {"scallop_um", plan.scallop_um},
+                                              {"feed_mm_per_min", plan.feed_mm_per_min},
+                                              {"spindle_rpm", plan.spindle_rpm},
+                                              {"max_point_spacing_mm", plan.max_point_spacing_mm},
+                                              {"raster_angle_deg", plan.raster_angle_deg}}},
           {"predicted_form_error_before_um", predicted_form_error_before_um},
           {"predicted_form_error_after_um", predicted_form_error_after_um},
           {"precompensation_scale", precompensation_scale},

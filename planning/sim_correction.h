@@ -75,10 +75,10 @@ struct GaOptions {
   double finish_depth_mm = 0.3;          // a_p,fin
   double t_link_min = 0.02;              // per pass
   double youngs_modulus_n_per_mm2 = 6e5;
-  double k_n = 2500;                     // N·mm^-1.75
+  double k_n = 2500;  // N·mm^-1.75
   double s_min_mm = 0.05;
   double c_pc_max = 1.2;
-  double gouge_margin = 0.9;             // gouge-free: r ≤ margin · ρ_cc,min
+  double gouge_margin = 0.9;  // gouge-free: r ≤ margin · ρ_cc,min
   nlohmann::json ToJson() const;
 };
 
@@ -87,13 +87,13 @@ struct SimCorrectionInput {
   nc::ToolpathOptions case_plan;                   // the retrieved case's plan as given
   std::vector<nc::BallEndTool> tools;              // the machine's magazine
   int flutes = 2;
-  sim::Model model;                                // the case's learned model (may be empty)
-  double similarity = 0.9;                         // A of the retrieval
-  double tolerance_mm = 0.010;                     // α (t_form)
-  double scallop_limit_mm = 0.0;                   // h_tol; 0 → 0.3 · tolerance
-  double random_um = 2.0;                          // e_rand = 2σ of the random error
+  sim::Model model;               // the case's learned model (may be empty)
+  double similarity = 0.9;        // A of the retrieval
+  double tolerance_mm = 0.010;    // α (t_form)
+  double scallop_limit_mm = 0.0;  // h_tol; 0 → 0.3 · tolerance
+  double random_um = 2.0;         // e_rand = 2σ of the random error
   nc::MachineLimits limits;
-  metrology::ProbingPlan probing_plan;             // where the predicted form error is evaluated
+  metrology::ProbingPlan probing_plan;  // where the predicted form error is evaluated
   std::uint64_t seed = 1;
   GaOptions ga;
 };

@@ -37,8 +37,8 @@ struct SurfaceDerivatives {
 };
 
 struct PrincipalCurvatures {
-  double k1 = 0, k2 = 0;        // 1/mm, k1 >= k2, sign as in the header comment
-  Eigen::Vector3d dir1, dir2;   // unit principal directions in 3-D (tangent to the surface)
+  double k1 = 0, k2 = 0;       // 1/mm, k1 >= k2, sign as in the header comment
+  Eigen::Vector3d dir1, dir2;  // unit principal directions in 3-D (tangent to the surface)
   double mean() const { return 0.5 * (k1 + k2); }
   double gaussian() const { return k1 * k2; }
 };
@@ -50,7 +50,7 @@ PrincipalCurvatures CurvaturesFromDerivatives(const SurfaceDerivatives& d);
 class AnalyticSurface {
  public:
   virtual ~AnalyticSurface() = default;
-  virtual std::string name() const = 0;          // stable identifier, e.g. "saddle"
+  virtual std::string name() const = 0;         // stable identifier, e.g. "saddle"
   virtual std::string description() const = 0;  // formula and parameters, one line
   virtual ParamDomain domain() const = 0;
   // True when u = x and v = y (z = f(x, y)).

@@ -30,7 +30,7 @@ std::string OcctMessage(const Standard_Failure& failure) {
 }
 
 // Maps the knots of one direction linearly so that [first knot, last knot] becomes [lo, hi].
-void RemapKnots(const Handle(Geom_BSplineSurface)& geom, bool u_direction, double lo, double hi) {
+void RemapKnots(const Handle(Geom_BSplineSurface) & geom, bool u_direction, double lo, double hi) {
   TColStd_Array1OfReal knots(1, u_direction ? geom->NbUKnots() : geom->NbVKnots());
   if (u_direction) {
     geom->UKnots(knots);
@@ -155,8 +155,8 @@ Status GridFitOptions::Validate() const {
   }
   if (degree_max < degree_min || degree_max > 25) {
     return Status::BadInput(Where{.field = "degree_max"},
-                            "degree_max " + std::to_string(degree_max) + " must lie in [degree_min = " +
-                                std::to_string(degree_min) + ", 25]",
+                            "degree_max " + std::to_string(degree_max) +
+                                " must lie in [degree_min = " + std::to_string(degree_min) + ", 25]",
                             "raise degree_max or lower degree_min");
   }
   if (!(tolerance_mm > 0) || !std::isfinite(tolerance_mm)) {

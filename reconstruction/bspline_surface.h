@@ -29,7 +29,7 @@ class BSplineSurface {
   explicit BSplineSurface(Handle(Geom_BSplineSurface) geom);
 
   bool valid() const { return !geom_.IsNull(); }
-  const Handle(Geom_BSplineSurface)& geom() const { return geom_; }
+  const Handle(Geom_BSplineSurface) & geom() const { return geom_; }
   ParamDomain domain() const;
   Eigen::Vector3d Point(double u, double v) const;
   // Unit normal, oriented like the source surface (n_z > 0 for the reference surfaces).
@@ -69,7 +69,7 @@ PointSet SampleGridPoints(const AnalyticSurface& surface, int nu, int nv);
 inline constexpr int kMaxInterpolationSamples = 72;
 
 struct GridFitOptions {
-  int degree_min = 3;          // cubic is the CAM norm; OpenCASCADE may raise it up to degree_max
+  int degree_min = 3;  // cubic is the CAM norm; OpenCASCADE may raise it up to degree_max
   int degree_max = 5;
   double tolerance_mm = 1e-4;  // approximation tolerance handed to GeomAPI_PointsToBSplineSurface
   bool interpolate = false;    // true: pass through every sample (at most kMaxInterpolationSamples a side)
@@ -77,11 +77,11 @@ struct GridFitOptions {
 };
 
 struct FitReport {
-  std::string method;               // e.g. "occt-grid-approximation"
+  std::string method;  // e.g. "occt-grid-approximation"
   int n_points = 0;
   // What rms_mm/max_mm measure; FitGrid: the parametric residual |Q(u_i, v_j) - sample_ij|.
   std::string residual = "parametric: |Q(u_i, v_j) - sample_ij| at the grid nodes (an upper bound of the distance)";
-  double rms_mm = 0;                // residual at the fitted samples
+  double rms_mm = 0;  // residual at the fitted samples
   double max_mm = 0;
   Eigen::Vector3d max_at = Eigen::Vector3d::Zero();  // sample where the max residual occurs
   // Filled when an analytic truth is known: error at check points not used in the fit.

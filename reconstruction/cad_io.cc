@@ -38,7 +38,7 @@ std::string Lower(std::string s) {
   return s;
 }
 
-std::string Trimmed(const Handle(TCollection_HAsciiString)& text) {
+std::string Trimmed(const Handle(TCollection_HAsciiString) & text) {
   if (text.IsNull()) return "";
   std::string s = text->ToCString();
   const auto not_space = [](unsigned char c) { return !std::isspace(c); };
@@ -145,9 +145,9 @@ Result<LoadedCad> Load(const std::filesystem::path& path) {
       cad.reader = std::make_unique<IGESControl_Reader>();
     }
     if (cad.reader->ReadFile(path.string().c_str()) != IFSelect_RetDone) {
-      return Status::BadInput(Where{.file = path.string()}, "OpenCASCADE could not read this as a " + kind + " file",
-                              format == CadFormat::kStep ? "export the part as STEP AP203/AP214/AP242"
-                                                         : "export the part as IGES 5.3");
+      return Status::BadInput(
+          Where{.file = path.string()}, "OpenCASCADE could not read this as a " + kind + " file",
+          format == CadFormat::kStep ? "export the part as STEP AP203/AP214/AP242" : "export the part as IGES 5.3");
     }
     if (format == CadFormat::kIges) FL_RETURN_IF_ERROR(CheckIgesUnit(path, *cad.reader));
     cad.reader->TransferRoots();
@@ -168,7 +168,8 @@ Result<LoadedCad> Load(const std::filesystem::path& path) {
     }
     cad.file_unit = FileUnit(cad);
   } catch (const Standard_Failure& failure) {
-    return Status::BadInput(Where{.file = path.string()}, "OpenCASCADE failed while reading: " + occt::Message(failure));
+    return Status::BadInput(Where{.file = path.string()},
+                            "OpenCASCADE failed while reading: " + occt::Message(failure));
   }
   return cad;
 }
@@ -177,8 +178,8 @@ std::string FaceList(const std::vector<CadFaceInfo>& infos) {
   std::string list;
   for (const CadFaceInfo& info : infos) {
     if (!list.empty()) list += ", ";
-    list += std::to_string(info.index) + (info.name.empty() ? "" : " '" + info.name + "'") + " (" +
-            info.surface_type + ")";
+    list +=
+        std::to_string(info.index) + (info.name.empty() ? "" : " '" + info.name + "'") + " (" + info.surface_type + ")";
     if (list.size() > 400) {
       list += ", ...";
       break;
@@ -211,8 +212,8 @@ Result<int> ChooseFace(const std::filesystem::path& path, const std::vector<CadF
     }
     if (selector.index >= 0 && selector.index != matches.front()) {
       return Status::BadInput(Where{.file = path.string(), .field = "face"},
-                              "face '" + selector.name + "' has index " + std::to_string(matches.front()) +
-                                  ", not " + std::to_string(selector.index),
+                              "face '" + selector.name + "' has index " + std::to_string(matches.front()) + ", not " +
+                                  std::to_string(selector.index),
                               "give either the name or the index");
     }
     return matches.front();
@@ -259,7 +260,8 @@ Result<CadFace> MakeCadFace(const std::filesystem::path& path, const LoadedCad& 
   CadFace result;
   result.info = cad.infos[static_cast<std::size_t>(index)];
   result.file_unit = cad.file_unit;
-  const std::string which = "face " + std::to_string(index) + (result.info.name.empty() ? "" : " '" + result.info.name + "'");
+  const std::string which =
+      "face " + std::to_string(index) + (result.info.name.empty() ? "" : " '" + result.info.name + "'");
   try {
     TopLoc_Location location;
     if (BRep_Tool::Surface(face, location).IsNull()) {

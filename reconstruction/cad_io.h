@@ -41,17 +41,17 @@ Result<CadFormat> CadFormatFromPath(const std::filesystem::path& path);
 bool IsCadPath(const std::filesystem::path& path);
 
 struct CadFaceInfo {
-  int index = 0;            // 0-based, TopExp_Explorer order
-  std::string name;         // "" when the file gives none
-  std::string surface_type; // OpenCASCADE type of the underlying surface, e.g. "Geom_Plane"
+  int index = 0;             // 0-based, TopExp_Explorer order
+  std::string name;          // "" when the file gives none
+  std::string surface_type;  // OpenCASCADE type of the underlying surface, e.g. "Geom_Plane"
 };
 
 struct CadFace {
-  BSplineSurface surface;   // in mm, with its trim (null when the face is its whole patch and alone in the file)
-  TopoDS_Face face;         // the face as read (after NURBS conversion), in mm
+  BSplineSurface surface;  // in mm, with its trim (null when the face is its whole patch and alone in the file)
+  TopoDS_Face face;        // the face as read (after NURBS conversion), in mm
   CadFaceInfo info;
-  std::string file_unit;    // the file's length unit: "mm", "inch", "m", ... (Q itself is always in mm)
-  bool converted = false;   // the face's surface was converted to a B-spline
+  std::string file_unit;   // the file's length unit: "mm", "inch", "m", ... (Q itself is always in mm)
+  bool converted = false;  // the face's surface was converted to a B-spline
 };
 
 // Selects a face: by name when `name` is not empty, else by `index`. With neither (index < 0 and

@@ -39,22 +39,22 @@ struct RegionFitOptions {
   double boundary_spacing_mm = 0.25;  // between the boundary points projected onto Q for the trim
   double sewing_tolerance_mm = 1e-3;  // faces within this of each other share an edge (not a free boundary)
   int check_points_per_face = 2000;
-  unsigned long long seed = 1;        // of the check points
-  double max_cad_deviation_mm = 0;    // refuse a larger deviation from the faces (0: report only)
+  unsigned long long seed = 1;      // of the check points
+  double max_cad_deviation_mm = 0;  // refuse a larger deviation from the faces (0: report only)
   ScatteredFitOptions fit;
   Status Validate() const;
 };
 
 struct RegionFit {
-  BSplineSurface q;   // with the region's trim
-  FitReport report;   // the scattered fit's report; details gain "region" (the figures below)
+  BSplineSurface q;  // with the region's trim
+  FitReport report;  // the scattered fit's report; details gain "region" (the figures below)
   int faces = 0;
   int samples = 0;
-  int loops = 0;      // boundary loops of the region (1 + its holes)
+  int loops = 0;  // boundary loops of the region (1 + its holes)
   int check_points = 0;
   double cad_deviation_rms_mm = 0, cad_deviation_max_mm = 0;
   Eigen::Vector3d cad_deviation_max_at = Eigen::Vector3d::Zero();
-  int cad_deviation_max_face = -1;    // CadFaceInfo::index of the face where the max occurs
+  int cad_deviation_max_face = -1;  // CadFaceInfo::index of the face where the max occurs
 };
 
 // Needs at least two faces (one face is its own Q: cad_io.h). BadInput for invalid options or faces;

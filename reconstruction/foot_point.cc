@@ -21,14 +21,14 @@
 #include <sstream>
 #include <string>
 
+#include <pcl/kdtree/kdtree_flann.h>
+#include <pcl/point_cloud.h>
+#include <pcl/point_types.h>
 #include <BSplSLib_Cache.hxx>
 #include <GeomAdaptor_Surface.hxx>
 #include <Geom_BSplineSurface.hxx>
 #include <gp_Pnt.hxx>
 #include <gp_Vec.hxx>
-#include <pcl/kdtree/kdtree_flann.h>
-#include <pcl/point_cloud.h>
-#include <pcl/point_types.h>
 
 #include <Eigen/Dense>
 
@@ -71,7 +71,6 @@ Vector3d ToEigen(const gp_XYZ& p) { return {p.X(), p.Y(), p.Z()}; }
 // ---------------------------------------------------------------------------------------------
 // Evaluators: one per call (they may cache), with SurfaceDerivatives D2(u, v).
 
-
 // OpenCASCADE's D2 outputs (argument order p, S_u, S_v, S_uu, S_vv, S_uv) as SurfaceDerivatives.
 SurfaceDerivatives FromOcct(const gp_Pnt& p, const gp_Vec& su, const gp_Vec& sv, const gp_Vec& suu, const gp_Vec& svv,
                             const gp_Vec& suv) {
@@ -96,7 +95,7 @@ class AnalyticEvaluator {
 
 class BSplineEvaluator {
  public:
-  explicit BSplineEvaluator(const Handle(Geom_BSplineSurface)& geom) : adaptor_(geom) {}
+  explicit BSplineEvaluator(const Handle(Geom_BSplineSurface) & geom) : adaptor_(geom) {}
   SurfaceDerivatives D2(double u, double v) {
     gp_Pnt p;
     gp_Vec su, sv, suu, svv, suv;
@@ -114,12 +113,12 @@ class BSplineEvaluator {
 class SpanCaches {
  public:
   // Bytes the caches of geom would take (poles and weights of every span, plus per-object overhead).
-  static double EstimateBytes(const Handle(Geom_BSplineSurface)& geom) {
+  static double EstimateBytes(const Handle(Geom_BSplineSurface) & geom) {
     const double spans = static_cast<double>(geom->NbUKnots() - 1) * (geom->NbVKnots() - 1);
     return spans * ((geom->UDegree() + 1) * (geom->VDegree() + 1) * 4 * sizeof(double) + 256);
   }
 
-  explicit SpanCaches(const Handle(Geom_BSplineSurface)& geom) {
+  explicit SpanCaches(const Handle(Geom_BSplineSurface) & geom) {
     for (int i = 1; i <= geom->NbUKnots(); ++i) u_knots_.push_back(geom->UKnot(i));
     for (int j = 1; j <= geom->NbVKnots(); ++j) v_knots_.push_back(geom->VKnot(j));
     const std::size_t nu = u_knots_.size() - 1, nv = v_knots_.size() - 1;
@@ -329,7 +328,7 @@ double GridParam(double lo, double hi, int i, int n) {
   return lo + (hi - lo) * static_cast<double>(i) / (n - 1);
 }
 
-ParamDomain DomainOf(const Handle(Geom_BSplineSurface)& geom) {
+ParamDomain DomainOf(const Handle(Geom_BSplineSurface) & geom) {
   ParamDomain d;
   geom->Bounds(d.u_min, d.u_max, d.v_min, d.v_max);
   return d;

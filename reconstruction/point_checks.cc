@@ -10,7 +10,8 @@
 namespace formloop::recon {
 
 std::string PointText(const Eigen::Vector3d& p) {
-  return "(" + FormatSignificant(p.x(), 10) + ", " + FormatSignificant(p.y(), 10) + ", " + FormatSignificant(p.z(), 10) + ") mm";
+  return "(" + FormatSignificant(p.x(), 10) + ", " + FormatSignificant(p.y(), 10) + ", " +
+         FormatSignificant(p.z(), 10) + ") mm";
 }
 
 Status CheckFiniteAndDistinct(const std::vector<Eigen::Vector3d>& points) {

@@ -68,8 +68,9 @@ Result<QuadricCentreForm> Quadric::CentreForm() const {
   const double g_scale = o.x() * o.x() + std::abs(a) * o.y() * o.y() + std::abs(b) * o.z() * o.z() + std::abs(f);
   if (!(std::abs(g) > 256 * kEps * g_scale)) {
     return Status::BadInput(Where{.field = "quadric"},
-                            "g = x0² + a y0² + b z0² − f = " + Num(g) + " mm² is zero to rounding: the surface is a cone (apex " +
-                                PointText(o) + ") with no semi-axes",
+                            "g = x0² + a y0² + b z0² − f = " + Num(g) +
+                                " mm² is zero to rounding: the surface is a cone (apex " + PointText(o) +
+                                ") with no semi-axes",
                             "use the general form a..f");
   }
   form.sign_flipped = g < 0;

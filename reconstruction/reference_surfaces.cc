@@ -252,8 +252,8 @@ class TiltedParaboloid final : public AnalyticSurface {
   std::string name() const override { return "tilted_paraboloid"; }
   std::string description() const override {
     return "tilted paraboloid S(u,v) = Rx(theta) (u, v, (u^2 + v^2)/(2R)) + t, R = " + Num(r_) +
-           " mm, theta = " + Num(theta_deg_) + " deg, t = (" + Num(t_.x()) + ", " + Num(t_.y()) + ", " +
-           Num(t_.z()) + ") mm; " + DomainText(domain(), "u", "v");
+           " mm, theta = " + Num(theta_deg_) + " deg, t = (" + Num(t_.x()) + ", " + Num(t_.y()) + ", " + Num(t_.z()) +
+           ") mm; " + DomainText(domain(), "u", "v");
   }
   ParamDomain domain() const override { return {-50, 50, -40, 40}; }
   bool is_graph() const override { return false; }

@@ -8,7 +8,6 @@
 
 #include <APIHeaderSection_MakeHeader.hxx>
 #include <BRepBuilderAPI_MakeFace.hxx>
-#include <TopoDS_Face.hxx>
 #include <IFSelect_ReturnStatus.hxx>
 #include <Interface_InterfaceModel.hxx>
 #include <Interface_Static.hxx>
@@ -20,6 +19,7 @@
 #include <StepRepr_RepresentationItem.hxx>
 #include <StepShape_AdvancedFace.hxx>
 #include <TCollection_HAsciiString.hxx>
+#include <TopoDS_Face.hxx>
 
 #include "core/atomic_file.h"
 #include "reconstruction/bspline_surface.h"

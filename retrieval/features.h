@@ -134,10 +134,10 @@ struct PartFeatures {
   Eigen::VectorXd descriptors;  // kDescriptorCount entries, the table above
   // Canonical concept names per facet.
   std::string shape, material, tolerance_class, finish_class, machine_tool_class;
-  double size_mm = 0;           // L = sqrt(area)
-  bool normal_flipped = false;  // the surface's normal pointed to −z and was flipped
-  int nodes_skipped = 0;        // grid nodes/midpoints with an undefined normal (degenerate), left out
-  int samples_outside_trim = 0; // grid nodes/midpoints outside Q's trim, left out
+  double size_mm = 0;            // L = sqrt(area)
+  bool normal_flipped = false;   // the surface's normal pointed to −z and was flipped
+  int nodes_skipped = 0;         // grid nodes/midpoints with an undefined normal (degenerate), left out
+  int samples_outside_trim = 0;  // grid nodes/midpoints outside Q's trim, left out
   // Facet name → concept, ready for CaseConcepts::categorical.
   std::map<std::string, std::string> Concepts() const;
   nlohmann::json ToJson() const;

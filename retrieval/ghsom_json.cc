@@ -37,7 +37,9 @@ Status Bad(const std::string& field, const std::string& what, const std::string&
 // Typed reading of a stored map through core's JsonFields; messages name the key path ("maps[2].rows").
 constexpr const char* kSource = "ghsom";
 
-JsonFields FieldsAt(const json& j, const std::string& path) { return JsonFields(j, kSource, path.empty() ? "" : path + "."); }
+JsonFields FieldsAt(const json& j, const std::string& path) {
+  return JsonFields(j, kSource, path.empty() ? "" : path + ".");
+}
 
 std::string Join(const std::string& path, const char* key) { return path.empty() ? key : path + "." + key; }
 
@@ -62,9 +64,9 @@ Status ReadInt(const json& j, const std::string& path, const char* key, int* out
 
 Status ReadVector(const json& v, const std::string& path, Eigen::Index expected, Eigen::VectorXd* out) {
   std::vector<double> values;
-  FL_RETURN_IF_ERROR(ReadNumberArray(v, kSource, path, &values,
-                                     expected >= 0 ? std::optional<std::size_t>(static_cast<std::size_t>(expected))
-                                                   : std::nullopt));
+  FL_RETURN_IF_ERROR(
+      ReadNumberArray(v, kSource, path, &values,
+                      expected >= 0 ? std::optional<std::size_t>(static_cast<std::size_t>(expected)) : std::nullopt));
   *out = Eigen::Map<const Eigen::VectorXd>(values.data(), static_cast<Eigen::Index>(values.size()));
   return Status::Ok();
 }

@@ -37,9 +37,9 @@ Result<Eigen::MatrixXd> DescriptorMatrix(const std::vector<const kb::CaseRecord*
   for (size_t i = 0; i < cases.size(); ++i) {
     const auto& d = *cases[i]->descriptor;
     if (static_cast<int>(d.size()) != kDescriptorCount) {
-      return Status::BadInput(Where{.field = "cases." + cases[i]->uid + ".descriptor"},
-                              "has " + std::to_string(d.size()) + " values, expected " +
-                                  std::to_string(kDescriptorCount));
+      return Status::BadInput(
+          Where{.field = "cases." + cases[i]->uid + ".descriptor"},
+          "has " + std::to_string(d.size()) + " values, expected " + std::to_string(kDescriptorCount));
     }
     for (int k = 0; k < kDescriptorCount; ++k) x(static_cast<Eigen::Index>(i), k) = d[static_cast<size_t>(k)];
   }
@@ -103,7 +103,8 @@ Eigen::MatrixXd DescriptorTransform::ApplyRows(const Eigen::MatrixXd& x) const {
 }
 
 json DescriptorTransform::ToJson() const {
-  return {{"kind", "asinh(d / eps) for eps > 0, d otherwise"}, {"eps", std::vector<double>(eps.data(), eps.data() + eps.size())}};
+  return {{"kind", "asinh(d / eps) for eps > 0, d otherwise"},
+          {"eps", std::vector<double>(eps.data(), eps.data() + eps.size())}};
 }
 
 Result<DescriptorTransform> DescriptorTransform::FromJson(const json& j, int dimension) {
@@ -192,7 +193,8 @@ Result<Eigen::VectorXd> InputWeightsFromRules(const std::vector<kb::Rule>& rules
       w(k) = v.get<double>();
     }
   }
-  if (!(w.sum() > 0)) return Status::BadInput(Where{.field = "rules.retrieval.descriptors"}, "every descriptor excluded");
+  if (!(w.sum() > 0))
+    return Status::BadInput(Where{.field = "rules.retrieval.descriptors"}, "every descriptor excluded");
   return w;
 }
 
@@ -222,16 +224,16 @@ json RetrievalResult::ToJson() const {
                            {"similarity", c.similarity.overall},
                            {"facets", facets}});
   }
-  return {{"query", {{"geometric_chain", query_chain}, {"leaf", query_chain.empty() ? "" : query_chain.back()},
-                     {"refinement_radius", r_leaf}}},
-          {"breadth_used", breadth_used},
-          {"candidates_scored", candidates},
-          {"route",
-           {{"name", route},
-            {"similarity", best_similarity},
-            {"flag_engineer", route == "default"},
-            {"rule", route_rule}}},
-          {"ranked", ranked_json}};
+  return {
+      {"query",
+       {{"geometric_chain", query_chain},
+        {"leaf", query_chain.empty() ? "" : query_chain.back()},
+        {"refinement_radius", r_leaf}}},
+      {"breadth_used", breadth_used},
+      {"candidates_scored", candidates},
+      {"route",
+       {{"name", route}, {"similarity", best_similarity}, {"flag_engineer", route == "default"}, {"rule", route_rule}}},
+      {"ranked", ranked_json}};
 }
 
 Result<RetrievalModel> RetrievalModel::Assemble(const std::vector<kb::CaseRecord>& records,
@@ -267,8 +269,8 @@ Result<RetrievalModel> RetrievalModel::Assemble(const std::vector<kb::CaseRecord
     return Status::BadInput(Where{.field = "rules.retrieval.refinement.radius_scale"}, "must be a number > 0");
   }
   for (const auto& [facet, tax] : by_facet) {
-    m.weights_[facet] = weights_rule.contains(facet) && weights_rule[facet].is_number() ? weights_rule[facet].get<double>()
-                                                                                       : 1.0;
+    m.weights_[facet] =
+        weights_rule.contains(facet) && weights_rule[facet].is_number() ? weights_rule[facet].get<double>() : 1.0;
   }
   m.weights_[kGeometricFacet] = weights_rule.contains(kGeometricFacet) && weights_rule[kGeometricFacet].is_number()
                                     ? weights_rule[kGeometricFacet].get<double>()
@@ -370,7 +372,8 @@ Result<CaseConcepts> RetrievalModel::Query(const Eigen::VectorXd& x,
     query.categorical[facet] = it->second;
   }
   query.geometric_chain = ghsom_.ConceptPath(x);
-  if (query.geometric_chain.empty()) return Status::BadInput(Where{.field = "query.descriptor"}, "non-finite descriptor");
+  if (query.geometric_chain.empty())
+    return Status::BadInput(Where{.field = "query.descriptor"}, "non-finite descriptor");
   query.geometric_x = x;
   return query;
 }
@@ -395,8 +398,8 @@ double RetrievalModel::RefinementRadius(const GhsomUnitRef& leaf) const {
 Result<Eigen::VectorXd> RetrievalModel::Input(const Eigen::VectorXd& descriptor) const {
   if (descriptor.size() != transform_.eps.size()) {
     return Status::BadInput(Where{.field = "query.descriptor"}, "has " + std::to_string(descriptor.size()) +
-                                                                     " values, the library's have " +
-                                                                     std::to_string(transform_.eps.size()));
+                                                                    " values, the library's have " +
+                                                                    std::to_string(transform_.eps.size()));
   }
   FL_ASSIGN_OR_RETURN(Eigen::VectorXd z, standardiser_.Apply(transform_.Apply(descriptor)));
   return z.cwiseProduct(input_weights_).eval();
@@ -510,8 +513,8 @@ Result<json> RetrievalModel::LeaveOneOut(const std::vector<kb::CaseRecord>& reco
     FL_ASSIGN_OR_RETURN(RetrievalModel model, Train(records, ghsom, rules, taxonomies, c->uid));
     RetrieveOptions options = options_in;
     options.top = 1;
-    const Eigen::VectorXd descriptor = Eigen::Map<const Eigen::VectorXd>(
-        c->descriptor->data(), static_cast<Eigen::Index>(c->descriptor->size()));
+    const Eigen::VectorXd descriptor =
+        Eigen::Map<const Eigen::VectorXd>(c->descriptor->data(), static_cast<Eigen::Index>(c->descriptor->size()));
     auto r = model.Retrieve(descriptor, c->concepts, options);
     if (!r.ok()) return r.status().WithContext("leave-one-out of case " + c->uid);
     if (r->ranked.empty()) continue;

@@ -117,12 +117,12 @@ Result<std::vector<std::string>> RetrievalProblems(kb::Library& library, const F
 struct RetrieveOptions {
   int breadth = 1;
   int min_candidates = 1;
-  int top = 5;                 // candidates listed in the result
+  int top = 5;  // candidates listed in the result
   // > 0: of the gathered candidates only the max_scored nearest in the GHSOM input space (||x' − x||) are scored
   // with A (for large leaves of big libraries; an approximation: a farther case with better categorical facets
   // can be missed). 0: every candidate is scored.
   int max_scored = 0;
-  std::string exclude_uid;     // leave-one-out: never return this case
+  std::string exclude_uid;  // leave-one-out: never return this case
   Status Validate() const;
 };
 
@@ -137,10 +137,10 @@ struct RetrievalResult {
   double r_leaf = 0;                     // refinement radius used (GHSOM input units)
   int breadth_used = 0;
   int candidates = 0;
-  std::vector<RetrievedCase> ranked;     // best first, at most options.top
-  std::string route;                     // "direct", "simulate" or "default"
+  std::vector<RetrievedCase> ranked;  // best first, at most options.top
+  std::string route;                  // "direct", "simulate" or "default"
   double best_similarity = 0;
-  nlohmann::json route_rule;             // the rule-base choice of the route
+  nlohmann::json route_rule;  // the rule-base choice of the route
   nlohmann::json ToJson() const;
 };
 
@@ -167,7 +167,8 @@ class RetrievalModel {
   Result<RetrievalResult> RetrieveInput(const Eigen::VectorXd& x, const std::map<std::string, std::string>& concepts,
                                         const RetrieveOptions& options) const;
   // Query from a descriptor (24 raw values) and facet concepts (PartFeatures::Concepts()).
-  Result<RetrievalResult> Retrieve(const Eigen::VectorXd& descriptor, const std::map<std::string, std::string>& concepts,
+  Result<RetrievalResult> Retrieve(const Eigen::VectorXd& descriptor,
+                                   const std::map<std::string, std::string>& concepts,
                                    const RetrieveOptions& options) const {
     FL_ASSIGN_OR_RETURN(Eigen::VectorXd x, Input(descriptor));
     return RetrieveInput(x, concepts, options);

@@ -4,9 +4,9 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <fstream>
 #include <functional>
 #include <limits>
-#include <fstream>
 #include <numbers>
 #include <sstream>
 
@@ -51,13 +51,14 @@ json MaterialProperties(const std::string& material) {
     const char* name;
     double e_gpa, hv, kc;
   };
-  static const Props kTable[] = {
-      {"H13", 210, 520, 2600},          {"H11", 210, 500, 2550},         {"P20", 205, 300, 2100},
-      {"P20+Ni", 205, 340, 2200},       {"1.2738", 205, 340, 2200},      {"D2", 210, 600, 2900},
-      {"420", 200, 480, 2400},          {"C45", 205, 200, 1800},         {"S355", 205, 170, 1700},
-      {"6061", 69, 107, 700},           {"7075", 72, 175, 800},          {"5083", 71, 95, 650},
-      {"Ti-6Al-4V", 114, 340, 1600},    {"Inconel 718", 200, 400, 3100}, {"POM", 3, 20, 150},
-      {"epoxy tooling board", 2, 10, 80}};
+  static const Props kTable[] = {{"H13", 210, 520, 2600},       {"H11", 210, 500, 2550},
+                                 {"P20", 205, 300, 2100},       {"P20+Ni", 205, 340, 2200},
+                                 {"1.2738", 205, 340, 2200},    {"D2", 210, 600, 2900},
+                                 {"420", 200, 480, 2400},       {"C45", 205, 200, 1800},
+                                 {"S355", 205, 170, 1700},      {"6061", 69, 107, 700},
+                                 {"7075", 72, 175, 800},        {"5083", 71, 95, 650},
+                                 {"Ti-6Al-4V", 114, 340, 1600}, {"Inconel 718", 200, 400, 3100},
+                                 {"POM", 3, 20, 150},           {"epoxy tooling board", 2, 10, 80}};
   for (const Props& p : kTable) {
     if (material == p.name) {
       return {{"youngs_modulus_gpa", p.e_gpa}, {"hardness_hv", p.hv}, {"specific_cutting_force_n_per_mm2", p.kc}};
@@ -112,7 +113,8 @@ Result<StarterSpec> StarterSpec::FromJson(const json& j, const std::string& sour
     FL_RETURN_IF_ERROR(f.String("machine", &fam.machine));
     FL_RETURN_IF_ERROR(f.String("strategy", &fam.strategy));
     FL_RETURN_IF_ERROR(ReadRanges(f, "effects", &fam.effects));
-    if (fam.materials.empty()) return Status::BadInput(Where{.file = source, .field = f.Path("materials")}, "no materials");
+    if (fam.materials.empty())
+      return Status::BadInput(Where{.file = source, .field = f.Path("materials")}, "no materials");
     spec.families.push_back(std::move(fam));
   }
   if (spec.families.empty()) return Status::BadInput(Where{.file = source, .field = "families"}, "no families");
@@ -163,19 +165,18 @@ std::vector<StarterPart> DrawStarterParts(const StarterSpec& spec) {
       json effects = json::array();
       for (const auto& [name, range] : fam.effects) {
         const double est = R6(Draw(rng, range));
-        effects.push_back({{"name", name}, {"estimate", est}, {"standard_error", R6(0.05 * est + 0.1 * rng.Uniform())}});
+        effects.push_back(
+            {{"name", name}, {"estimate", est}, {"standard_error", R6(0.05 * est + 0.1 * rng.Uniform())}});
       }
-      part.simulation = {
-          {"model_format", "bspline-grid-fit"},
-          {"material", d.material},
-          {"material_properties", MaterialProperties(d.material)},
-          {"size_mm", {{"x", nullptr}, {"y", nullptr}}},
-          {"effect_models",
-           json::array({{{"machine", d.machine_class},
-                         {"tool", "ball r" + Round(d.tool_radius_mm, 4)},
+      part.simulation = {{"model_format", "bspline-grid-fit"},
                          {"material", d.material},
-                         {"effects", effects},
-                         {"confidence", 0.95}}})}};
+                         {"material_properties", MaterialProperties(d.material)},
+                         {"size_mm", {{"x", nullptr}, {"y", nullptr}}},
+                         {"effect_models", json::array({{{"machine", d.machine_class},
+                                                         {"tool", "ball r" + Round(d.tool_radius_mm, 4)},
+                                                         {"material", d.material},
+                                                         {"effects", effects},
+                                                         {"confidence", 0.95}}})}};
       const double before = R6(d.form_tolerance_mm * 1e3 * (2.0 + 3.0 * rng.Uniform()));
       const int loops = 1 + static_cast<int>(rng.UniformIndex(3));
       json loop_rows = json::array();
@@ -193,9 +194,12 @@ std::vector<StarterPart> DrawStarterParts(const StarterSpec& spec) {
                                   {"flutes", flutes},
                                   {"stick_out_mm", R6(4 * d.tool_radius_mm + 10)}}})},
           {"strategy",
-           {{"pattern", d.strategy}, {"raster_angle_deg", d.raster_angle_deg}, {"scallop_um", scallop},
+           {{"pattern", d.strategy},
+            {"raster_angle_deg", d.raster_angle_deg},
+            {"scallop_um", scallop},
             {"direction", "climb"}}},
-          {"feeds", {{"feed_mm_per_min", R6(800 + 1200 * rng.Uniform())}, {"spindle_rpm", R6(8000 + 16000 * rng.Uniform())}}},
+          {"feeds",
+           {{"feed_mm_per_min", R6(800 + 1200 * rng.Uniform())}, {"spindle_rpm", R6(8000 + 16000 * rng.Uniform())}}},
           {"compensation", {{"method", "mirror-systematic"}, {"loops", loop_rows}}},
           {"probing", {{"grid", {20, 20}}, {"inset_fraction", 0.05}}},
           {"reconstruction", {{"algorithm", "B-spline"}, {"degree", 3}, {"control_net", {8, 8}}, {"smoothing", 1e-4}}}};
@@ -213,10 +217,11 @@ StarterPart PerturbStarterPart(const StarterPart& base, double delta, Rng& rng, 
 }
 
 nlohmann::json PartDescriptionToJson(const PartDescription& d) {
-  return {{"family_tag", d.family_tag},         {"shape_family", d.shape_family},   {"material", d.material},
-          {"tolerance_mm", d.form_tolerance_mm}, {"finish_ra_um", d.ra_um},         {"batch_size", d.batch_size},
-          {"machine_class", d.machine_class},   {"tool_radius_mm", d.tool_radius_mm}, {"strategy", d.strategy},
-          {"raster_angle_deg", d.raster_angle_deg}};
+  return {{"family_tag", d.family_tag},       {"shape_family", d.shape_family},
+          {"material", d.material},           {"tolerance_mm", d.form_tolerance_mm},
+          {"finish_ra_um", d.ra_um},          {"batch_size", d.batch_size},
+          {"machine_class", d.machine_class}, {"tool_radius_mm", d.tool_radius_mm},
+          {"strategy", d.strategy},           {"raster_angle_deg", d.raster_angle_deg}};
 }
 
 Result<PartDescription> PartDescriptionFromJson(const nlohmann::json& j, const std::string& source) {
@@ -257,8 +262,8 @@ Result<kb::CaseRecord> MakeStarterCase(const StarterPart& part, int fit_samples,
   r.part["size_mm"] = features.size_mm;
   r.simulation = part.simulation;
   r.manufacturing = part.manufacturing;
-  r.descriptor = std::vector<double>(features.descriptors.data(),
-                                     features.descriptors.data() + features.descriptors.size());
+  r.descriptor =
+      std::vector<double>(features.descriptors.data(), features.descriptors.data() + features.descriptors.size());
   r.concepts = features.Concepts();
   return r;
 }

@@ -2,11 +2,11 @@
 
 #include <algorithm>
 #include <cctype>
-#include <string_view>
 #include <cmath>
 #include <fstream>
 #include <limits>
 #include <sstream>
+#include <string_view>
 
 #include "core/number_text.h"
 

@@ -44,9 +44,9 @@ Result<std::vector<PointContext>> AssociateWithToolpath(const std::vector<Cutter
   out.reserve(points.size());
   for (const MeasuredPoint& mp : points) {
     const Eigen::Vector3d query = mp.point + r * mp.normal - origin;
-    tree.nearestKSearch(pcl::PointXYZ(static_cast<float>(query.x()), static_cast<float>(query.y()),
-                                      static_cast<float>(query.z())),
-                        kCandidates, found, distances);
+    tree.nearestKSearch(
+        pcl::PointXYZ(static_cast<float>(query.x()), static_cast<float>(query.y()), static_cast<float>(query.z())),
+        kCandidates, found, distances);
     double envelope = 1e300;
     std::size_t nearest = 0;
     double nearest_d2 = 1e300;
@@ -66,7 +66,8 @@ Result<std::vector<PointContext>> AssociateWithToolpath(const std::vector<Cutter
       }
     }
     if (std::sqrt(nearest_d2) > max_distance_factor * r) {
-      return Status::BadInput("point " + std::to_string(mp.id) + " lies outside the machined area (nearest cutter location " +
+      return Status::BadInput("point " + std::to_string(mp.id) +
+                              " lies outside the machined area (nearest cutter location " +
                               std::to_string(std::sqrt(nearest_d2)) + " mm away). Fix: probe inside the tool path");
     }
     const CutterLocation& cut = cls[nearest];

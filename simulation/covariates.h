@@ -36,8 +36,7 @@ struct MeasuredPoint {
 // A point whose nearest ball centre is further than `max_distance_factor` · r from p + r n was not
 // cut by this program: an error naming the point.
 Result<std::vector<PointContext>> AssociateWithToolpath(const std::vector<CutterLocation>& cutter_locations,
-                                                        double tool_radius_mm,
-                                                        const std::vector<MeasuredPoint>& points,
+                                                        double tool_radius_mm, const std::vector<MeasuredPoint>& points,
                                                         double max_distance_factor = 5.0);
 
 }  // namespace formloop::sim

@@ -28,11 +28,10 @@ Eigen::Vector3d Effect::DisplacementUm(const Eigen::Vector3d&, std::span<const d
 const std::vector<const Effect*>& EffectCatalogue() {
   // The registry: one line per effect, in the order of spec §3.
   static const std::vector<const Effect*> catalogue = {
-      ScallopEffect(),          ToolRadiusEffect(),       ToolWearEffect(),         ToolDeflectionEffect(),
-      ThermalDriftZEffect(),    AxisScaleEffect(0),       AxisScaleEffect(1),       AxisScaleEffect(2),
-      SquarenessEffect(0),      SquarenessEffect(1),      SquarenessEffect(2),      BacklashEffect(0),
-      BacklashEffect(1),        SetupOffsetEffect(),      SetupRotationEffect(),    ProbeRadiusEffect(),
-      ProbeLobingEffect(),      NoiseEffect(),
+      ScallopEffect(),     ToolRadiusEffect(),  ToolWearEffect(),   ToolDeflectionEffect(), ThermalDriftZEffect(),
+      AxisScaleEffect(0),  AxisScaleEffect(1),  AxisScaleEffect(2), SquarenessEffect(0),    SquarenessEffect(1),
+      SquarenessEffect(2), BacklashEffect(0),   BacklashEffect(1),  SetupOffsetEffect(),    SetupRotationEffect(),
+      ProbeRadiusEffect(), ProbeLobingEffect(), NoiseEffect(),
   };
   return catalogue;
 }

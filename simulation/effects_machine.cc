@@ -103,9 +103,12 @@ class Squareness final : public Effect {
   // The displacement for S = 1 µrad at p (mm): µrad · mm = 1e-3 µm.
   Eigen::Vector3d Unit(const Eigen::Vector3d& p) const {
     switch (pair_) {
-      case 0: return {p.y() * 1e-3, 0, 0};
-      case 1: return {0, p.z() * 1e-3, 0};
-      default: return {p.z() * 1e-3, 0, 0};
+      case 0:
+        return {p.y() * 1e-3, 0, 0};
+      case 1:
+        return {0, p.z() * 1e-3, 0};
+      default:
+        return {p.z() * 1e-3, 0, 0};
     }
   }
   int pair_;

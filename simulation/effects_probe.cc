@@ -39,8 +39,9 @@ class ProbeLobing final : public Effect {
   }
   EffectKind kind() const override { return EffectKind::kMeasurement; }
   const std::vector<EffectParameter>& parameters() const override {
-    static const std::vector<EffectParameter> p = {{"c3_um", "cos 3 theta amplitude of the effective radius, um", true, -5, 5},
-                                                   {"s3_um", "sin 3 theta amplitude of the effective radius, um", true, -5, 5}};
+    static const std::vector<EffectParameter> p = {
+        {"c3_um", "cos 3 theta amplitude of the effective radius, um", true, -5, 5},
+        {"s3_um", "sin 3 theta amplitude of the effective radius, um", true, -5, 5}};
     return p;
   }
   void Jacobian(const PointContext& c, std::span<const double>, std::span<double> j) const override {

@@ -61,9 +61,7 @@ class ToolDeflection final : public Effect {
  public:
   std::string_view name() const override { return "tool_deflection"; }
   std::string_view physics() const override { return "cutting load bends the tool away from steep walls"; }
-  std::string_view basis() const override {
-    return "+k_d * (1 - n_z^2) * (a_e / r) / 0.1";
-  }
+  std::string_view basis() const override { return "+k_d * (1 - n_z^2) * (a_e / r) / 0.1"; }
   bool uses_toolpath() const override { return true; }
   const std::vector<EffectParameter>& parameters() const override {
     static const std::vector<EffectParameter> p = {

@@ -162,7 +162,8 @@ nlohmann::json VirtualMachineResult::ReportJson() const {
   nlohmann::json injected = {{"scallop", stats([&](std::size_t i) { return truth[i].scallop_um; })}};
   for (std::size_t k = 0; k < model.effects.size(); ++k) {
     if (model.effects[k].effect->kind() == EffectKind::kNoise) continue;
-    injected[std::string(model.effects[k].effect->name())] = stats([&](std::size_t i) { return truth[i].effect_um[k]; });
+    injected[std::string(model.effects[k].effect->name())] =
+        stats([&](std::size_t i) { return truth[i].effect_um[k]; });
   }
   injected["roughness"] = stats([&](std::size_t i) { return truth[i].roughness_um; });
   injected["probe_noise"] = stats([&](std::size_t i) { return truth[i].probe_noise_um; });

@@ -27,22 +27,22 @@ namespace formloop::sim {
 // The part file's `machine.effects` block: a few catalogue effects under their part-file names. It is
 // turned into a Model (ToModel) before machining.
 struct MachineEffects {
-  double tool_radius_error_um = 0;     // tool_radius: Δr
-  double deflection_um = 0;            // tool_deflection: k_d
-  double thermal_amplitude_um = 0;     // thermal_drift_z: A
-  double thermal_tau_s = 600;          // thermal_drift_z: τ
-  double surface_noise_um = 0;         // noise: roughness σ_s
-  double probe_noise_um = 0;           // noise: probe repeatability σ_p
+  double tool_radius_error_um = 0;  // tool_radius: Δr
+  double deflection_um = 0;         // tool_deflection: k_d
+  double thermal_amplitude_um = 0;  // thermal_drift_z: A
+  double thermal_tau_s = 600;       // thermal_drift_z: τ
+  double surface_noise_um = 0;      // noise: roughness σ_s
+  double probe_noise_um = 0;        // noise: probe repeatability σ_p
   Status Validate() const;
   nlohmann::json ToJson() const;
   Model ToModel() const;  // only the effects with a non-zero value
 };
 
 struct VirtualMachineOptions {
-  double tool_radius_mm = 3.0;         // programmed ball radius
-  MachineEffects effects;              // merged into `model` (the model's entry wins for an effect in both)
+  double tool_radius_mm = 3.0;  // programmed ball radius
+  MachineEffects effects;       // merged into `model` (the model's entry wins for an effect in both)
   Model model;
-  metrology::ProbeModel true_probe;    // the probe the machine really has
+  metrology::ProbeModel true_probe;  // the probe the machine really has
   // Approach direction per plan point (unit, into the surface); empty = along −n everywhere.
   std::vector<Eigen::Vector3d> approaches;
   double probe_seconds_per_point = 4.0;

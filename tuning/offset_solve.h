@@ -97,7 +97,7 @@ struct OffsetSolution {
   std::vector<std::string> fixed_offsets, zero_offsets;     // removed before solving
   BoundedLsqReport solver;
   std::vector<int> kept;  // the offset columns solved for (x = [c(kept); t])
-  double objective = 0;  // the §4.2 objective at the continuous solution (µm², penalty form)
+  double objective = 0;   // the §4.2 objective at the continuous solution (µm², penalty form)
   nlohmann::json ToJson() const;
   bool reachable() const;
 };

@@ -15,9 +15,9 @@
 
 #include <unistd.h>
 
+#include <gtest/gtest.h>
 #include <Eigen/LU>
 #include <Eigen/QR>
-#include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
 #include "core/json_io.h"
@@ -100,8 +100,9 @@ class AnalysePartCliTest : public ::testing::Test {
       }
       const Eigen::Vector3d a = -p.normal;
       const Eigen::Vector3d c = p.point + offset * p.normal - kBallRadiusMm * a;
-      const std::vector<std::string> cells = {std::to_string(p.id), FormatFixed(c.x(), 7), FormatFixed(c.y(), 7),
-                                              FormatFixed(c.z(), 7), FormatFixed(a.x(), 10), FormatFixed(a.y(), 10),
+      const std::vector<std::string> cells = {std::to_string(p.id),   FormatFixed(c.x(), 7),
+                                              FormatFixed(c.y(), 7),  FormatFixed(c.z(), 7),
+                                              FormatFixed(a.x(), 10), FormatFixed(a.y(), 10),
                                               FormatFixed(a.z(), 10), FormatFixed(0.5 * static_cast<double>(i), 1)};
       std::string row;
       for (std::size_t k = 0; k < cells.size(); ++k) {
@@ -115,8 +116,7 @@ class AnalysePartCliTest : public ::testing::Test {
   // A log of the bare saddle (no systematic field) probed along the planned normals with the probe
   // `truth` (its direction-dependent pretravel included) and i.i.d. noise of noise_um along the
   // normal: c = p − R_eff(a)·a with p = Q(u, v) + noise·n and a = −n.
-  void WriteLobedLog(const std::string& name, const metrology::ProbeModel& truth, double noise_um,
-                     std::uint64_t seed) {
+  void WriteLobedLog(const std::string& name, const metrology::ProbeModel& truth, double noise_um, std::uint64_t seed) {
     Rng rng(seed);
     std::ofstream out(Path(name));
     out << "# synthetic probe log, lobed probe\nid,x,y,z,ax,ay,az,t\n";
@@ -124,8 +124,8 @@ class AnalysePartCliTest : public ::testing::Test {
       const metrology::ProbePoint& p = plan_.points[i];
       const Eigen::Vector3d a = -p.normal;
       const Eigen::Vector3d c = p.point + rng.Normal(0, noise_um * 1e-3) * p.normal - truth.EffectiveRadius(a) * a;
-      out << p.id << "," << FormatFixed(c.x(), 8) << "," << FormatFixed(c.y(), 8) << "," << FormatFixed(c.z(), 8)
-          << "," << FormatFixed(a.x(), 12) << "," << FormatFixed(a.y(), 12) << "," << FormatFixed(a.z(), 12) << ","
+      out << p.id << "," << FormatFixed(c.x(), 8) << "," << FormatFixed(c.y(), 8) << "," << FormatFixed(c.z(), 8) << ","
+          << FormatFixed(a.x(), 12) << "," << FormatFixed(a.y(), 12) << "," << FormatFixed(a.z(), 12) << ","
           << FormatFixed(0.5 * static_cast<double>(i), 1) << "\n";
     }
   }
@@ -164,9 +164,9 @@ void ExpectSystematicFieldFound(const nlohmann::json& j, double field_rms_um) {
   EXPECT_NEAR(j["random_sigma_um"].get<double>(), kNoiseUm, 0.2 * kNoiseUm);
   EXPECT_NEAR(j["deviations"]["max_abs_um"].get<double>(), kAmplitudeUm, 4 * kNoiseUm);
   EXPECT_TRUE(j["lisa"].is_object());
-  std::cout << "measured: field rms " << field_rms_um << " um, d_s rms " << j["systematic_rms_um"]
-            << " um, sigma(d_u) " << j["random_sigma_um"] << " um, raw Moran z " << j["raw_moran"]["z_normality"]
-            << ", model " << j["chosen_model"] << ", form error " << j["form_error_um"] << " um\n";
+  std::cout << "measured: field rms " << field_rms_um << " um, d_s rms " << j["systematic_rms_um"] << " um, sigma(d_u) "
+            << j["random_sigma_um"] << " um, raw Moran z " << j["raw_moran"]["z_normality"] << ", model "
+            << j["chosen_model"] << ", form error " << j["form_error_um"] << " um\n";
 }
 
 TEST_F(AnalysePartCliTest, WithPlanFindsTheFieldAndAdvisesCompensationBelowIt) {
@@ -366,11 +366,11 @@ TEST_F(AnalysePartCliTest, ProbeProfileRemovesTheTriLobeEndToEnd) {
   const TriLobeFit before = RegressOnTriLobe(theta_without, dev_without);
   const TriLobeFit after = RegressOnTriLobe(theta, dev_with);
   const double bound_um = 3 * std::hypot(se_cal_um, after.standard_error);
-  std::cout << "measured: tri-lobe without profile " << before.amplitude << " um (t = "
-            << before.amplitude / before.standard_error << ", phase "
-            << std::remainder(before.phase * 180 / std::numbers::pi, 360.0) << " deg); with profile "
-            << after.amplitude << " um (t = " << after.amplitude / after.standard_error << "), bound " << bound_um
-            << " um (se_cal " << se_cal_um << ", se_reg " << after.standard_error << ")\n";
+  std::cout << "measured: tri-lobe without profile " << before.amplitude
+            << " um (t = " << before.amplitude / before.standard_error << ", phase "
+            << std::remainder(before.phase * 180 / std::numbers::pi, 360.0) << " deg); with profile " << after.amplitude
+            << " um (t = " << after.amplitude / after.standard_error << "), bound " << bound_um << " um (se_cal "
+            << se_cal_um << ", se_reg " << after.standard_error << ")\n";
   // Without: −δ(a) shows the tri-lobe in full, with the opposite sign (phase ψ + 180°).
   EXPECT_NEAR(before.amplitude, kA, 0.1 * kA);
   EXPECT_GT(before.amplitude / before.standard_error, 10);

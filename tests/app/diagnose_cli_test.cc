@@ -47,7 +47,8 @@ class DiagnoseCliTest : public ::testing::Test {
     auto analytic = recon::MakeReferenceSurface(surface);
     const recon::BSplineSurface q = recon::FitAnalytic(*analytic.value(), 30, 30, {}, 0, 1, nullptr).value();
     EXPECT_TRUE(recon::WriteStep(run / "surface" / "Q.step", q, name).ok());
-    EXPECT_TRUE(nc::WriteToolpathFile(run / "toolpath" / "toolpath.csv", nc::PlanRaster(q, part->toolpath).value()).ok());
+    EXPECT_TRUE(
+        nc::WriteToolpathFile(run / "toolpath" / "toolpath.csv", nc::PlanRaster(q, part->toolpath).value()).ok());
     EXPECT_TRUE(WriteJsonFile(run / "toolpath" / "probing_plan.json",
                               metrology::PlanProbingGrid(q, 18, 18, 0.05).value().ToJson())
                     .ok());
@@ -99,13 +100,14 @@ TEST_F(DiagnoseCliTest, SimulateThenDiagnoseNamesTheHiddenEffectAndMeasuresTheGa
   }
   // After: the noise (0.5 µm roughness + 0.5 µm probe ≈ 0.71 µm); before: the wear on top of it.
   EXPECT_LT((*json)["gain"]["heldout_rms_after_um"].get<double>(), 0.8);
-  EXPECT_LT((*json)["gain"]["heldout_rms_after_um"].get<double>(), 0.5 * (*json)["gain"]["heldout_rms_before_um"].get<double>());
+  EXPECT_LT((*json)["gain"]["heldout_rms_after_um"].get<double>(),
+            0.5 * (*json)["gain"]["heldout_rms_before_um"].get<double>());
   const auto& second = (*json)["gain"]["second_part"];
   EXPECT_LT(second["rms_after_um"].get<double>(), 0.5 * second["rms_before_um"].get<double>()) << second.dump();
   EXPECT_TRUE((*json)["unexplained"].is_null());
   EXPECT_NE(err.find("cause: tool_wear"), std::string::npos) << err;
-  for (const char* file : {"diagnosis.json", "model.json", "residuals.csv", "inputs/measured.csv", "inputs/baseline.json",
-                           "inputs/arguments.json"}) {
+  for (const char* file : {"diagnosis.json", "model.json", "residuals.csv", "inputs/measured.csv",
+                           "inputs/baseline.json", "inputs/arguments.json"}) {
     EXPECT_TRUE(fs::exists(out_dir / file)) << file;
   }
   // The extended model is a model formloop reads back, with the cause in it.
@@ -115,9 +117,10 @@ TEST_F(DiagnoseCliTest, SimulateThenDiagnoseNamesTheHiddenEffectAndMeasuresTheGa
   // The learned model goes into a case of the library, keyed by machine/tool/material, with provenance.
   const std::string db = (dir_ / "cases.db").string();
   ASSERT_EQ(RunFormloop("kb init " + db, &out, &err), 0) << err;
-  ASSERT_EQ(RunFormloop("kb add " + db + " " + (fs::path(FORMLOOP_SOURCE_DIR) / "data" / "kb" / "example_case.json").string(),
-                        &out, &err),
-            0)
+  ASSERT_EQ(
+      RunFormloop("kb add " + db + " " + (fs::path(FORMLOOP_SOURCE_DIR) / "data" / "kb" / "example_case.json").string(),
+                  &out, &err),
+      0)
       << err;
   ASSERT_EQ(RunFormloop("diagnose --measured " + (dir_ / "log1.csv").string() + " --run " + run1.string() +
                             " --baseline " + baseline.string() + " --out " + (dir_ / "stored").string() +

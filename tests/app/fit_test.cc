@@ -7,6 +7,7 @@
 #include <fstream>
 #include <string>
 
+#include <unistd.h>
 #include <BRepBuilderAPI_MakeVertex.hxx>
 #include <BRepPrimAPI_MakeBox.hxx>
 #include <STEPControl_Writer.hxx>
@@ -14,7 +15,6 @@
 #include <StepShape_AdvancedFace.hxx>
 #include <TCollection_HAsciiString.hxx>
 #include <gp_Pnt.hxx>
-#include <unistd.h>
 
 #include <gtest/gtest.h>
 
@@ -184,8 +184,7 @@ TEST_F(FitTest, BadInputIsRefusedWithAClearErrorAndNoOutput) {
   const fs::path point_step = dir_ / "point.step";
   {
     STEPControl_Writer writer;
-    ASSERT_EQ(writer.Transfer(BRepBuilderAPI_MakeVertex(gp_Pnt(1, 2, 3)).Vertex(), STEPControl_AsIs),
-              IFSelect_RetDone);
+    ASSERT_EQ(writer.Transfer(BRepBuilderAPI_MakeVertex(gp_Pnt(1, 2, 3)).Vertex(), STEPControl_AsIs), IFSelect_RetDone);
     ASSERT_EQ(writer.Write(point_step.string().c_str()), IFSelect_RetDone);
   }
   cases.push_back({"no faces", Request(point_step.string()), "holds no face"});
@@ -256,9 +255,8 @@ int RunBinary(const std::string& args, std::string* out, std::string* err, const
 TEST_F(FitTest, BinaryFitAndProject) {
   std::string out, err;
   const std::string q = (dir_ / "Q.step").string();
-  ASSERT_EQ(RunBinary("fit analytic:egg_box --out " + q + " --report " + (dir_ / "fit.json").string(), &out, &err,
-                      dir_),
-            0)
+  ASSERT_EQ(
+      RunBinary("fit analytic:egg_box --out " + q + " --report " + (dir_ / "fit.json").string(), &out, &err, dir_), 0)
       << err;
   EXPECT_TRUE(out.empty()) << "stdout is for JSON only: " << out;
   ASSERT_TRUE(WritePoints(dir_ / "p.csv", Samples("egg_box", 100, 9, -0.05)).ok());
@@ -293,8 +291,7 @@ TEST_F(FitTest, BinaryFitAndProject) {
   EXPECT_EQ(faces->size(), 6u);
 
   // Bad input: exit code 2, the message names the file and the face, nothing written.
-  EXPECT_EQ(RunBinary("fit " + box.string() + " --face-name top --out " + (dir_ / "B.step").string(), &out, &err,
-                      dir_),
+  EXPECT_EQ(RunBinary("fit " + box.string() + " --face-name top --out " + (dir_ / "B.step").string(), &out, &err, dir_),
             2);
   EXPECT_NE(err.find("box.step"), std::string::npos) << err;
   EXPECT_NE(err.find("'top'"), std::string::npos) << err;

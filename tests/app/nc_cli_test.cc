@@ -82,8 +82,7 @@ TEST_F(NcCliTest, ProbingProgramsNameEveryPoint) {
   for (int id = 1; id <= 15; ++id) {
     EXPECT_NE(text.find("point " + std::to_string(id) + ")"), std::string::npos) << "misses point " << id;
   }
-  EXPECT_EQ(Run("nc probe --surface " + Path("Q.step") + " --count 15 --curvature-weight -1 --out " +
-                Path("bad.ngc")),
+  EXPECT_EQ(Run("nc probe --surface " + Path("Q.step") + " --count 15 --curvature-weight -1 --out " + Path("bad.ngc")),
             2);
   EXPECT_NE(err_.find("curvature_weight"), std::string::npos) << err_;
   EXPECT_FALSE(fs::exists(dir_ / "bad.ngc"));
@@ -137,8 +136,10 @@ TEST_F(NcCliTest, CheckFindsACorruptedCompensatedBlock) {
 // program that `nc check` accepts against the field; an offset above the limit writes nothing.
 TEST_F(NcCliTest, ToolpathFilePostsAndCompensatesInSeparateSteps) {
   const std::string toolpath = Path("t.csv"), direct = Path("direct.ngc"), posted = Path("posted.ngc");
-  ASSERT_EQ(Run("nc path --surface " + Path("Q.step") + " --scallop-um 20 --max-spacing-mm 2 --raster-angle 30 "
-                "--one-way --toolpath " + toolpath + " --out " + direct),
+  ASSERT_EQ(Run("nc path --surface " + Path("Q.step") +
+                " --scallop-um 20 --max-spacing-mm 2 --raster-angle 30 "
+                "--one-way --toolpath " +
+                toolpath + " --out " + direct),
             0)
       << err_;
   ASSERT_EQ(Run("nc post --toolpath " + toolpath + " --out " + posted), 0) << err_;

@@ -99,9 +99,9 @@ TEST_F(OptimiseCliTest, BadInputNamesTheParameterAndWritesNothing) {
   EXPECT_NE(err.find("--a-p-mm"), std::string::npos) << err;
   // F_max of 5 N: no speed and feed of the box can hold it.
   const fs::path weak = Coefficients("/limits/max_force_n", 5);
-  EXPECT_NE(RunFormloop("optimise cutting --coefficients " + weak.string() + " --a-p-mm 5 --a-e-mm 1 --out " +
-                            target.string(),
-                        &out, &err),
+  EXPECT_NE(RunFormloop(
+                "optimise cutting --coefficients " + weak.string() + " --a-p-mm 5 --a-e-mm 1 --out " + target.string(),
+                &out, &err),
             0);
   EXPECT_NE(err.find("L1-INFEASIBLE"), std::string::npos) << err;
   EXPECT_NE(err.find("F_max"), std::string::npos) << err;
@@ -266,7 +266,8 @@ TEST_F(OptimiseCliTest, PlantedLocalErrorIsTracedToTheBlocksThatCutItAndTheProgr
     const double e_um = (inside ? 40.0 : 0.0) + rng.Normal(0, 1);
     const Eigen::Vector3d p = f + e_um / 1000 * n;
     csv += std::to_string(i + 1);
-    for (double v : {p.x(), p.y(), p.z(), n.x(), n.y(), n.z(), f.x(), f.y(), f.z(), e_um}) csv += "," + FormatFixed(v, 6);
+    for (double v : {p.x(), p.y(), p.z(), n.x(), n.y(), n.z(), f.x(), f.y(), f.z(), e_um})
+      csv += "," + FormatFixed(v, 6);
     csv += "\n";
   }
   std::ofstream(run / "loop-0" / "deviations.csv") << csv;

@@ -6,8 +6,8 @@
 #include <filesystem>
 #include <thread>
 
-#include <unistd.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <gtest/gtest.h>
 
@@ -68,8 +68,9 @@ TEST_F(PipelineTest, RetrievesRoutesAndRetainsTheCaseWithTheLearnedModel) {
   ASSERT_TRUE(summary.ok()) << summary.status().ToString();
   EXPECT_GT(summary->similarity, 0.0);
   EXPECT_FALSE(summary->case_uid.empty());
-  for (const char* file : {"retrieval.json", "plan.json", "report.html", "retain.json", "status.json",
-                           "inputs/machine_profile.json", "loop-0/diagnosis/diagnosis.json", "loop-0/diagnosis/model.json"}) {
+  for (const char* file :
+       {"retrieval.json", "plan.json", "report.html", "retain.json", "status.json", "inputs/machine_profile.json",
+        "loop-0/diagnosis/diagnosis.json", "loop-0/diagnosis/model.json"}) {
     EXPECT_TRUE(fs::exists(dir_ / "dome" / file)) << file;
   }
   EXPECT_EQ(ReadJsonFile(dir_ / "dome" / "status.json").value()["state"], "complete");
@@ -170,7 +171,8 @@ TEST_F(PipelineTest, KilledRunIsMarkedIncompleteLeavesTheLibraryAloneAndRerunCom
     ::_exit(127);
   }
   // Kill it once it is machining (loop-0 exists), long before the retain step.
-  for (int i = 0; i < 600 && !fs::exists(partial / "loop-0"); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  for (int i = 0; i < 600 && !fs::exists(partial / "loop-0"); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
   ASSERT_EQ(::kill(child, SIGKILL), 0);
   int status = 0;
   ::waitpid(child, &status, 0);
@@ -185,8 +187,8 @@ TEST_F(PipelineTest, KilledRunIsMarkedIncompleteLeavesTheLibraryAloneAndRerunCom
   library->reset();
   // Rerunning the same command completes it.
   std::string stdout_text, stderr_text;
-  const int code = testing::RunFormloop("run " + part_file.string() + " --kb " + kb_.string() + " --out " + out.string(),
-                                        &stdout_text, &stderr_text);
+  const int code = testing::RunFormloop(
+      "run " + part_file.string() + " --kb " + kb_.string() + " --out " + out.string(), &stdout_text, &stderr_text);
   EXPECT_EQ(code, 0) << stderr_text;
   EXPECT_NE(stderr_text.find("incomplete run"), std::string::npos);
   EXPECT_EQ(ReadJsonFile(out / "status.json").value()["state"], "complete");
@@ -276,7 +278,8 @@ TEST_F(PipelineTest, MachineProfilesAreCheckedWithTheField) {
 // `formloop regress` fails when a golden figure is perturbed and passes again after --update.
 TEST_F(PipelineTest, RegressFailsOnAPerturbedGoldenAndPassesAfterUpdate) {
   const fs::path goldens = dir_ / "goldens";
-  const std::string args = "regress --only reg-dome-a --goldens " + goldens.string() + " --out " + (dir_ / "r").string();
+  const std::string args =
+      "regress --only reg-dome-a --goldens " + goldens.string() + " --out " + (dir_ / "r").string();
   std::string out, err;
   ASSERT_EQ(testing::RunFormloop(args + " --update", &out, &err), 0) << err;  // goldens of this subset
   ASSERT_EQ(testing::RunFormloop(args, &out, &err), 0) << err;
@@ -291,19 +294,19 @@ TEST_F(PipelineTest, RegressFailsOnAPerturbedGoldenAndPassesAfterUpdate) {
 }
 
 TEST(RegressFigures, ComparisonUsesTheStatedTolerances) {
-  const Json golden = {{"route", "direct"}, {"similarity", 0.97}, {"form_error_um", {20.0, 4.0}},
-                       {"causes", {"tool_radius"}}};
+  const Json golden = {
+      {"route", "direct"}, {"similarity", 0.97}, {"form_error_um", {20.0, 4.0}}, {"causes", {"tool_radius"}}};
   Json value = golden;
-  value["similarity"] = 0.9715;             // within 0.002
-  value["form_error_um"] = {21.5, 4.3};     // within 0.5 + 10 %
+  value["similarity"] = 0.9715;          // within 0.002
+  value["form_error_um"] = {21.5, 4.3};  // within 0.5 + 10 %
   EXPECT_TRUE(CompareFigures(golden, value).empty());
-  value["form_error_um"] = {23.0, 4.3};     // 3 um off 20: outside 0.5 + 2
+  value["form_error_um"] = {23.0, 4.3};  // 3 um off 20: outside 0.5 + 2
   ASSERT_EQ(CompareFigures(golden, value).size(), 1u);
   value = golden;
   value["causes"] = {"tool_radius", "thermal_drift_z"};
   ASSERT_EQ(CompareFigures(golden, value).size(), 1u);
   value = golden;
-  value["form_error_um"] = {20.0};          // a loop fewer is a change
+  value["form_error_um"] = {20.0};  // a loop fewer is a change
   EXPECT_EQ(CompareFigures(golden, value).size(), 1u);
   value = golden;
   value.erase("route");

@@ -8,8 +8,8 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
-#include <vector>
 #include <string>
+#include <vector>
 
 #include <unistd.h>
 
@@ -125,10 +125,10 @@ TEST_F(ReportTest, HasEverySectionAndValidEmbeddedPngs) {
   }
   // Every optional file of the fixture is present, so no section may fall back.
   EXPECT_EQ(html.find("not available"), std::string::npos);
-  EXPECT_NE(html.find("case-0002"), std::string::npos);       // second ranked candidate
-  EXPECT_NE(html.find("tool_wear"), std::string::npos);       // diagnosis cause
+  EXPECT_NE(html.find("case-0002"), std::string::npos);  // second ranked candidate
+  EXPECT_NE(html.find("tool_wear"), std::string::npos);  // diagnosis cause
   EXPECT_NE(html.find("k_w_um_per_m = 1.9 ± 0.1"), std::string::npos);
-  EXPECT_NE(html.find("0.1.0-test"), std::string::npos);      // footer version
+  EXPECT_NE(html.find("0.1.0-test"), std::string::npos);  // footer version
 
   const std::vector<EmbeddedImage> images = EmbeddedImages(html);
   for (std::size_t k = 0; k < images.size(); ++k) {
@@ -209,9 +209,9 @@ TEST(ReportImageTest, Base64AndColourMaps) {
   EXPECT_EQ(Base64("fo"), "Zm8=");
   EXPECT_EQ(Base64("foobar"), "Zm9vYmFy");
   const Rgb zero = DivergingColour(0, 10), plus = DivergingColour(10, 10), minus = DivergingColour(-10, 10);
-  EXPECT_GT(plus.r, plus.b);    // positive: red
-  EXPECT_GT(minus.b, minus.r);  // negative: blue
-  EXPECT_EQ(zero.r, zero.b);    // zero: neutral
+  EXPECT_GT(plus.r, plus.b);                 // positive: red
+  EXPECT_GT(minus.b, minus.r);               // negative: blue
+  EXPECT_EQ(zero.r, zero.b);                 // zero: neutral
   EXPECT_EQ(DivergingColour(99, 10), plus);  // clamped
   EXPECT_EQ(LisaColour(1), HexColour(0xd7191c));
   EXPECT_EQ(LisaColour(3), HexColour(0x2c7bb6));

@@ -47,12 +47,12 @@ TEST_F(RunTest, DemoRunsEveryStageAndCompensatesIntoTolerance) {
   options.out = dir_ / "demo";
   const auto summary = RunPart(*part, options);
   ASSERT_TRUE(summary.ok()) << summary.status().message();
-  for (const char* file : {"summary.json", "formloop.log", "inputs/part.json", "surface/Q.step", "surface/surface.json",
-                           "surface/samples.csv", "toolpath/program.ngc", "toolpath/probe.ngc",
-                           "toolpath/probing_plan.json", "toolpath/toolpath.json", "loop-0/probe_log.csv",
-                           "loop-0/machine.json", "loop-0/deviations.csv", "loop-0/deviations.ply",
-                           "loop-0/analysis.json", "loop-0/program_compensated.ngc", "loop-0/compensation_side.csv",
-                           "loop-0/compensation.json", "loop-1/analysis.json"}) {
+  for (const char* file :
+       {"summary.json", "formloop.log", "inputs/part.json", "surface/Q.step", "surface/surface.json",
+        "surface/samples.csv", "toolpath/program.ngc", "toolpath/probe.ngc", "toolpath/probing_plan.json",
+        "toolpath/toolpath.json", "loop-0/probe_log.csv", "loop-0/machine.json", "loop-0/deviations.csv",
+        "loop-0/deviations.ply", "loop-0/analysis.json", "loop-0/program_compensated.ngc",
+        "loop-0/compensation_side.csv", "loop-0/compensation.json", "loop-1/analysis.json"}) {
     EXPECT_TRUE(fs::exists(options.out / file)) << file;
   }
   EXPECT_FALSE(fs::exists(dir_ / "demo.partial"));
@@ -97,8 +97,8 @@ TEST_F(RunTest, DemoRunsEveryStageAndCompensatesIntoTolerance) {
   }
   const auto summary_json = ReadJsonFile(options.out / "summary.json");
   ASSERT_TRUE(summary_json.ok());
-  for (const char* key : {"chosen_model", "residual_moran_z", "residual_independent", "compensation_advised",
-                          "decision"}) {
+  for (const char* key :
+       {"chosen_model", "residual_moran_z", "residual_independent", "compensation_advised", "decision"}) {
     EXPECT_TRUE((*summary_json)["loops"][0].contains(key)) << key;
   }
   // Residual σ stays at the injected noise level: roughness 1 µm, probe 0.5 µm, and the scallop
@@ -154,7 +154,8 @@ TEST_F(RunTest, RunAndAnalyseGiveTheSamePerPointTable) {
                            (run / "loop-0" / "probe_log.csv").string() + " --plan " +
                            (run / "toolpath" / "probing_plan.json").string() +
                            " --ball-radius 1 --knn 8 --max-control-net 8 --coverage-factor 2 --tolerance-um 10"
-                           " --lisa-permutations 199 --out " + out.string();
+                           " --lisa-permutations 199 --out " +
+                           out.string();
   ASSERT_EQ(testing::RunFormloop(args, &stdout_text, &stderr_text), 0) << stderr_text;
   const std::string run_csv = Slurp(run / "loop-0" / "deviations.csv");
   const std::string analyse_csv = Slurp(out / "deviations.csv");
@@ -213,8 +214,8 @@ TEST_F(RunTest, MachineEffectsAreTheCatalogueModelAndTheOldFieldsStillRead) {
   ASSERT_TRUE(as_model.ok()) << as_model.status().ToString();
   ASSERT_TRUE(as_model->effects.has_value());
   Json old = *json;
-  old["machine"]["effects"] = {{"tool_radius_error_um", 18}, {"deflection_um", 20}, {"thermal_amplitude_um", 6},
-                               {"thermal_tau_s", 900}, {"surface_noise_um", 1.0}, {"probe_noise_um", 0.5}};
+  old["machine"]["effects"] = {{"tool_radius_error_um", 18}, {"deflection_um", 20},     {"thermal_amplitude_um", 6},
+                               {"thermal_tau_s", 900},       {"surface_noise_um", 1.0}, {"probe_noise_um", 0.5}};
   const auto as_fields = ParsePart(old, "old.json");
   ASSERT_TRUE(as_fields.ok()) << as_fields.status().ToString();
   ASSERT_TRUE(as_fields->effects.has_value());

@@ -143,7 +143,8 @@ inline std::vector<Case> AllCases() {
         {"current directory"})
           .Setup("echo keep > keep.txt"),
       C("regress_out_user_folder", "output folder",
-        "regress --parts {DATA}/regress/parts --goldens g --only reg-dome-a --out reg", 2, {"'reg'", ".formloop-output"})
+        "regress --parts {DATA}/regress/parts --goldens g --only reg-dome-a --out reg", 2,
+        {"'reg'", ".formloop-output"})
           .Setup("mkdir reg && echo keep > reg/keep.txt"),
       C("regress_out_is_cwd", "output folder",
         "regress --parts {DATA}/regress/parts --goldens {D}/g --only reg-dome-a --out .", 2, {"current directory"})
@@ -188,20 +189,20 @@ inline std::vector<Case> AllCases() {
           .Copy("tp.csv"),
       C("project_out_is_points", "output path", kProject + "scan.csv --out scan.csv", 2, {"scan.csv", "--points"})
           .Copy("scan.csv"),
-      C("moran_lisa_is_points", "output path",
-        "analyse moran --points t.csv --value v --knn 2 --style W --lisa t.csv", 2, {"t.csv", "--lisa"})
+      C("moran_lisa_is_points", "output path", "analyse moran --points t.csv --value v --knn 2 --style W --lisa t.csv",
+        2, {"t.csv", "--lisa"})
           .File("t.csv", "x,y,v\n0,0,1\n1,0,2\n0,1,3\n1,1,4\n2,2,5\n"),
       C("fit_out_is_input", "output path", "fit Q.step --out Q.step", 2, {"Q.step", "INPUT"}).Copy("Q.step"),
       C("simulate_out_is_model", "output path", "simulate --run {F}/run --model m.json --out m.json", 2,
         {"m.json", "--model"})
           .File("m.json", [](const Fixtures& f) { return f.Read("model.json"); }),
-      C("simulate_out_is_truth", "output path", "simulate --run {F}/run --model {F}/model.json --out a.csv --truth a.csv",
-        2, {"a.csv", "--truth"}),
+      C("simulate_out_is_truth", "output path",
+        "simulate --run {F}/run --model {F}/model.json --out a.csv --truth a.csv", 2, {"a.csv", "--truth"}),
       C("simulate_out_in_run_folder", "output path",
         "simulate --run run --model {F}/model.json --out run/toolpath/toolpath.csv", 2, {"toolpath.csv"})
           .Copy("run"),
-      C("calibrate_out_is_log", "output path",
-        "calibrate sphere sphere.csv --radius 12.5 --ball 1 --out sphere.csv", 2, {"sphere.csv", "--out"})
+      C("calibrate_out_is_log", "output path", "calibrate sphere sphere.csv --radius 12.5 --ball 1 --out sphere.csv", 2,
+        {"sphere.csv", "--out"})
           .Copy("sphere.csv"),
       C("nc_path_out_is_surface", "output path", "nc path --surface Q.step --out Q.step", 2, {"Q.step", "--surface"})
           .Copy("Q.step"),
@@ -213,7 +214,8 @@ inline std::vector<Case> AllCases() {
         {"--report"}),
 
       // ---- point files: CSV, XYZ, PLY, PCD
-      C("csv_missing_column_z", "point file", "fit p.csv --out q.step", 2, {"p.csv:1", "z"}).File("p.csv", "x,y\n1,2\n"),
+      C("csv_missing_column_z", "point file", "fit p.csv --out q.step", 2, {"p.csv:1", "z"})
+          .File("p.csv", "x,y\n1,2\n"),
       C("csv_not_a_number", "point file", "fit p.csv --out q.step", 2, {"p.csv:3", "field 'y'"})
           .File("p.csv", "x,y,z\n1,2,3\n4,abc,6\n"),
       C("csv_nan", "point file", "fit p.csv --out q.step", 2, {"p.csv:3", "field 'z'"})
@@ -230,7 +232,9 @@ inline std::vector<Case> AllCases() {
       C("csv_utf16", "point file", "fit p.csv --out q.step", 2, {"p.csv", "UTF-16"})
           .File("p.csv", std::string("\xFF\xFEx\0,\0y\0,\0z\0\n\0", 14)),
       C("csv_binary", "point file", "fit p.csv --out q.step", 2, {"p.csv"})
-          .File("p.csv", std::string("\x7f" "ELF\x02\x01\x01\0\0\0\0\0\0\0\0\0", 16)),
+          .File("p.csv", std::string("\x7f"
+                                     "ELF\x02\x01\x01\0\0\0\0\0\0\0\0\0",
+                                     16)),
       C("csv_decimal_comma_with_commas", "point file", "fit p.csv --out q.step", 2, {"p.csv:2", "decimal comma"})
           .File("p.csv", "x,y,z\n1,5,2,5,3,5\n"),
       C("csv_semicolon_not_a_number", "point file", "fit p.csv --out q.step", 2, {"p.csv:2", "field 'y'"})
@@ -257,8 +261,9 @@ inline std::vector<Case> AllCases() {
       C("ply_bad_magic", "point file", "fit p.ply --out q.step", 2, {"p.ply"})
           .File("p.ply", "plx\nformat ascii 1.0\nend_header\n"),
       C("ply_no_vertex_element", "point file", "fit p.ply --out q.step", 2, {"p.ply"})
-          .File("p.ply", "ply\nformat ascii 1.0\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
-                         "3 0 1 2\n"),
+          .File("p.ply",
+                "ply\nformat ascii 1.0\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                "3 0 1 2\n"),
       C("ply_ascii_huge_coordinate", "point file", kProject + "p.ply --out o.csv", 2, {"p.ply:9", "field 'y'"})
           .File("p.ply",
                 "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\n"
@@ -314,7 +319,8 @@ inline std::vector<Case> AllCases() {
           .File("g.step", "ISO-10303-21;\nDATA;\n#1=FOO(;\n"),
 
       // ---- part JSON (formloop run PART)
-      C("part_syntax_error", "part JSON", "run p.json --out r", 2, {"p.json:2", "column"}).File("p.json", "{ \"name\": \n"),
+      C("part_syntax_error", "part JSON", "run p.json --out r", 2, {"p.json:2", "column"})
+          .File("p.json", "{ \"name\": \n"),
       C("part_unknown_field", "part JSON", "run p.json --out r", 2, {"p.json", "tolrance_mm"})
           .File("p.json", PartWith("/tolrance_mm", 0.01)),
       C("part_tolerance_negative", "part JSON", "run p.json --out r", 2, {"p.json", "tolerance_mm"})
@@ -451,8 +457,7 @@ inline std::vector<Case> AllCases() {
       C("run_measured_missing", "probe log", "run {F}/part.json --measured nolog.csv --out r", 2, {"nolog.csv"}),
       C("log_utf16", "probe log", kAnalyse + "l.csv", 2, {"l.csv", "UTF-16"})
           .File("l.csv", std::string("\xFF\xFEi\0d\0,\0x\0\n\0", 12)),
-      C("calibrate_log_missing_columns", "probe log", "calibrate sphere l.csv --radius 12.5 --ball 1", 2,
-        {"l.csv:1"})
+      C("calibrate_log_missing_columns", "probe log", "calibrate sphere l.csv --radius 12.5 --ball 1", 2, {"l.csv:1"})
           .File("l.csv", "id,x,y,z\n1,0,0,13.5\n"),
       C("calibrate_log_too_few_points", "probe log", "calibrate sphere l.csv --radius 12.5 --ball 1", 2, {"l.csv"})
           .File("l.csv", "id,x,y,z,ax,ay,az,t\n1,0,0,13.5,0,0,-1,0\n2,0,13.5,0,0,-1,0,1\n"),
@@ -460,8 +465,7 @@ inline std::vector<Case> AllCases() {
           .File("l.csv", "id,x,y,z,ax,ay,az,t\n1,0,0,zz,0,0,-1,0\n"),
 
       // ---- probing plans
-      C("plan_json_normal_not_unit", "probing plan", kAnalyse + "{F}/log.csv --plan p.json", 2,
-        {"p.json", "normal"})
+      C("plan_json_normal_not_unit", "probing plan", kAnalyse + "{F}/log.csv --plan p.json", 2, {"p.json", "normal"})
           .File("p.json", Changed("plan.json", "\"normal\": [\n        0.", "\"normal\": [\n        5.")),
       C("plan_json_duplicate_id", "probing plan", kAnalyse + "{F}/log.csv --plan p.json", 2, {"p.json", "id"})
           .File("p.json", Changed("plan.json", "\"id\": 2,", "\"id\": 1,")),
@@ -471,8 +475,8 @@ inline std::vector<Case> AllCases() {
           .File("p.json", "{\"count\": 0, \"points\": []}\n"),
       C("plan_json_syntax", "probing plan", kAnalyse + "{F}/log.csv --plan p.json", 2, {"p.json"})
           .File("p.json", "{\"points\": [\n"),
-      C("plan_csv_missing_u", "probing plan", "simulate --run {F}/run --model {F}/model.json --probe-plan p.csv --out o.csv",
-        2, {"p.csv"})
+      C("plan_csv_missing_u", "probing plan",
+        "simulate --run {F}/run --model {F}/model.json --probe-plan p.csv --out o.csv", 2, {"p.csv"})
           .File("p.csv", "id,v,x,y,z,nx,ny,nz\n1,0,0,0,0,0,0,1\n"),
       C("plan_csv_approach_outward", "probing plan",
         "simulate --run {F}/run --model {F}/model.json --probe-plan p.csv --out o.csv", 2, {"p.csv:2", "ax,ay,az"})
@@ -508,7 +512,8 @@ inline std::vector<Case> AllCases() {
                   return at == std::string::npos ? text : text.replace(at + 5, 0, "1e300");
                 })
           .File("s.csv", [](const Fixtures& f) { return f.Read("side.csv"); }),
-      C("nc_compensate_nominal_garbage", "G-code", kCompensate + "--nominal n.ngc --out p.ngc --side s.csv", 2, {"n.ngc"})
+      C("nc_compensate_nominal_garbage", "G-code", kCompensate + "--nominal n.ngc --out p.ngc --side s.csv", 2,
+        {"n.ngc"})
           .Copy("tp.csv")
           .Copy("field.csv")
           .File("n.ngc", "G1 X1 Y\n"),
@@ -550,47 +555,57 @@ inline std::vector<Case> AllCases() {
       C("kb_add_material_with_space", "case JSON", "kb add kb.sqlite c.json", 2,
         {"example-blade-001", "material", "h13 "})
           .Copy("kb.sqlite")
-          .File("c.json", [](const Fixtures& f) {
-            nlohmann::json c = nlohmann::json::parse(ReadText(fs::path(FORMLOOP_SOURCE_DIR) / "data/kb/example_case.json"));
-            c["part"]["material"] = "h13 ";
-            c["concepts"]["material"] = "h13 ";
-            c["descriptor"] = std::vector<double>(24, 1.0);
-            return c.dump(2);
-          }),
+          .File("c.json",
+                [](const Fixtures& f) {
+                  nlohmann::json c =
+                      nlohmann::json::parse(ReadText(fs::path(FORMLOOP_SOURCE_DIR) / "data/kb/example_case.json"));
+                  c["part"]["material"] = "h13 ";
+                  c["concepts"]["material"] = "h13 ";
+                  c["descriptor"] = std::vector<double>(24, 1.0);
+                  return c.dump(2);
+                }),
       C("kb_add_short_descriptor", "case JSON", "kb add kb.sqlite c.json", 2, {"example-blade-001", "descriptor"})
           .Copy("kb.sqlite")
-          .File("c.json", [](const Fixtures& f) {
-            nlohmann::json c = nlohmann::json::parse(ReadText(fs::path(FORMLOOP_SOURCE_DIR) / "data/kb/example_case.json"));
-            c["descriptor"] = std::vector<double>(10, 1.0);
-            return c.dump(2);
-          }),
+          .File("c.json",
+                [](const Fixtures& f) {
+                  nlohmann::json c =
+                      nlohmann::json::parse(ReadText(fs::path(FORMLOOP_SOURCE_DIR) / "data/kb/example_case.json"));
+                  c["descriptor"] = std::vector<double>(10, 1.0);
+                  return c.dump(2);
+                }),
       C("kb_add_descriptor_with_string", "case JSON", "kb add kb.sqlite c.json", 2, {"example-blade-001", "descriptor"})
           .Copy("kb.sqlite")
-          .File("c.json", [](const Fixtures& f) {
-            nlohmann::json c = nlohmann::json::parse(ReadText(fs::path(FORMLOOP_SOURCE_DIR) / "data/kb/example_case.json"));
-            std::vector<nlohmann::json> d(24, 1.0);
-            d[5] = "x";
-            c["descriptor"] = d;
-            return c.dump(2);
-          }),
+          .File("c.json",
+                [](const Fixtures& f) {
+                  nlohmann::json c =
+                      nlohmann::json::parse(ReadText(fs::path(FORMLOOP_SOURCE_DIR) / "data/kb/example_case.json"));
+                  std::vector<nlohmann::json> d(24, 1.0);
+                  d[5] = "x";
+                  c["descriptor"] = d;
+                  return c.dump(2);
+                }),
       C("kb_add_unknown_shape", "case JSON", "kb add kb.sqlite c.json", 2, {"example-blade-001", "shape", "teapot"})
           .Copy("kb.sqlite")
-          .File("c.json", [](const Fixtures& f) {
-            nlohmann::json c = nlohmann::json::parse(ReadText(fs::path(FORMLOOP_SOURCE_DIR) / "data/kb/example_case.json"));
-            c["concepts"]["shape"] = "teapot";
-            c["descriptor"] = std::vector<double>(24, 1.0);
-            return c.dump(2);
-          }),
+          .File("c.json",
+                [](const Fixtures& f) {
+                  nlohmann::json c =
+                      nlohmann::json::parse(ReadText(fs::path(FORMLOOP_SOURCE_DIR) / "data/kb/example_case.json"));
+                  c["concepts"]["shape"] = "teapot";
+                  c["descriptor"] = std::vector<double>(24, 1.0);
+                  return c.dump(2);
+                }),
       C("kb_add_not_json", "case JSON", "kb add kb.sqlite c.json", 2, {"c.json"})
           .Copy("kb.sqlite")
           .File("c.json", "{ uid: x }\n"),
       C("kb_add_missing_uid", "case JSON", "kb add kb.sqlite c.json", 2, {"c.json", "uid"})
           .Copy("kb.sqlite")
-          .File("c.json", [](const Fixtures& f) {
-            nlohmann::json c = nlohmann::json::parse(ReadText(fs::path(FORMLOOP_SOURCE_DIR) / "data/kb/example_case.json"));
-            c.erase("uid");
-            return c.dump(2);
-          }),
+          .File("c.json",
+                [](const Fixtures& f) {
+                  nlohmann::json c =
+                      nlohmann::json::parse(ReadText(fs::path(FORMLOOP_SOURCE_DIR) / "data/kb/example_case.json"));
+                  c.erase("uid");
+                  return c.dump(2);
+                }),
       C("kb_import_bad_line", "case library export", "kb import kb.sqlite e.jsonl", 2, {"e.jsonl:2"})
           .Copy("kb.sqlite")
           .Setup("'" FORMLOOP_BINARY "' -q kb export kb.sqlite --out full.jsonl && head -1 full.jsonl > e.jsonl && "
@@ -621,7 +636,8 @@ inline std::vector<Case> AllCases() {
           .File("m.json", "{\"effects\": [\n"),
       C("simulate_model_unknown_effect", "model JSON", "simulate --run {F}/run --model m.json --out o.csv", 2,
         {"m.json", "wobble"})
-          .File("m.json", R"({"format": "formloop-model", "version": 1, "effects": [{"name": "wobble", "parameters": {}}]})"),
+          .File("m.json",
+                R"({"format": "formloop-model", "version": 1, "effects": [{"name": "wobble", "parameters": {}}]})"),
       C("simulate_model_parameter_string", "model JSON", "simulate --run {F}/run --model m.json --out o.csv", 2,
         {"m.json", "delta_r_um"})
           .File("m.json", R"({"format": "formloop-model", "version": 1,
@@ -630,9 +646,10 @@ inline std::vector<Case> AllCases() {
         {"m.json", "delta_r_um"})
           .File("m.json", R"({"format": "formloop-model", "version": 1,
                               "effects": [{"name": "tool_radius", "parameters": {"delta_r_um": 1e300}}]})"),
-      C("diagnose_baseline_unknown_effect", "model JSON", "diagnose --measured {F}/log.csv --run {F}/run --baseline b.json --out d",
-        2, {"b.json", "wobble"})
-          .File("b.json", R"({"format": "formloop-model", "version": 1, "effects": [{"name": "wobble", "parameters": {}}]})"),
+      C("diagnose_baseline_unknown_effect", "model JSON",
+        "diagnose --measured {F}/log.csv --run {F}/run --baseline b.json --out d", 2, {"b.json", "wobble"})
+          .File("b.json",
+                R"({"format": "formloop-model", "version": 1, "effects": [{"name": "wobble", "parameters": {}}]})"),
       C("analyse_profile_bad_json", "probe profile", kAnalyse + "{F}/log.csv --probe-profile pp.json", 2, {"pp.json"})
           .File("pp.json", "{\"ball_radius_mm\": \n"),
       C("analyse_profile_negative_radius", "probe profile", kAnalyse + "{F}/log.csv --probe-profile pp.json", 2,
@@ -653,8 +670,8 @@ inline std::vector<Case> AllCases() {
       C("fit_method_bogus", "options", "fit {F}/scan.csv --method bogus --out q.step", 2, {"--method"}),
       C("fit_check_negative", "options", "fit analytic:saddle --check -5 --out q.step", 2, {"--check"}),
       C("fit_out_not_step", "options", "fit analytic:saddle --out q.stl", 2, {"q.stl"}),
-      C("nc_path_fanuc_five_decimals", "options", "nc path --surface {F}/Q.step --dialect fanuc --decimals 5 --out p.nc",
-        2, {"--decimals"}),
+      C("nc_path_fanuc_five_decimals", "options",
+        "nc path --surface {F}/Q.step --dialect fanuc --decimals 5 --out p.nc", 2, {"--decimals"}),
       C("nc_path_scallop_tiny", "options", "nc path --surface {F}/Q.step --scallop-um 0.000001 --out p.ngc", 2,
         {"--scallop-um"}),
       C("nc_path_chord_tiny", "options", "nc path --surface {F}/Q.step --chord-um 1e-9 --out p.ngc", 2, {"--chord-um"}),
@@ -698,8 +715,7 @@ inline std::vector<Case> AllCases() {
       C("analyse_register_bogus", "options", kAnalyse + "{F}/log.csv --register tq", 2, {"--register"}),
       C("analyse_knn_zero", "options", kAnalyse + "{F}/log.csv --knn 0", 2, {"--knn"}),
       C("analyse_no_out", "options", "analyse --surface {F}/Q.step --probe-log {F}/log.csv", 2, {"--out"}),
-      C("calibrate_radius_negative", "options", "calibrate sphere {F}/sphere.csv --radius -1 --ball 1", 2,
-        {"radius"}),
+      C("calibrate_radius_negative", "options", "calibrate sphere {F}/sphere.csv --radius -1 --ball 1", 2, {"radius"}),
       C("calibrate_lobes_nine", "options", "calibrate sphere {F}/sphere.csv --radius 12.5 --ball 1 --lobes 9", 2,
         {"--lobes"}),
       C("synth_sphere_points_huge", "options", "calibrate synth-sphere --out s.csv --points 1000000000", 2,

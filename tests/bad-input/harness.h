@@ -78,12 +78,12 @@ inline Content Text(std::string text) {
 }
 
 struct Case {
-  std::string name;    // unique, [A-Za-z0-9_]
-  std::string reader;  // what is tried: "point file", "part JSON", "output folder", ...
+  std::string name;                                    // unique, [A-Za-z0-9_]
+  std::string reader;                                  // what is tried: "point file", "part JSON", "output folder", ...
   std::vector<std::pair<std::string, Content>> files;  // written into the case folder first
   std::vector<std::string> copies;                     // fixture entries copied into the case folder
   std::vector<std::string> setup;                      // shell commands run in the case folder first
-  std::string args;    // after the binary; {F} fixture folder, {D} case folder, {DATA} the project's data/
+  std::string args;  // after the binary; {F} fixture folder, {D} case folder, {DATA} the project's data/
   int exit_code = 2;
   std::vector<std::string> mentions;  // substrings the message (stderr) must hold
   std::string cwd;                    // relative to the case folder (empty: the case folder)
@@ -96,18 +96,23 @@ struct Case {
 enum class Outcome { kClear, kVague, kSilent, kPartial, kCrash };
 inline const char* OutcomeName(Outcome o) {
   switch (o) {
-    case Outcome::kClear: return "clear";
-    case Outcome::kVague: return "vague";
-    case Outcome::kSilent: return "silent";
-    case Outcome::kPartial: return "partial";
-    case Outcome::kCrash: return "crash";
+    case Outcome::kClear:
+      return "clear";
+    case Outcome::kVague:
+      return "vague";
+    case Outcome::kSilent:
+      return "silent";
+    case Outcome::kPartial:
+      return "partial";
+    case Outcome::kCrash:
+      return "crash";
   }
   return "?";
 }
 
 struct Result {
   Outcome outcome = Outcome::kClear;
-  int exit_code = 0;        // -1: no normal exit
+  int exit_code = 0;  // -1: no normal exit
   int signal = 0;
   bool timed_out = false;
   std::string err, out;
@@ -233,8 +238,10 @@ inline std::vector<std::string> Diff(const Snapshot& before, const Snapshot& aft
   std::vector<std::string> changes;
   for (const auto& [path, value] : before) {
     const auto it = after.find(path);
-    if (it == after.end()) changes.push_back("- " + prefix + path);
-    else if (it->second != value) changes.push_back("~ " + prefix + path);
+    if (it == after.end())
+      changes.push_back("- " + prefix + path);
+    else if (it->second != value)
+      changes.push_back("~ " + prefix + path);
   }
   for (const auto& [path, value] : after) {
     if (!before.count(path)) changes.push_back("+ " + prefix + path);
@@ -278,9 +285,9 @@ inline fs::path EnsureFixtures(const std::string& binary, const fs::path& root, 
   const auto size = fs::file_size(binary, ec);
   struct stat info {};
   ::stat(binary.c_str(), &info);
-  const std::string key = std::to_string(Hash(binary + ":" + std::to_string(size) + ":" +
-                                              std::to_string(info.st_mtim.tv_sec) + "." +
-                                              std::to_string(info.st_mtim.tv_nsec)));
+  const std::string key =
+      std::to_string(Hash(binary + ":" + std::to_string(size) + ":" + std::to_string(info.st_mtim.tv_sec) + "." +
+                          std::to_string(info.st_mtim.tv_nsec)));
   fs::create_directories(root, ec);
   const fs::path dir = root / key;
   const int lock = ::open((root / "lock").c_str(), O_RDWR | O_CREAT, 0644);
@@ -326,9 +333,10 @@ inline fs::path EnsureFixtures(const std::string& binary, const fs::path& root, 
       if (cells.size() > 8) field += cells[7] + "," + cells[8] + "," + std::to_string(0.05 * n++) + "\n";
     }
     WriteText(dir / "field.csv", field);
-    WriteText(dir / "model.json",
-              R"({"format": "formloop-model", "version": 1, "effects": [{"name": "tool_radius", "parameters": {"delta_r_um": -5}}]})"
-              "\n");
+    WriteText(
+        dir / "model.json",
+        R"({"format": "formloop-model", "version": 1, "effects": [{"name": "tool_radius", "parameters": {"delta_r_um": -5}}]})"
+        "\n");
     fs::remove(dir / "step.out", ec);
     fs::remove(dir / "step.err", ec);
     WriteText(dir / "ready", key);
@@ -411,15 +419,15 @@ inline Result RunCase(const Case& c, const std::string& binary, const fs::path& 
   }
   bool partial = false;
   for (const auto& change : r.changes) {
-    if (change[0] == '+' && (change.find(".partial") != std::string::npos || change.find(".tmp-") != std::string::npos)) {
+    if (change[0] == '+' &&
+        (change.find(".partial") != std::string::npos || change.find(".tmp-") != std::string::npos)) {
       partial = true;
     }
   }
-  const bool crashed = e.timed_out || e.signal != 0 || (e.code != 0 && e.code != 1 && e.code != 2) ||
-                       r.err.find("unexpected exception") != std::string::npos ||
-                       r.err.find("terminate called") != std::string::npos ||
-                       r.err.find("runtime error:") != std::string::npos ||
-                       r.err.find("AddressSanitizer") != std::string::npos;
+  const bool crashed =
+      e.timed_out || e.signal != 0 || (e.code != 0 && e.code != 1 && e.code != 2) ||
+      r.err.find("unexpected exception") != std::string::npos || r.err.find("terminate called") != std::string::npos ||
+      r.err.find("runtime error:") != std::string::npos || r.err.find("AddressSanitizer") != std::string::npos;
   if (crashed) {
     r.outcome = Outcome::kCrash;
   } else if (partial) {

@@ -19,9 +19,9 @@
 
 #include "cnc/controller.h"
 #include "core/json_io.h"
-#include "metrology/probe.h"
 #include "core/point_io.h"
 #include "core/random.h"
+#include "metrology/probe.h"
 #include "tests/cnc/process_support.h"
 #include "tests/support/test_dir.h"
 
@@ -314,14 +314,15 @@ TEST_F(LinkProcessTest, CollectWritesAProbeLogOfTheRun) {
   const metrology::ProbingPlan probing = SyntheticPlan(40);
   ASSERT_TRUE(WriteJsonFile(plan, probing.ToJson()).ok());
   pid_t emulator = -1;
-  const std::string address = StartEmulator(
-      dir_, {"--points", "40", "--dwell-ms", "2", "--measure-ms", "1", "--record", (dir_ / "record.csv").string(), "--linger-s", "0.5"},
-      &guard, &emulator);
+  const std::string address = StartEmulator(dir_,
+                                            {"--points", "40", "--dwell-ms", "2", "--measure-ms", "1", "--record",
+                                             (dir_ / "record.csv").string(), "--linger-s", "0.5"},
+                                            &guard, &emulator);
   ASSERT_FALSE(address.empty());
-  const pid_t collector = SpawnFormloop({"link", "collect", "--address", address, "--out", (dir_ / "P.csv").string(), "--expect",
-                                         "40", "--poll-ms", "1", "--plan", plan.string(), "--probe-log",
-                                         (dir_ / "probe_log.csv").string(), "--quiet"},
-                                        dir_ / "collect.out", dir_ / "collect.err");
+  const pid_t collector = SpawnFormloop(
+      {"link", "collect", "--address", address, "--out", (dir_ / "P.csv").string(), "--expect", "40", "--poll-ms", "1",
+       "--plan", plan.string(), "--probe-log", (dir_ / "probe_log.csv").string(), "--quiet"},
+      dir_ / "collect.out", dir_ / "collect.err");
   guard.pids.push_back(collector);
   ASSERT_EQ(WaitFor(collector, 60), 0) << *ReadFile(dir_ / "collect.err");
   EXPECT_EQ(WaitFor(emulator, 30), 0);
@@ -379,15 +380,14 @@ TEST_F(LinkProcessTest, ProgramAndCheckCommands) {
 TEST_F(LinkProcessTest, SkippedPointsMakeTheCollectionFail) {
   ProcessGuard guard;
   pid_t emulator = -1;
-  const std::string address = StartEmulator(
-      dir_, {"--points", "30", "--dwell-ms", "2", "--measure-ms", "1", "--skip-rate", "0.2", "--seed", "7",
-             "--ack-timeout-s", "5", "--linger-s", "0.5"},
-      &guard, &emulator);
+  const std::string address = StartEmulator(dir_,
+                                            {"--points", "30", "--dwell-ms", "2", "--measure-ms", "1", "--skip-rate",
+                                             "0.2", "--seed", "7", "--ack-timeout-s", "5", "--linger-s", "0.5"},
+                                            &guard, &emulator);
   ASSERT_FALSE(address.empty());
-  const pid_t collector =
-      SpawnFormloop({"link", "collect", "--address", address, "--out", (dir_ / "P.csv").string(), "--poll-ms", "1",
-                     "--idle-timeout-s", "20"},
-                    dir_ / "collect.out", dir_ / "collect.err");
+  const pid_t collector = SpawnFormloop({"link", "collect", "--address", address, "--out", (dir_ / "P.csv").string(),
+                                         "--poll-ms", "1", "--idle-timeout-s", "20"},
+                                        dir_ / "collect.out", dir_ / "collect.err");
   guard.pids.push_back(collector);
   EXPECT_EQ(WaitFor(collector, 60), 1);
   WaitFor(emulator, 30);

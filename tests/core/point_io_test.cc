@@ -250,8 +250,7 @@ TEST_F(PointIoTest, FormatFromPath) {
   EXPECT_EQ(*PointFormatFromPath("b.txt"), PointFormat::kXyz);
   EXPECT_EQ(*PointFormatFromPath("b.Ply"), PointFormat::kPly);
   EXPECT_EQ(*PointFormatFromPath("b.pcd"), PointFormat::kPcd);
-  ExpectError(PointFormatFromPath("scan.las").status(), StatusCode::kBadInput,
-              {"scan.las", "'.las'", "Fix:"});
+  ExpectError(PointFormatFromPath("scan.las").status(), StatusCode::kBadInput, {"scan.las", "'.las'", "Fix:"});
   ExpectError(PointFormatFromPath("scan").status(), StatusCode::kBadInput, {"scan", "no extension"});
 }
 
@@ -302,10 +301,9 @@ TEST_F(CsvTest, RoundTripWithNineDecimals) {
 }
 
 TEST_F(CsvTest, CommentsBlankLinesSpacesAndCrlf) {
-  const fs::path path =
-      WriteBytes("a.csv",
-                 "# exported by a probe\r\n\r\n x , y ,z, deviation_um ,id\r\n1, 2, 3, 4.5, 7\r\n"
-                 "# a comment between rows\r\n\r\n5,6,7,-8,+9\r\n");
+  const fs::path path = WriteBytes("a.csv",
+                                   "# exported by a probe\r\n\r\n x , y ,z, deviation_um ,id\r\n1, 2, 3, 4.5, 7\r\n"
+                                   "# a comment between rows\r\n\r\n5,6,7,-8,+9\r\n");
   auto points = ReadCsv(path);
   ASSERT_TRUE(points.ok()) << points.status().ToString();
   ASSERT_EQ(points->size(), 2u);
@@ -342,8 +340,7 @@ TEST_F(CsvTest, NanAndInfAreRejected) {
 }
 
 TEST_F(CsvTest, EmptyFile) {
-  ExpectError(ReadCsv(WriteBytes("empty.csv", "")).status(), StatusCode::kBadInput,
-              {"empty.csv", "no points"});
+  ExpectError(ReadCsv(WriteBytes("empty.csv", "")).status(), StatusCode::kBadInput, {"empty.csv", "no points"});
   ExpectError(ReadCsv(WriteBytes("comments.csv", "# nothing\n\n")).status(), StatusCode::kBadInput,
               {"comments.csv", "no points"});
 }
@@ -441,8 +438,7 @@ TEST_F(XyzTest, CommentsTabsAndCrlf) {
 TEST_F(XyzTest, InconsistentColumnCount) {
   ExpectError(ReadXyz(WriteBytes("mixed.xyz", "1 2 3\n# c\n4 5 6 0 0 1\n")).status(), StatusCode::kBadInput,
               {"mixed.xyz:3", "6 values", "line 1 has 3"});
-  ExpectError(ReadXyz(WriteBytes("four.xyz", "1 2 3 4\n")).status(), StatusCode::kBadInput,
-              {"four.xyz:1", "4 values"});
+  ExpectError(ReadXyz(WriteBytes("four.xyz", "1 2 3 4\n")).status(), StatusCode::kBadInput, {"four.xyz:1", "4 values"});
 }
 
 TEST_F(XyzTest, BadValues) {
@@ -562,11 +558,10 @@ TEST_F(PlyTest, SkipsElementsBeforeVertex) {
 }
 
 TEST_F(PlyTest, AsciiWithFacesAfterVertices) {
-  auto points =
-      ReadPly(WriteBytes("faces.ply",
-                         "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
-                         "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
-                         "end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"));
+  auto points = ReadPly(WriteBytes("faces.ply",
+                                   "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                                   "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+                                   "end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"));
   ASSERT_TRUE(points.ok()) << points.status().ToString();
   EXPECT_EQ(points->size(), 3u);
   EXPECT_EQ(points->points[2], Eigen::Vector3d(0, 1, 0));
@@ -582,12 +577,11 @@ TEST_F(PlyTest, TruncatedBinary) {
 }
 
 TEST_F(PlyTest, ListPropertyOnVertex) {
-  ExpectError(
-      ReadPly(WriteBytes("list.ply",
-                         "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
-                         "property float z\nproperty list uchar float extra\nend_header\n1 2 3 1 4\n"))
-          .status(),
-      StatusCode::kBadInput, {"list.ply:7", "field 'extra'", "list"});
+  ExpectError(ReadPly(WriteBytes("list.ply",
+                                 "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+                                 "property float z\nproperty list uchar float extra\nend_header\n1 2 3 1 4\n"))
+                  .status(),
+              StatusCode::kBadInput, {"list.ply:7", "field 'extra'", "list"});
 }
 
 TEST_F(PlyTest, AsciiErrorsNameTheLine) {
@@ -596,8 +590,8 @@ TEST_F(PlyTest, AsciiErrorsNameTheLine) {
       "property int id\nend_header\n";
   ExpectError(ReadPly(WriteBytes("tokens.ply", header + "1 2 3 4\n1 2 3\n")).status(), StatusCode::kBadInput,
               {"tokens.ply:10", "vertex 1", "3 values", "4 properties"});
-  ExpectError(ReadPly(WriteBytes("word.ply", header + "1 2 3 4\n1 two 3 4\n")).status(),
-              StatusCode::kBadInput, {"word.ply:10", "field 'y'", "'two' is not a number"});
+  ExpectError(ReadPly(WriteBytes("word.ply", header + "1 2 3 4\n1 two 3 4\n")).status(), StatusCode::kBadInput,
+              {"word.ply:10", "field 'y'", "'two' is not a number"});
   ExpectError(ReadPly(WriteBytes("nan.ply", header + "1 2 nan 4\n1 2 3 4\n")).status(), StatusCode::kBadInput,
               {"nan.ply:9", "field 'z'", "not finite"});
   ExpectError(ReadPly(WriteBytes("id.ply", header + "1 2 3 4\n1 2 3 4.5\n")).status(), StatusCode::kBadInput,
@@ -614,14 +608,12 @@ TEST_F(PlyTest, BinaryNanNamesVertexAndField) {
   for (const double v : {1.0, 2.0, 3.0, 4.0, std::numeric_limits<double>::quiet_NaN(), 6.0}) {
     AppendLittleEndian<double>(v, &text);
   }
-  ExpectError(
-      ReadPly(WriteBytes("nan.ply", text)).status(), StatusCode::kBadInput,
-      {"nan.ply", "field 'y'", "vertex 1", "byte offset " + std::to_string(header_size + 32), "Fix:"});
+  ExpectError(ReadPly(WriteBytes("nan.ply", text)).status(), StatusCode::kBadInput,
+              {"nan.ply", "field 'y'", "vertex 1", "byte offset " + std::to_string(header_size + 32), "Fix:"});
 }
 
 TEST_F(PlyTest, HeaderErrors) {
-  ExpectError(ReadPly(WriteBytes("empty.ply", "")).status(), StatusCode::kBadInput,
-              {"empty.ply", "no points"});
+  ExpectError(ReadPly(WriteBytes("empty.ply", "")).status(), StatusCode::kBadInput, {"empty.ply", "no points"});
   ExpectError(ReadPly(WriteBytes("nope.ply", "solid cube\n")).status(), StatusCode::kBadInput,
               {"nope.ply:1", "not a PLY file"});
   ExpectError(ReadPly(WriteBytes("type.ply",
@@ -645,9 +637,8 @@ TEST_F(PlyTest, HeaderErrors) {
                                  "end_header\n1 2 3 0\n"))
                   .status(),
               StatusCode::kBadInput, {"normals.ply:3", "field 'ny'"});
-  ExpectError(
-      ReadPly(WriteBytes("open.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n")).status(),
-      StatusCode::kBadInput, {"open.ply", "end_header"});
+  ExpectError(ReadPly(WriteBytes("open.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n")).status(),
+              StatusCode::kBadInput, {"open.ply", "end_header"});
   ExpectError(ReadPly(WriteBytes("fmt.ply", "ply\nformat binary_middle_endian 1.0\nend_header\n")).status(),
               StatusCode::kBadInput, {"fmt.ply:2", "binary_middle_endian"});
 }
@@ -748,13 +739,11 @@ TEST_F(PcdTest, BadFilesAreReportedQuietly) {
   ::testing::internal::CaptureStderr();
   ExpectError(ReadPcd(WriteBytes("junk.pcd", "this is not a point cloud\n")).status(), StatusCode::kBadInput,
               {"junk.pcd", "Fix:"});
-  ExpectError(ReadPcd(WriteBytes("empty.pcd", "")).status(), StatusCode::kBadInput,
-              {"empty.pcd", "no points"});
+  ExpectError(ReadPcd(WriteBytes("empty.pcd", "")).status(), StatusCode::kBadInput, {"empty.pcd", "no points"});
   ExpectError(ReadPcd(Path("missing.pcd")).status(), StatusCode::kNotFound, {"missing.pcd"});
   const std::string header_xy =
       "VERSION .7\nFIELDS x y\nSIZE 4 4\nTYPE F F\nCOUNT 1 1\nWIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA ascii\n1 2\n";
-  ExpectError(ReadPcd(WriteBytes("noz.pcd", header_xy)).status(), StatusCode::kBadInput,
-              {"noz.pcd", "field 'z'"});
+  ExpectError(ReadPcd(WriteBytes("noz.pcd", header_xy)).status(), StatusCode::kBadInput, {"noz.pcd", "field 'z'"});
   const std::string partial =
       "VERSION .7\nFIELDS x y z normal_x\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH 1\nHEIGHT 1\n"
       "POINTS 1\nDATA ascii\n1 2 3 0\n";

@@ -22,7 +22,8 @@ using testing::SyntheticCase;
 CaseRecord RetrievableCase(int index) {
   CaseRecord r = SyntheticCase(index);
   std::vector<double> d(24, 0.0);
-  for (std::size_t k = 0; k < d.size(); ++k) d[k] = 1.0 + 0.01 * static_cast<double>(index) + 0.1 * static_cast<double>(k);
+  for (std::size_t k = 0; k < d.size(); ++k)
+    d[k] = 1.0 + 0.01 * static_cast<double>(index) + 0.1 * static_cast<double>(k);
   r.descriptor = d;
   r.concepts = {{"shape", "blade"},
                 {"material", "H13"},

@@ -21,9 +21,7 @@ namespace fs = std::filesystem;
 
 class KbLibraryTest : public ::testing::Test {
  protected:
-  void SetUp() override {
-    dir_ = formloop::testing::FreshTestDir("formloop-kblib");
-  }
+  void SetUp() override { dir_ = formloop::testing::FreshTestDir("formloop-kblib"); }
   void TearDown() override { fs::remove_all(dir_); }
 
   // A fresh library at the current schema.

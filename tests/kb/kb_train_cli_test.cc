@@ -56,17 +56,16 @@ TEST_F(KbTrainCliTest, StarterTrainRetrieveAddCheck) {
   EXPECT_FALSE(Out()["ghsom"]["stale"].get<bool>());
 
   // A query of the dome family, given by its surface parameters.
-  WriteBytes(dir_ / "query.json", nlohmann::json{{"name", "dome query"},
-                                                 {"shape_family", "sphere_cap"},
-                                                 {"material", "H13"},
-                                                 {"tolerance_mm", 0.01},
-                                                 {"finish_ra_um", 0.3},
-                                                 {"machine_class", "3-axis"},
-                                                 {"tool_radius_mm", 4},
-                                                 {"surface",
-                                                  {{"kind", "sphere_cap"},
-                                                   {"params", {{"size_mm", 90}, {"radius_ratio", 1.4}}}}}}
-                                                     .dump(2));
+  WriteBytes(dir_ / "query.json",
+             nlohmann::json{{"name", "dome query"},
+                            {"shape_family", "sphere_cap"},
+                            {"material", "H13"},
+                            {"tolerance_mm", 0.01},
+                            {"finish_ra_um", 0.3},
+                            {"machine_class", "3-axis"},
+                            {"tool_radius_mm", 4},
+                            {"surface", {{"kind", "sphere_cap"}, {"params", {{"size_mm", 90}, {"radius_ratio", 1.4}}}}}}
+                 .dump(2));
   ASSERT_EQ(Run("retrieve --library " + db + " --part " + P("query.json") + " --top 3"), 0) << err_;
   const auto r = Out();
   ASSERT_TRUE(r["route"]["name"].is_string());

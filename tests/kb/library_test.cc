@@ -27,7 +27,8 @@ TEST_F(KbLibraryTest, MigratesAVersion1LibraryWithItsCasesAndLoops) {
     ASSERT_TRUE(db.ok());
     const std::vector<Migration> v1(SchemaMigrations().begin(), SchemaMigrations().begin() + 1);
     ASSERT_TRUE(Migrate(db->get(), v1).ok());
-    ASSERT_TRUE((*db)->Execute(R"sql(
+    ASSERT_TRUE((*db)
+                    ->Execute(R"sql(
       INSERT INTO materials(id, name, taxonomy_path) VALUES (1, 'H13', 'metal/steel/tool steel/H13');
       INSERT INTO machines(id, name, controller) VALUES (1, 'dmu50', 'heidenhain');
       INSERT INTO tools(id, name, type, radius_mm) VALUES (1, 'ball6', 'ball_end', 3);
@@ -37,7 +38,8 @@ TEST_F(KbLibraryTest, MigratesAVersion1LibraryWithItsCasesAndLoops) {
                 '{"strategy":{"raster_angle_deg":30}}', '{"model_format":"step"}'),
                (2, 'plate', '2026-01-03T00:00:00Z', 'freeform', 'not json', NULL, 0.05, NULL, NULL, '{}', '{}');
       INSERT INTO case_loops(case_id, loop_index, form_error_mm, compensated) VALUES (1, 1, 0.012, 1), (1, 0, 0.05, 0);
-    )sql").ok());
+    )sql")
+                    .ok());
     ASSERT_EQ(*(*db)->QueryInt("PRAGMA user_version;"), 1);
   }
   const auto init = InitLibrary(path);
@@ -64,7 +66,7 @@ TEST_F(KbLibraryTest, MigratesAVersion1LibraryWithItsCasesAndLoops) {
   EXPECT_FALSE(a->descriptor.has_value());
   auto b = (*lib)->GetCase("v1-2");
   ASSERT_TRUE(b.ok());
-  EXPECT_FALSE(b->part.contains("material"));     // no material in v1: no key, not null
+  EXPECT_FALSE(b->part.contains("material"));  // no material in v1: no key, not null
   EXPECT_FALSE(b->manufacturing.contains("machine"));
 
   // case_loops survived and now points at the new cases table: removing the case removes its loops.
@@ -109,8 +111,8 @@ TEST_F(KbLibraryTest, AddGetListRemoveRoundTrip) {
   auto all = lib->ListCases();
   ASSERT_TRUE(all.ok());
   ASSERT_EQ(all->size(), 9u);
-  EXPECT_TRUE(std::is_sorted(all->begin(), all->end(),
-                             [](const CaseRecord& x, const CaseRecord& y) { return x.uid < y.uid; }));
+  EXPECT_TRUE(
+      std::is_sorted(all->begin(), all->end(), [](const CaseRecord& x, const CaseRecord& y) { return x.uid < y.uid; }));
   auto blades = lib->ListCases("turbine_blade");
   ASSERT_TRUE(blades.ok());
   EXPECT_EQ(blades->size(), 3u);
@@ -258,25 +260,30 @@ TEST_F(KbLibraryTest, ExportImportExportIsByteIdentical) {
 TEST_F(KbLibraryTest, ImportRefusesNewerFormatsAndBadLines) {
   auto lib = NewLibrary("cases.db");
   ASSERT_NE(lib, nullptr);
-  const std::string one_case =
-      nlohmann::json{{"type", "case"}, {"case", SyntheticCase(1).ToJson()}}.dump() + "\n";
-  const auto newer_format = lib->ImportText(
-      R"({"format":"formloop-case-library","format_version":2,"schema_version":2})" "\n" + one_case, "x.jsonl");
+  const std::string one_case = nlohmann::json{{"type", "case"}, {"case", SyntheticCase(1).ToJson()}}.dump() + "\n";
+  const auto newer_format =
+      lib->ImportText(R"({"format":"formloop-case-library","format_version":2,"schema_version":2})"
+                      "\n" +
+                          one_case,
+                      "x.jsonl");
   EXPECT_EQ(newer_format.status().code(), StatusCode::kBadInput);
   EXPECT_NE(newer_format.status().message().find("format version 2 is newer"), std::string::npos);
   EXPECT_NE(newer_format.status().message().find("upgrade formloop"), std::string::npos);
-  const auto newer_schema = lib->ImportText(
-      R"({"format":"formloop-case-library","format_version":1,"schema_version":7})" "\n" + one_case, "x.jsonl");
+  const auto newer_schema =
+      lib->ImportText(R"({"format":"formloop-case-library","format_version":1,"schema_version":7})"
+                      "\n" +
+                          one_case,
+                      "x.jsonl");
   EXPECT_NE(newer_schema.status().message().find("schema version 7"), std::string::npos);
   const auto not_ours = lib->ImportText("{\"hello\":1}\n", "x.jsonl");
   EXPECT_NE(not_ours.status().message().find("header"), std::string::npos);
   // A bad case on line 3 refuses the whole file: the good case on line 2 is not imported either.
   nlohmann::json bad = SyntheticCase(2).ToJson();
   bad["part"]["tolerance_mm"] = "tight";
-  const auto bad_line = lib->ImportText(
-      R"({"format":"formloop-case-library","format_version":1,"schema_version":2})" "\n" + one_case +
-          nlohmann::json{{"type", "case"}, {"case", bad}}.dump() + "\n",
-      "x.jsonl");
+  const auto bad_line = lib->ImportText(R"({"format":"formloop-case-library","format_version":1,"schema_version":2})"
+                                        "\n" +
+                                            one_case + nlohmann::json{{"type", "case"}, {"case", bad}}.dump() + "\n",
+                                        "x.jsonl");
   EXPECT_NE(bad_line.status().message().find("x.jsonl:3: field 'part.tolerance_mm'"), std::string::npos)
       << bad_line.status().message();
   EXPECT_EQ(*lib->db()->QueryInt("SELECT COUNT(*) FROM cases;"), 0);
@@ -304,8 +311,10 @@ TEST_F(KbLibraryTest, RulesAreVersionedAndChecked) {
   EXPECT_EQ(*lib->db()->QueryInt("SELECT COUNT(*) FROM rules WHERE active = 0;"), 4);
   EXPECT_TRUE(lib->Check()->clean());
   // A rule base broken behind the API's back is reported by check.
-  ASSERT_TRUE(lib->db()->Execute("UPDATE rules SET condition_json = '{\"similarity\":{\"ge\":1.2,\"le\":0.97}}' "
-                                 "WHERE active = 1 AND name = 'route.simulate';").ok());
+  ASSERT_TRUE(lib->db()
+                  ->Execute("UPDATE rules SET condition_json = '{\"similarity\":{\"ge\":1.2,\"le\":0.97}}' "
+                            "WHERE active = 1 AND name = 'route.simulate';")
+                  .ok());
   auto check = lib->Check();
   EXPECT_FALSE(check->clean());
   EXPECT_FALSE(check->rule_problems.empty());
@@ -347,8 +356,10 @@ TEST_F(KbLibraryTest, CheckFindsOrphansAndStaleGhsom) {
   EXPECT_EQ(*lib->db()->QueryInt("SELECT COUNT(*) FROM ghsom;"), 1);
 
   // An orphan concept row, written with foreign keys off by another program.
-  ASSERT_TRUE(lib->db()->Execute("PRAGMA foreign_keys = OFF; INSERT INTO case_concepts(case_id, facet, concept) "
-                                 "VALUES (9999, 'shape', 'ghost'); PRAGMA foreign_keys = ON;").ok());
+  ASSERT_TRUE(lib->db()
+                  ->Execute("PRAGMA foreign_keys = OFF; INSERT INTO case_concepts(case_id, facet, concept) "
+                            "VALUES (9999, 'shape', 'ghost'); PRAGMA foreign_keys = ON;")
+                  .ok());
   auto orphan = lib->Check();
   EXPECT_FALSE(orphan->clean());
   EXPECT_EQ(orphan->orphan_concepts, 1);

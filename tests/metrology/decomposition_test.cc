@@ -148,10 +148,10 @@ std::string Seeds(const std::vector<int>& seeds) {
 struct ItemFourFigures {
   int independent = 0, recovered_points = 0, recovered_grid = 0, constant_on_noise = 0, detected = 0;
   int field_independent = 0, filtered = 0, filter_vectors_max = 0;
-  double fine_scale_rms_max = 0;  // largest d_f RMS / σ where the filter ran
-  std::vector<double> grid_errors;      // d_s RMS error on the grid / σ, sorted
+  double fine_scale_rms_max = 0;    // largest d_f RMS / σ where the filter ran
+  std::vector<double> grid_errors;  // d_s RMS error on the grid / σ, sorted
   std::vector<int> model_counts = std::vector<int>(12, 0);
-  std::vector<int> not_independent;     // seeds of the smooth fields whose chosen residual is correlated
+  std::vector<int> not_independent;  // seeds of the smooth fields whose chosen residual is correlated
   // The oracle: the noise alone (deviation − true field) under the same test (residual Moran of the
   // constant model on the same weights). The test rejects at level 0.01, so even the exact field
   // leaves a "correlated" residual in about 1 % of seeds: no honest rule can do better than this.
@@ -243,15 +243,16 @@ TEST(DecompositionTest, SmoothFieldsGiveAnIndependentResidualAndRecoverTheField)
   std::printf("smooth fields, n = 1000: d_u independent %s, d_s within 0.3 sigma at points %s, on grid %s\n",
               Rate(f.independent, kSeeds).c_str(), Rate(f.recovered_points, kSeeds).c_str(),
               Rate(f.recovered_grid, kSeeds).c_str());
-  std::printf("  the field's own residual independent %s (the noise alone fails the same test in %s: %s); "
-              "filtered %d, at most %d vectors, d_f RMS at most %.3f sigma\n",
-              Rate(f.field_independent, kSeeds).c_str(),
-              Rate(static_cast<int>(f.noise_not_independent.size()), kSeeds).c_str(),
-              Seeds(f.noise_not_independent).c_str(), f.filtered, f.filter_vectors_max, f.fine_scale_rms_max);
-  std::printf("  seeds whose d_u is correlated: %s; grid RMS error / sigma: median %.3f, 95th %.3f, max %.3f; "
-              "chosen step counts:",
-              Seeds(f.not_independent).c_str(), f.grid_errors[kSeeds / 2], f.grid_errors[kSeeds * 95 / 100],
-              f.grid_errors.back());
+  std::printf(
+      "  the field's own residual independent %s (the noise alone fails the same test in %s: %s); "
+      "filtered %d, at most %d vectors, d_f RMS at most %.3f sigma\n",
+      Rate(f.field_independent, kSeeds).c_str(), Rate(static_cast<int>(f.noise_not_independent.size()), kSeeds).c_str(),
+      Seeds(f.noise_not_independent).c_str(), f.filtered, f.filter_vectors_max, f.fine_scale_rms_max);
+  std::printf(
+      "  seeds whose d_u is correlated: %s; grid RMS error / sigma: median %.3f, 95th %.3f, max %.3f; "
+      "chosen step counts:",
+      Seeds(f.not_independent).c_str(), f.grid_errors[kSeeds / 2], f.grid_errors[kSeeds * 95 / 100],
+      f.grid_errors.back());
   for (int c : f.model_counts) std::printf(" %d", c);
   std::printf("\n");
   EXPECT_EQ(f.independent, kSeeds);
@@ -289,8 +290,8 @@ TEST(DecompositionTest, FieldOfOneSigmaIsDetectedWithAThousandPoints) {
 // Disabled by default (about four times the three tests above); run with
 //   formloop_metrology_tests --gtest_also_run_disabled_tests --gtest_filter='*CvGuardStudy*'
 TEST(DecompositionTest, DISABLED_CvGuardStudy) {
-  std::printf("%-40s %12s %12s %12s %12s %10s %10s  %s\n", "guard, field independent", "d_u indep.", "d_s@points", "d_s@grid",
-              "noise->const", "detected", "grid_max", "seeds not independent");
+  std::printf("%-40s %12s %12s %12s %12s %10s %10s  %s\n", "guard, field independent", "d_u indep.", "d_s@points",
+              "d_s@grid", "noise->const", "detected", "grid_max", "seeds not independent");
   for (CvGuard guard : {CvGuard::kLowerHeldOutError, CvGuard::kOneStandardError, CvGuard::kOneStandardErrorFolds,
                         CvGuard::kIndependentWithinOneStandardError}) {
     DecompositionOptions options;

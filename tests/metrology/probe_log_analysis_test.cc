@@ -86,10 +86,21 @@ TEST(ProbeLogAnalysisTest, FlagsTheFarPointAndGivesOneConsistentTable) {
   const PointSet table = a->PerPointTable();
   std::vector<std::string> names;
   for (const auto& column : table.scalars) names.push_back(column.name);
-  const std::vector<std::string> expected = {"u",           "v",          "foot_x",        "foot_y",
-                                             "foot_z",      "deviation_um", "on_boundary", "systematic_um",
-                                             "fine_scale_um", "random_um", "lag_um",        "lisa_cluster",
-                                             "local_moran", "local_moran_random", "lisa_cluster_random"};
+  const std::vector<std::string> expected = {"u",
+                                             "v",
+                                             "foot_x",
+                                             "foot_y",
+                                             "foot_z",
+                                             "deviation_um",
+                                             "on_boundary",
+                                             "systematic_um",
+                                             "fine_scale_um",
+                                             "random_um",
+                                             "lag_um",
+                                             "lisa_cluster",
+                                             "local_moran",
+                                             "local_moran_random",
+                                             "lisa_cluster_random"};
   EXPECT_EQ(names, expected);
   EXPECT_EQ(ProbeLogAnalysis::PerPointColumns().size(), expected.size());
   const auto& d = *table.FindScalar("deviation_um");

@@ -147,9 +147,10 @@ TEST_F(ProbingPlanTest, CurvedRegionGetsDenserPointsThanAtWeightZero) {
   const int n_strong = CountNearCentre(*strong, kRadius);
   const double ratio = static_cast<double>(n_weighted) / std::max(n_uniform, 1);
   const double ratio_strong = static_cast<double>(n_strong) / std::max(n_uniform, 1);
-  std::printf("[probing plan] bump, %d points within r < %.1f mm: %d at weight 0, %d at weight 1 (ratio %.2f), "
-              "%d at weight 3 (ratio %.2f)\n",
-              kCount, kRadius, n_uniform, n_weighted, ratio, n_strong, ratio_strong);
+  std::printf(
+      "[probing plan] bump, %d points within r < %.1f mm: %d at weight 0, %d at weight 1 (ratio %.2f), "
+      "%d at weight 3 (ratio %.2f)\n",
+      kCount, kRadius, n_uniform, n_weighted, ratio, n_strong, ratio_strong);
   EXPECT_GE(n_uniform, 8);
   EXPECT_LE(n_uniform, 16);
   EXPECT_GE(ratio, 2.0);
@@ -186,11 +187,11 @@ TEST_F(ProbingPlanTest, BadInputIsRefusedNamingTheField) {
     const char* field;
   };
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  for (const Case& c : {Case{0, 0.05, 1.0, "probing.count"}, Case{-3, 0.05, 1.0, "probing.count"},
-                        Case{kMaxProbingCandidates + 1, 0.05, 1.0, "probing.count"},
-                        Case{10, -0.01, 1.0, "probing.inset_fraction"}, Case{10, 0.45, 1.0, "probing.inset_fraction"},
-                        Case{10, nan, 1.0, "probing.inset_fraction"}, Case{10, 0.05, -0.5, "probing.curvature_weight"},
-                        Case{10, 0.05, nan, "probing.curvature_weight"}}) {
+  for (const Case& c :
+       {Case{0, 0.05, 1.0, "probing.count"}, Case{-3, 0.05, 1.0, "probing.count"},
+        Case{kMaxProbingCandidates + 1, 0.05, 1.0, "probing.count"}, Case{10, -0.01, 1.0, "probing.inset_fraction"},
+        Case{10, 0.45, 1.0, "probing.inset_fraction"}, Case{10, nan, 1.0, "probing.inset_fraction"},
+        Case{10, 0.05, -0.5, "probing.curvature_weight"}, Case{10, 0.05, nan, "probing.curvature_weight"}}) {
     const auto plan = PlanProbingCurvatureWeighted(Q(), c.count, c.inset, c.weight);
     ASSERT_FALSE(plan.ok()) << c.field;
     EXPECT_EQ(plan.status().code(), StatusCode::kBadInput) << c.field;

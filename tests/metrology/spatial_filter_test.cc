@@ -96,8 +96,9 @@ TEST(SpatialFilterTest, RemovesPlantedStructureWithVectorsOrthogonalToTheField) 
   // The planted structure is what came out: d_f correlates with it.
   const Eigen::VectorXd planted = Values(s, 0.5, 12) - Values(s, 0.0, 12);
   const double corr = f->fitted.dot(planted) / (f->fitted.norm() * planted.norm());
-  std::printf("planted structure RMS 0.5 sigma: z %.2f -> %.2f with %d vectors; d_f RMS %.3f; corr(d_f, planted) %.2f\n",
-              f->z_before, f->final.z, f->vectors, std::sqrt(f->fitted.squaredNorm() / 800.0), corr);
+  std::printf(
+      "planted structure RMS 0.5 sigma: z %.2f -> %.2f with %d vectors; d_f RMS %.3f; corr(d_f, planted) %.2f\n",
+      f->z_before, f->final.z, f->vectors, std::sqrt(f->fitted.squaredNorm() / 800.0), corr);
   EXPECT_GT(corr, 0.5);
 
   // Same input, same output.

@@ -158,8 +158,8 @@ Fixture MakeFixture() {
   for (int i = 0; i < 12; ++i) {
     for (int j = 0; j < 12; ++j) {
       const double u = u0 + (u1 - u0) * i / 11.0, v = v0 + (v1 - v0) * j / 11.0;
-      samples.push_back({u, v, 5.0 * std::sin(2 * kPi * (u - u0) / (u1 - u0)) * std::cos(kPi * (v - v0) / (v1 - v0)),
-                         0});
+      samples.push_back(
+          {u, v, 5.0 * std::sin(2 * kPi * (u - u0) / (u1 - u0)) * std::cos(kPi * (v - v0) / (v1 - v0)), 0});
     }
   }
   auto field = DeviationField::Fit(samples, {});
@@ -178,7 +178,8 @@ std::string CorruptZ(const std::string& text, long line_number, double delta_mm)
       const auto z = line.find(" Z");
       const auto end = line.find(' ', z + 2);
       const double value = std::stod(line.substr(z + 2, end - z - 2));
-      line = line.substr(0, z + 2) + FormatFixed(value + delta_mm, 4) + (end == std::string::npos ? "" : line.substr(end));
+      line =
+          line.substr(0, z + 2) + FormatFixed(value + delta_mm, 4) + (end == std::string::npos ? "" : line.substr(end));
     }
     out += line + "\n";
   }
@@ -202,8 +203,10 @@ TEST(CompensationCheckTest, EveryBlockMovesByMinusDsNToOutputPrecisionAndTheSide
   const auto b = ReadLinuxCncMoves(*comp_text, "compensated");
   ASSERT_TRUE(a.ok() && b.ok());
   std::vector<const ProgramMove*> fa, fb;
-  for (const auto& m : *a) if (!m.rapid) fa.push_back(&m);
-  for (const auto& m : *b) if (!m.rapid) fb.push_back(&m);
+  for (const auto& m : *a)
+    if (!m.rapid) fa.push_back(&m);
+  for (const auto& m : *b)
+    if (!m.rapid) fb.push_back(&m);
   ASSERT_EQ(fa.size(), f.path.points.size());
   ASSERT_EQ(fb.size(), f.path.points.size());
   // Each axis of each tip is rounded to 0.05 µm, so each axis of the offset is within 0.1 µm.
@@ -250,8 +253,8 @@ TEST(CompensationCheckTest, ReportsExactlyTheCorruptedBlockWithItsLinesAndBothVa
   PostOptions post;
   const auto nominal_text = PostLinuxCnc(f.path, post);
   ASSERT_TRUE(nominal_text.ok());
-  const auto comp = WriteCompensatedProgram(f.path, *nominal_text, f.ds, "field", {}, post, dir / "c.ngc",
-                                            dir / "side.csv");
+  const auto comp =
+      WriteCompensatedProgram(f.path, *nominal_text, f.ds, "field", {}, post, dir / "c.ngc", dir / "side.csv");
   ASSERT_TRUE(comp.ok()) << comp.status().message();
   const auto side = ReadSideFile(dir / "side.csv");
   ASSERT_TRUE(side.ok());
@@ -328,8 +331,8 @@ TEST(CompensationCheckTest, OffsetAboveTheMaximumIsRefusedWithTheReasonAndNothin
   const SystematicField field = [&](double u, double v) {
     return 0.005 + 0.020 * std::exp(-((u - hot.u) * (u - hot.u) + (v - hot.v) * (v - hot.v)) / 1e-6);
   };
-  const auto result = WriteCompensatedProgram(path, *nominal_text, field, "too big", options, post,
-                                              dir / "c.ngc", dir / "side.csv");
+  const auto result =
+      WriteCompensatedProgram(path, *nominal_text, field, "too big", options, post, dir / "c.ngc", dir / "side.csv");
   ASSERT_FALSE(result.ok());
   EXPECT_EQ(result.status().code(), StatusCode::kSafetyLimit);
   const std::string& message = result.status().message();
@@ -341,9 +344,8 @@ TEST(CompensationCheckTest, OffsetAboveTheMaximumIsRefusedWithTheReasonAndNothin
   EXPECT_TRUE(fs::is_empty(dir));
   // Just under the limit it goes through.
   options.max_offset_um = 25.5;
-  EXPECT_TRUE(WriteCompensatedProgram(path, *nominal_text, field, "ok", options, post, dir / "c.ngc",
-                                      dir / "side.csv")
-                  .ok());
+  EXPECT_TRUE(
+      WriteCompensatedProgram(path, *nominal_text, field, "ok", options, post, dir / "c.ngc", dir / "side.csv").ok());
   EXPECT_TRUE(fs::exists(dir / "c.ngc") && fs::exists(dir / "side.csv"));
 }
 

@@ -82,7 +82,8 @@ TEST(PostTest, LinuxCncProgramReadsBackToTheToolpath) {
   }
   ASSERT_EQ(feeds.size(), path->points.size());
   double worst = 0;
-  for (std::size_t k = 0; k < feeds.size(); ++k) worst = std::max(worst, (feeds[k] - path->points[k].tip).cwiseAbs().maxCoeff());
+  for (std::size_t k = 0; k < feeds.size(); ++k)
+    worst = std::max(worst, (feeds[k] - path->points[k].tip).cwiseAbs().maxCoeff());
   EXPECT_LE(worst, 0.5e-4 + 1e-12);  // 4 decimals: half a unit in the last place
   // Block numbers do not disturb the reader.
   post.block_numbers = true;

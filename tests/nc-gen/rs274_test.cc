@@ -168,8 +168,8 @@ ToolCheck CheckToolLengthOffset(const Canon& canon, int tool) {
     if (check.wrong++ == 0) {
       check.first = "canon line " + std::to_string(m.line) + ": tool " + std::to_string(m.tool) +
                     " with length offset " + std::to_string(m.tool_length_z) + " mm; expected tool " +
-                    std::to_string(tool) + " with its " + std::to_string(length) + " mm (G43 H" +
-                    std::to_string(tool) + ")";
+                    std::to_string(tool) + " with its " + std::to_string(length) + " mm (G43 H" + std::to_string(tool) +
+                    ")";
     }
   }
   return check;
@@ -246,10 +246,10 @@ TEST_F(Rs274Test, CuttingProgramCanonicalMovesMatchTheMoveList) {
   EXPECT_EQ(c.probes, 0u);
   const ToolCheck tool = CheckToolLengthOffset(canon, 3);
   EXPECT_EQ(tool.wrong, 0u) << tool.first;
-  std::printf("[rs274] cutting  tool 3, length offset %.4f mm active at all %zu motions: the tip at the "
-              "programmed point, the gauge line %.4f mm above it\n",
-              canon.moves.empty() ? 0.0 : canon.moves.front().tool_length_z, canon.moves.size(),
-              Rs274ToolLengthsMm().at(3));
+  std::printf(
+      "[rs274] cutting  tool 3, length offset %.4f mm active at all %zu motions: the tip at the "
+      "programmed point, the gauge line %.4f mm above it\n",
+      canon.moves.empty() ? 0.0 : canon.moves.front().tool_length_z, canon.moves.size(), Rs274ToolLengthsMm().at(3));
 }
 
 TEST_F(Rs274Test, ProbingProgramCanonicalMovesMatchThePlan) {

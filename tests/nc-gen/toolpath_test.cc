@@ -72,10 +72,11 @@ TEST_P(ReferenceSurfaceToolpathTest, ScallopWithinTargetPlusChordAndNoGouge) {
   // Across the passes the grid is a tenth of the smallest step-over; along them 0.05 mm.
   const double dv = path->min_step_over_mm / 10;
   const CheckResult c = Check(*q, *path, 4, 4.0, 3.0, 0.05, dv, 1.0);
-  std::printf("[checker] %-18s CL %6zu passes %4d step-over %.4f..%.4f mm  max scallop %.3f um  max gouge %.3f um"
-              "  (%d samples, %d uncovered) lifted %d\n",
-              GetParam().c_str(), path->points.size(), path->passes, path->min_step_over_mm, path->max_step_over_mm,
-              c.max_scallop_um, c.max_gouge_um, c.samples, c.uncovered, path->lifted_points);
+  std::printf(
+      "[checker] %-18s CL %6zu passes %4d step-over %.4f..%.4f mm  max scallop %.3f um  max gouge %.3f um"
+      "  (%d samples, %d uncovered) lifted %d\n",
+      GetParam().c_str(), path->points.size(), path->passes, path->min_step_over_mm, path->max_step_over_mm,
+      c.max_scallop_um, c.max_gouge_um, c.samples, c.uncovered, path->lifted_points);
   EXPECT_EQ(c.uncovered, 0);
   EXPECT_LE(c.max_scallop_um, o.scallop_um + o.chord_tolerance_um);
   EXPECT_LE(c.max_gouge_um, 1.0);
@@ -139,11 +140,12 @@ TEST(ToolpathGougeTest, ConcaveBowlBelowTheBallRadiusIsLiftedFlaggedAndNotGouged
   // The whole bowl, densely: nothing inside the swept balls by more than 1 µm.
   const double dv = path->min_step_over_mm / 10;
   const CheckResult c = Check(*q, *path, 1, 5.8, 5.8, 0.04, std::min(dv, 0.04), 0.1);
-  std::printf("[checker] bowl R=2: CL %zu passes %d gouge-risk %d lifted %d (max lift %.4f mm, box x %.2f..%.2f y "
-              "%.2f..%.2f)  max gouge %.3f um  max material left %.1f um (%d samples)\n",
-              path->points.size(), path->passes, path->gouge_risk_points, path->lifted_points, path->max_lift_mm,
-              path->lifted_box_min.x(), path->lifted_box_max.x(), path->lifted_box_min.y(),
-              path->lifted_box_max.y(), c.max_gouge_um, c.max_scallop_um, c.samples);
+  std::printf(
+      "[checker] bowl R=2: CL %zu passes %d gouge-risk %d lifted %d (max lift %.4f mm, box x %.2f..%.2f y "
+      "%.2f..%.2f)  max gouge %.3f um  max material left %.1f um (%d samples)\n",
+      path->points.size(), path->passes, path->gouge_risk_points, path->lifted_points, path->max_lift_mm,
+      path->lifted_box_min.x(), path->lifted_box_max.x(), path->lifted_box_min.y(), path->lifted_box_max.y(),
+      c.max_gouge_um, c.max_scallop_um, c.samples);
   EXPECT_EQ(c.uncovered, 0);
   EXPECT_LE(c.max_gouge_um, 1.0);
   const nlohmann::json j = path->ReportJson();
@@ -232,10 +234,11 @@ TEST_P(RasterAngleTest, PassesLieInTheirPlanesAndMeetTheScallopTarget) {
 
   const double dv = path->min_step_over_mm / 10;
   const CheckResult c = Check(*q, *path, 3, 4.0, 4.0, 0.05, dv, 1.0);
-  std::printf("[checker] %-18s angle %5.1f %-8s CL %6zu passes %4d  max scallop %.3f um  max gouge %.3f um  (%d "
-              "samples, %d uncovered)\n",
-              param.surface.c_str(), param.angle_deg, param.zigzag ? "zig-zag" : "one-way", path->points.size(),
-              path->passes, c.max_scallop_um, c.max_gouge_um, c.samples, c.uncovered);
+  std::printf(
+      "[checker] %-18s angle %5.1f %-8s CL %6zu passes %4d  max scallop %.3f um  max gouge %.3f um  (%d "
+      "samples, %d uncovered)\n",
+      param.surface.c_str(), param.angle_deg, param.zigzag ? "zig-zag" : "one-way", path->points.size(), path->passes,
+      c.max_scallop_um, c.max_gouge_um, c.samples, c.uncovered);
   EXPECT_EQ(c.uncovered, 0);
   EXPECT_LE(c.max_scallop_um, o.scallop_um + o.chord_tolerance_um);
   EXPECT_LE(c.max_gouge_um, 1.0);

@@ -36,7 +36,7 @@ TEST(SimCorrectionSurrogate, BruteForceMatchesReferenceInstance) {
   EXPECT_NEAR(bf.e_pred, 0.045, 0.0005);
   EXPECT_NEAR(bf.J, 1.041, 0.0005);
   const SurrogateResult printed = EvaluateSurrogate(in, 4, 0.456, 0.066, 1.0);
-  EXPECT_GE(printed.J, bf.J);            // the grid finds the minimum...
+  EXPECT_GE(printed.J, bf.J);           // the grid finds the minimum...
   EXPECT_LE(printed.J, 1.0001 * bf.J);  // ...on the ridge the spec's point lies on
   EXPECT_LE(bf.e_pred, in.t_form_mm);
   EXPECT_LE(bf.scallop_mm, in.h_tol_mm + 1e-15);
@@ -113,11 +113,12 @@ void Print(const char* name, const SimCorrectionResult& r) {
   std::string before, after;
   for (const Defect& d : r.defects_before) before += d.kind + " ";
   for (const Defect& d : r.defects_after) after += d.kind + " ";
-  std::printf("%s: corrected %d rounds %d | before [%s] e_pred %.3f um | after [%s] e_pred %.3f um | r %.2f mm s %.4f mm "
-              "scallop %.3f um f_z %.4f mm %.0f mm/min %.0f rpm c_pc %.4f\n",
-              name, r.corrected, r.rounds, before.c_str(), r.predicted_form_error_before_um, after.c_str(),
-              r.predicted_form_error_after_um, r.chosen.tool_radius_mm, r.chosen.step_over_mm, r.chosen.scallop_um,
-              r.chosen.feed_per_tooth_mm, r.chosen.feed_mm_per_min, r.chosen.spindle_rpm, r.precompensation_scale);
+  std::printf(
+      "%s: corrected %d rounds %d | before [%s] e_pred %.3f um | after [%s] e_pred %.3f um | r %.2f mm s %.4f mm "
+      "scallop %.3f um f_z %.4f mm %.0f mm/min %.0f rpm c_pc %.4f\n",
+      name, r.corrected, r.rounds, before.c_str(), r.predicted_form_error_before_um, after.c_str(),
+      r.predicted_form_error_after_um, r.chosen.tool_radius_mm, r.chosen.step_over_mm, r.chosen.scallop_um,
+      r.chosen.feed_per_tooth_mm, r.chosen.feed_mm_per_min, r.chosen.spindle_rpm, r.precompensation_scale);
 }
 
 TEST(SimCorrectionLoop, MeasuresThePocket) {
@@ -130,7 +131,6 @@ TEST(SimCorrectionLoop, MeasuresThePocket) {
   EXPECT_GT(kappa, 0.0);
   EXPECT_LT(kappa, 1 / rho);
 }
-
 
 // Model of the case: the ball 8 µm smaller than programmed and a little deflection on the walls.
 sim::Model SmallModel(double delta_r_um, double k_d_um) {

@@ -14,16 +14,16 @@
 #include <string>
 #include <vector>
 
+#include <gtest/gtest.h>
+#include <BRepBuilderAPI_MakeFace.hxx>
 #include <GeomAPI_ProjectPointOnSurf.hxx>
 #include <Interface_Static.hxx>
-#include <STEPControl_Writer.hxx>
-#include <BRepBuilderAPI_MakeFace.hxx>
 #include <Precision.hxx>
-#include <TopoDS_Face.hxx>
+#include <STEPControl_Writer.hxx>
 #include <TColStd_Array1OfInteger.hxx>
 #include <TColStd_Array1OfReal.hxx>
 #include <TColgp_Array2OfPnt.hxx>
-#include <gtest/gtest.h>
+#include <TopoDS_Face.hxx>
 
 #include "core/random.h"
 #include "reconstruction/bspline_surface.h"
@@ -70,9 +70,10 @@ TEST_P(BSplineFitTest, FitAnalyticIsWithinBound) {
   FitReport report;
   const auto q = FitAnalytic(*s, 61, 61, options, 400, 20240611, &report);
   ASSERT_TRUE(q.ok()) << q.status().ToString();
-  std::printf("[ measured ] %-18s degree %d x %d, poles %3d x %3d, grid rms %.3e max %.3e, check rms %.3e max %.3e mm\n",
-              GetParam().c_str(), q->u_degree(), q->v_degree(), q->u_poles(), q->v_poles(), report.rms_mm,
-              report.max_mm, report.check_rms_mm, report.check_max_mm);
+  std::printf(
+      "[ measured ] %-18s degree %d x %d, poles %3d x %3d, grid rms %.3e max %.3e, check rms %.3e max %.3e mm\n",
+      GetParam().c_str(), q->u_degree(), q->v_degree(), q->u_poles(), q->v_poles(), report.rms_mm, report.max_mm,
+      report.check_rms_mm, report.check_max_mm);
   EXPECT_EQ(report.n_points, 61 * 61);
   EXPECT_EQ(report.n_check, 400);
   EXPECT_LE(report.check_max_mm, kFitBoundMm);

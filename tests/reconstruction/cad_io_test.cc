@@ -10,6 +10,7 @@
 #include <sstream>
 #include <string>
 
+#include <gtest/gtest.h>
 #include <BRepBuilderAPI_MakeFace.hxx>
 #include <BRepBuilderAPI_MakeVertex.hxx>
 #include <BRepPrimAPI_MakeBox.hxx>
@@ -24,7 +25,6 @@
 #include <StepShape_AdvancedFace.hxx>
 #include <TCollection_HAsciiString.hxx>
 #include <gp_Pnt.hxx>
-#include <gtest/gtest.h>
 
 #include "core/random.h"
 #include "reconstruction/analytic_surface.h"
@@ -227,8 +227,7 @@ TEST_F(CadIoTest, BadInputGivesClearErrors) {
   const fs::path point = dir_ / "point.step";
   {
     STEPControl_Writer writer;
-    ASSERT_EQ(writer.Transfer(BRepBuilderAPI_MakeVertex(gp_Pnt(1, 2, 3)).Vertex(), STEPControl_AsIs),
-              IFSelect_RetDone);
+    ASSERT_EQ(writer.Transfer(BRepBuilderAPI_MakeVertex(gp_Pnt(1, 2, 3)).Vertex(), STEPControl_AsIs), IFSelect_RetDone);
     ASSERT_EQ(writer.Write(point.string().c_str()), IFSelect_RetDone);
   }
   const auto no_faces = ReadCadFace(point, CadFaceSelector{.index = 0});

@@ -14,8 +14,8 @@
 #include <thread>
 #include <vector>
 
-#include <GeomAPI_ProjectPointOnSurf.hxx>
 #include <gtest/gtest.h>
+#include <GeomAPI_ProjectPointOnSurf.hxx>
 
 #include "core/random.h"
 #include "reconstruction/bspline_surface.h"

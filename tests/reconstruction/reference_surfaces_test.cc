@@ -7,8 +7,8 @@
 #include <string>
 #include <vector>
 
-#include <Eigen/Dense>
 #include <gtest/gtest.h>
+#include <Eigen/Dense>
 
 #include "reconstruction/analytic_surface.h"
 
@@ -164,7 +164,7 @@ INSTANTIATE_TEST_SUITE_P(ReferenceSurfaces, AnalyticSurfaceTest, ::testing::Valu
                          [](const auto& test_param) { return test_param.param; });
 
 TEST(ReferenceSurfaces, RegistryOrderAndUnknownName) {
-  const std::vector<std::string> expected = {"plane",  "sphere_cap", "cylinder", "ellipsoid_cap",    "saddle",
+  const std::vector<std::string> expected = {"plane",   "sphere_cap", "cylinder", "ellipsoid_cap",    "saddle",
                                              "egg_box", "franke",     "blade",    "tilted_paraboloid"};
   EXPECT_EQ(ReferenceSurfaceNames(), expected);
   const auto missing = MakeReferenceSurface("torus");

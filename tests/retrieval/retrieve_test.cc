@@ -167,8 +167,8 @@ TEST(StarterRetrieval, HeldOutCalibration) {
     std::sort(v.begin(), v.end());
     if (v.empty()) return std::string("-");
     char buf[128];
-    std::snprintf(buf, sizeof buf, "min %.3f  q25 %.3f  median %.3f  q75 %.3f  max %.3f", v.front(),
-                  v[v.size() / 4], v[v.size() / 2], v[3 * v.size() / 4], v.back());
+    std::snprintf(buf, sizeof buf, "min %.3f  q25 %.3f  median %.3f  q75 %.3f  max %.3f", v.front(), v[v.size() / 4],
+                  v[v.size() / 2], v[3 * v.size() / 4], v.back());
     return std::string(buf);
   };
   std::printf("\nHeld-out calibration (%zu library cases, %zu queries)\n", f.cases.size(), f.queries.size());
@@ -180,8 +180,8 @@ TEST(StarterRetrieval, HeldOutCalibration) {
               far_ok, n_far, rate(far_ok, n_far), far_above, far_below, quart(a_far).c_str());
   std::printf("  other family, all pairs A < 0.80     %ld / %ld = %.4f (goal >= 0.95)\n", other_ok, n_other,
               rate(other_ok, n_other));
-  std::printf("  other family, best pair A < 0.80     %d / %d = %.3f (stricter; reported)\n", max_other_ok,
-              n_max_other, rate(max_other_ok, n_max_other));
+  std::printf("  other family, best pair A < 0.80     %d / %d = %.3f (stricter; reported)\n", max_other_ok, n_max_other,
+              rate(max_other_ok, n_max_other));
   std::printf("  top-1 family accuracy                %3d / %3d = %.3f (goal >= 0.95)\n", top_ok, n_top,
               rate(top_ok, n_top));
   std::printf("Confusion (rows: query family, columns: top-1 family)\n%-16s", "");

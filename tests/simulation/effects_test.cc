@@ -20,11 +20,10 @@ namespace formloop::sim {
 namespace {
 
 TEST(EffectCatalogueTest, EveryEffectOfTheSpecIsRegisteredUnderItsStableName) {
-  const std::vector<std::string> spec = {"scallop",       "tool_radius",     "tool_wear",     "tool_deflection",
-                                         "thermal_drift_z", "axis_scale_x",  "axis_scale_y",  "axis_scale_z",
-                                         "squareness_xy", "squareness_yz",   "squareness_zx", "backlash_x",
-                                         "backlash_y",    "setup_offset",    "setup_rotation", "probe_radius",
-                                         "probe_lobing",  "noise"};
+  const std::vector<std::string> spec = {
+      "scallop",      "tool_radius",  "tool_wear",      "tool_deflection", "thermal_drift_z", "axis_scale_x",
+      "axis_scale_y", "axis_scale_z", "squareness_xy",  "squareness_yz",   "squareness_zx",   "backlash_x",
+      "backlash_y",   "setup_offset", "setup_rotation", "probe_radius",    "probe_lobing",    "noise"};
   ASSERT_EQ(EffectCatalogue().size(), spec.size());
   for (std::size_t i = 0; i < spec.size(); ++i) {
     EXPECT_EQ(EffectCatalogue()[i]->name(), spec[i]);
@@ -42,7 +41,8 @@ TEST(EffectCatalogueTest, JacobiansMatchFiniteDifferences) {
       PointContext c;
       c.point = {rng.Uniform(-50, 50), rng.Uniform(-50, 50), rng.Uniform(-10, 10)};
       c.normal = Eigen::Vector3d(rng.Uniform(-0.5, 0.5), rng.Uniform(-0.5, 0.5), 1).normalized();
-      c.approach = -Eigen::Vector3d(c.normal + Eigen::Vector3d(rng.Uniform(-0.3, 0.3), rng.Uniform(-0.3, 0.3), 0)).normalized();
+      c.approach =
+          -Eigen::Vector3d(c.normal + Eigen::Vector3d(rng.Uniform(-0.3, 0.3), rng.Uniform(-0.3, 0.3), 0)).normalized();
       c.path_length_mm = rng.Uniform(0, 5000);
       c.cut_time_s = rng.Uniform(0, 900);
       c.feed = Eigen::Vector3d(rng.Uniform(-1, 1), rng.Uniform(-1, 1), 0).normalized();
@@ -182,7 +182,8 @@ TEST(EffectPhysicsTest, ProbeRadiusAndToolRadiusReadAsHandComputedThroughTheProb
     for (std::size_t i = 0; i < plan.points.size(); ++i) {
       // Contact point c + R a with the assumed R = 1 mm, read along n (z here).
       const auto& rec = result->log.records[i];
-      const double deviation_um = 1e3 * (rec.centre + 1.0 * rec.approach - plan.points[i].point).dot(plan.points[i].normal);
+      const double deviation_um =
+          1e3 * (rec.centre + 1.0 * rec.approach - plan.points[i].point).dot(plan.points[i].normal);
       EXPECT_NEAR(deviation_um, 3.0, 1e-9) << effect;
     }
   }
@@ -218,8 +219,8 @@ TEST(FeatureDiagnosisTest, SimilarityTransformPlusAnisotropicScaleAndSquareness)
   Model truth;
   ASSERT_TRUE(truth.Set("setup_offset", {12, -8, 0}).ok());
   ASSERT_TRUE(truth.Set("setup_rotation", {0, 0, 80}).ok());
-  ASSERT_TRUE(truth.Set("axis_scale_x", {60}).ok());   // similarity scale 40 ppm + 20 anisotropic
-  ASSERT_TRUE(truth.Set("axis_scale_y", {20}).ok());   // similarity scale 40 ppm − 20
+  ASSERT_TRUE(truth.Set("axis_scale_x", {60}).ok());  // similarity scale 40 ppm + 20 anisotropic
+  ASSERT_TRUE(truth.Set("axis_scale_y", {20}).ok());  // similarity scale 40 ppm − 20
   ASSERT_TRUE(truth.Set("squareness_xy", {50}).ok());
   Rng rng(31);
   std::vector<FeaturePosition> features;
@@ -241,11 +242,12 @@ TEST(FeatureDiagnosisTest, SimilarityTransformPlusAnisotropicScaleAndSquareness)
   std::printf("%s", d->Summary().c_str());
   for (const auto& e : truth.effects) {
     const auto& named = d->causes;
-    const auto it = std::find_if(named.begin(), named.end(), [&](const Cause& c) { return c.effect == e.effect->name(); });
+    const auto it =
+        std::find_if(named.begin(), named.end(), [&](const Cause& c) { return c.effect == e.effect->name(); });
     ASSERT_NE(it, named.end()) << e.effect->name() << " not named";
     for (std::size_t k = 0; k < e.values.size(); ++k) {
       const bool unobservable = (e.effect->name() == "setup_offset" && k == 2) ||  // z, from 2-D positions
-                                (e.effect->name() == "setup_rotation" && k < 2);    // tilts, from 2-D positions
+                                (e.effect->name() == "setup_rotation" && k < 2);   // tilts, from 2-D positions
       if (unobservable) {
         EXPECT_TRUE(std::isnan(it->parameters[k])) << e.effect->name() << " parameter " << k << " reported";
         continue;
@@ -267,10 +269,14 @@ TEST(FeatureDiagnosisTest, BadFeatureFilesNameTheLineAndField) {
     std::ofstream(dir / name) << text;
     return (dir / name).string();
   };
-  EXPECT_NE(ReadFeatures(write("a.csv", "id,x_nom,y_nom,x\nH1,0,0,0\n")).status().message().find("y"), std::string::npos);
+  EXPECT_NE(ReadFeatures(write("a.csv", "id,x_nom,y_nom,x\nH1,0,0,0\n")).status().message().find("y"),
+            std::string::npos);
   const auto nan = ReadFeatures(write("b.csv", "id,x_nom,y_nom,x,y\nH1,0,0,0,0\nH2,1,1,abc,1\n"));
   EXPECT_NE(nan.status().message().find(":3"), std::string::npos) << nan.status().message();
-  EXPECT_NE(ReadFeatures(write("c.csv", "id,x_nom,y_nom,x,y\nH1,0,0,0,0\nH1,1,1,1,1\n")).status().message().find("duplicated"),
+  EXPECT_NE(ReadFeatures(write("c.csv", "id,x_nom,y_nom,x,y\nH1,0,0,0,0\nH1,1,1,1,1\n"))
+                .status()
+                .message()
+                .find("duplicated"),
             std::string::npos);
   EXPECT_FALSE(ReadFeatures((dir / "missing.csv").string()).ok());
   std::filesystem::remove_all(dir);

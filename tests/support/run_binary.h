@@ -9,8 +9,8 @@
 #include <iterator>
 #include <string>
 
-#include <unistd.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 namespace formloop::testing {
 

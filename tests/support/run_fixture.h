@@ -24,9 +24,9 @@
 namespace formloop::testing {
 
 struct RunFixtureOptions {
-  int grid = 20;                  // points per side
-  int loops = 2;                  // loop-0 .. loop-(loops-1)
-  double amplitude_um = 30;       // systematic bump of loop 0
+  int grid = 20;                    // points per side
+  int loops = 2;                    // loop-0 .. loop-(loops-1)
+  double amplitude_um = 30;         // systematic bump of loop 0
   double compensation_gain = 0.15;  // amplitude factor from one loop to the next
   double noise_sigma_um = 2;
   double tolerance_um = 20;
@@ -41,7 +41,9 @@ inline void WriteText(const std::filesystem::path& path, const std::string& text
   std::ofstream(path, std::ios::binary) << text;
 }
 
-inline void WriteJson(const std::filesystem::path& path, const nlohmann::json& json) { WriteText(path, json.dump(2) + "\n"); }
+inline void WriteJson(const std::filesystem::path& path, const nlohmann::json& json) {
+  WriteText(path, json.dump(2) + "\n");
+}
 
 // Row-standardised rook-neighbour lag of the centred values on a g × g lattice (index = j * g + i).
 inline std::vector<double> RookLag(const std::vector<double>& d, int g, double mean) {
@@ -83,7 +85,8 @@ inline double WriteFixtureLoop(const std::filesystem::path& dir, int loop, const
     for (int i = 0; i < g; ++i) {
       x.push_back(100.0 * i / (g - 1));
       y.push_back(80.0 * j / (g - 1));
-      ds.push_back(amplitude * std::sin(std::numbers::pi * x.back() / 100) * std::cos(std::numbers::pi * y.back() / 80));
+      ds.push_back(amplitude * std::sin(std::numbers::pi * x.back() / 100) *
+                   std::cos(std::numbers::pi * y.back() / 80));
       du.push_back(rng.Normal(0, o.noise_sigma_um));
       d.push_back(ds.back() + du.back());
     }
@@ -102,9 +105,9 @@ inline double WriteFixtureLoop(const std::filesystem::path& dir, int loop, const
   std::string csv = "x,y,z,nx,ny,nz,id,u,v,deviation_um,systematic_um,random_um,lag_um,lisa_cluster\n";
   for (std::size_t k = 0; k < d.size(); ++k) {
     const int lisa = loop == 0 ? Quadrant((d[k] - mean) / sd, lag[k] / sd) : 0;
-    csv += FormatExact(x[k]) + "," + FormatExact(y[k]) + ",0,0,0,1," + std::to_string(k) + "," + FormatExact(x[k] / 100) +
-           "," + FormatExact(y[k] / 80) + "," + FormatExact(d[k]) + "," + FormatExact(ds[k]) + "," + FormatExact(du[k]) +
-           "," + FormatExact(lag[k]) + "," + std::to_string(k == 0 ? 5 : lisa) + "\n";
+    csv += FormatExact(x[k]) + "," + FormatExact(y[k]) + ",0,0,0,1," + std::to_string(k) + "," +
+           FormatExact(x[k] / 100) + "," + FormatExact(y[k] / 80) + "," + FormatExact(d[k]) + "," + FormatExact(ds[k]) +
+           "," + FormatExact(du[k]) + "," + FormatExact(lag[k]) + "," + std::to_string(k == 0 ? 5 : lisa) + "\n";
   }
   const std::filesystem::path loop_dir = dir / ("loop-" + std::to_string(loop));
   WriteText(loop_dir / "deviations.csv", csv);
@@ -120,31 +123,51 @@ inline void WriteFixtureOptionalFiles(const std::filesystem::path& dir) {
   using run_fixture_detail::WriteJson;
   nlohmann::json facets = nlohmann::json::array();
   for (const char* f : {"shape", "material", "tolerance"}) {
-    facets.push_back({{"facet", f}, {"query_concept", std::string(f) + "-q"}, {"case_concept", std::string(f) + "-c"},
-                      {"common_node", std::string(f) + "-root"}, {"ic_query", 2.1}, {"ic_case", 2.3},
-                      {"ic_common", 1.4}, {"lin", 0.636}});
+    facets.push_back({{"facet", f},
+                      {"query_concept", std::string(f) + "-q"},
+                      {"case_concept", std::string(f) + "-c"},
+                      {"common_node", std::string(f) + "-root"},
+                      {"ic_query", 2.1},
+                      {"ic_case", 2.3},
+                      {"ic_common", 1.4},
+                      {"lin", 0.636}});
   }
-  WriteJson(dir / "retrieval.json",
-            {{"route", {{"name", "simulate"}, {"similarity", 0.71}, {"flag_engineer", false}, {"rule", "A >= 0.6"}}},
-             {"ranked",
-              {{{"rank", 1}, {"uid", "case-0001"}, {"family", "saddle"}, {"similarity", 0.71}, {"facets", facets}},
-               {{"rank", 2}, {"uid", "case-0002"}, {"family", "sphere_cap"}, {"similarity", 0.52}, {"facets", facets}}}},
-             {"query", {{"shape_family", "saddle"}}}});
-  WriteJson(dir / "plan.json", {{"tool_radius_mm", 3}, {"stepover_mm", 0.4}, {"feed_mm_per_min", 1200},
-                                {"strategy", "raster"}, {"raster_angle_deg", 0}});
+  WriteJson(
+      dir / "retrieval.json",
+      {{"route", {{"name", "simulate"}, {"similarity", 0.71}, {"flag_engineer", false}, {"rule", "A >= 0.6"}}},
+       {"ranked",
+        {{{"rank", 1}, {"uid", "case-0001"}, {"family", "saddle"}, {"similarity", 0.71}, {"facets", facets}},
+         {{"rank", 2}, {"uid", "case-0002"}, {"family", "sphere_cap"}, {"similarity", 0.52}, {"facets", facets}}}},
+       {"query", {{"shape_family", "saddle"}}}});
+  WriteJson(dir / "plan.json", {{"tool_radius_mm", 3},
+                                {"stepover_mm", 0.4},
+                                {"feed_mm_per_min", 1200},
+                                {"strategy", "raster"},
+                                {"raster_angle_deg", 0}});
   WriteJson(dir / "sim_correction.json",
-            {{"chosen", "corrected"}, {"why", "predicted form error falls below tolerance"},
+            {{"chosen", "corrected"},
+             {"why", "predicted form error falls below tolerance"},
              {"defects_before", {{{"defect", "gouge"}, {"peak_um", 12.5}}, {{"defect", "scallop"}, {"peak_um", 3.1}}}},
              {"defects_after", {{{"defect", "scallop"}, {"peak_um", 2.9}}}}});
-  WriteJson(dir / "loop-0" / "diagnosis" / "diagnosis.json",
-            {{"causes",
-              {{{"effect", "tool_wear"}, {"parameters", {{"k_w_um_per_m", 1.9}}}, {"std_errors", {{"k_w_um_per_m", 0.1}}},
-                {"variance_explained", 0.82}, {"z_before", 14.2}, {"z_after", 0.9}},
-               {{"effect", "thermal_drift"}, {"parameters", {2.5, 600}}, {"std_errors", {0.3, 40}},
-                {"variance_explained", 0.11}, {"z_before", 4.0}, {"z_after", 0.5}}}},
-             {"unexplained", nullptr},
-             {"gain", {{"rms_before_um", 11.0}, {"rms_after_um", 2.1}, {"heldout_rms_before_um", 11.4},
-                       {"heldout_rms_after_um", 2.3}}}});
+  WriteJson(dir / "loop-0" / "diagnosis" / "diagnosis.json", {{"causes",
+                                                               {{{"effect", "tool_wear"},
+                                                                 {"parameters", {{"k_w_um_per_m", 1.9}}},
+                                                                 {"std_errors", {{"k_w_um_per_m", 0.1}}},
+                                                                 {"variance_explained", 0.82},
+                                                                 {"z_before", 14.2},
+                                                                 {"z_after", 0.9}},
+                                                                {{"effect", "thermal_drift"},
+                                                                 {"parameters", {2.5, 600}},
+                                                                 {"std_errors", {0.3, 40}},
+                                                                 {"variance_explained", 0.11},
+                                                                 {"z_before", 4.0},
+                                                                 {"z_after", 0.5}}}},
+                                                              {"unexplained", nullptr},
+                                                              {"gain",
+                                                               {{"rms_before_um", 11.0},
+                                                                {"rms_after_um", 2.1},
+                                                                {"heldout_rms_before_um", 11.4},
+                                                                {"heldout_rms_after_um", 2.3}}}});
   WriteJson(dir / "retain.json", {{"case_uid", "case-0042"}, {"stored", true}});
 }
 
@@ -159,18 +182,27 @@ inline void WriteRunFixture(const std::filesystem::path& dir, const RunFixtureOp
     const double form_error_um = WriteFixtureLoop(dir, k, o, rng, &moran_z);
     within = form_error_um <= o.tolerance_um;
     if (within && loops_to_tolerance == 0) loops_to_tolerance = k + 1;
-    loops.push_back({{"loop", k}, {"form_error_um", form_error_um},
+    loops.push_back({{"loop", k},
+                     {"form_error_um", form_error_um},
                      {"systematic_peak_um", o.amplitude_um * std::pow(o.compensation_gain, k)},
-                     {"random_sigma_um", o.noise_sigma_um}, {"raw_moran_z", moran_z}, {"chosen_model", "bicubic"},
-                     {"residual_moran_z", 0.4}, {"within_tolerance", within}, {"compensated_after", k + 1 < o.loops},
+                     {"random_sigma_um", o.noise_sigma_um},
+                     {"raw_moran_z", moran_z},
+                     {"chosen_model", "bicubic"},
+                     {"residual_moran_z", 0.4},
+                     {"within_tolerance", within},
+                     {"compensated_after", k + 1 < o.loops},
                      {"decision", k + 1 < o.loops ? "compensate" : "stop"}});
   }
   run_fixture_detail::WriteJson(
       dir / "summary.json",
-      {{"formloop_version", "0.1.0-test"}, {"part", "fixture saddle"}, {"surface", "saddle"},
-       {"tolerance_um", o.tolerance_um}, {"fit_check_max_um", 0.8},
+      {{"formloop_version", "0.1.0-test"},
+       {"part", "fixture saddle"},
+       {"surface", "saddle"},
+       {"tolerance_um", o.tolerance_um},
+       {"fit_check_max_um", 0.8},
        {"route", {{"name", "simulate"}, {"similarity", 0.71}, {"case_uid", "case-0001"}, {"flag_engineer", false}}},
-       {"loops", loops}, {"within_tolerance", within},
+       {"loops", loops},
+       {"within_tolerance", within},
        {"loops_to_tolerance", within ? nlohmann::json(loops_to_tolerance) : nlohmann::json(nullptr)},
        {"causes", {"tool_wear"}}});
   if (o.with_optional_files) WriteFixtureOptionalFiles(dir);
