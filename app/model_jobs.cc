@@ -151,15 +151,15 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
   // The output folder is checked (and its staging folder started) before any work: it is built whole in
   // DIR.partial and renamed into place at the end, replacing only a folder formloop wrote.
   const fs::path dir(args.out);
-  std::vector<NamedPath> inputs = {
+  std::vector<NamedPath> input_paths = {
       {"--measured", args.measured}, {"--features", args.features},           {"--run", args.run},
       {"--plan", args.plan},         {"--probe-profile", args.probe_profile}, {"--baseline", args.baseline},
       {"--validate", args.validate}, {"--validate-run", args.validate_run},   {"--validate-plan", args.validate_plan},
       {"--library", args.library}};
-  for (const auto& m : args.more_measured) inputs.push_back({"--measured", m});
-  for (const auto& r : args.more_runs) inputs.push_back({"--run", r});
+  for (const auto& m : args.more_measured) input_paths.push_back({"--measured", m});
+  for (const auto& r : args.more_runs) input_paths.push_back({"--run", r});
   StagedOutputFolder folder;
-  FL_RETURN_IF_ERROR(folder.Open(dir, "--out", "diagnose", inputs));
+  FL_RETURN_IF_ERROR(folder.Open(dir, "--out", "diagnose", input_paths));
   const fs::path& staging = folder.dir();
   sim::Model baseline;
   if (!args.baseline.empty()) {

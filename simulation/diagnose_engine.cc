@@ -11,6 +11,7 @@
 #include <optional>
 
 #include <Eigen/QR>
+#include <Eigen/SVD>
 
 #include "metrology/morans_i.h"
 #include "metrology/spatial_cv.h"
@@ -56,6 +57,39 @@ Eigen::MatrixXd Concat(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
   return out;
 }
 
+namespace {
+
+// Unit column norms (a zero column keeps scale 1): the rank decisions below compare columns of µm,
+// µm/m and µrad effects on one scale, so an exactly duplicated column (a probe radius beside the tool
+// radius probed along −n) is dropped and nothing else, whatever the rounding of the last bits.
+Eigen::VectorXd ColumnScales(const Eigen::MatrixXd& a) {
+  Eigen::VectorXd d(a.cols());
+  for (Eigen::Index c = 0; c < a.cols(); ++c) {
+    const double norm = a.col(c).norm();
+    d[c] = norm > 0 ? 1.0 / norm : 1.0;
+  }
+  return d;
+}
+
+constexpr double kRankThreshold = 1e-10;  // relative to the largest pivot of the unit-norm columns
+
+}  // namespace
+
+Eigen::MatrixXd InverseGram(const Eigen::MatrixXd& a) {
+  const Eigen::VectorXd d = ColumnScales(a);
+  const Eigen::MatrixXd scaled = a * d.asDiagonal();
+  // (AᵀA)⁺ = V Σ⁻² Vᵀ over the singular values above the threshold (thin SVD: p is small).
+  Eigen::JacobiSVD<Eigen::MatrixXd, Eigen::ColPivHouseholderQRPreconditioner> svd(scaled, Eigen::ComputeThinV);
+  const Eigen::VectorXd& sv = svd.singularValues();
+  Eigen::VectorXd inv2 = Eigen::VectorXd::Zero(sv.size());
+  const double cut = sv.size() > 0 ? kRankThreshold * sv[0] : 0.0;
+  for (Eigen::Index k = 0; k < sv.size(); ++k) {
+    if (sv[k] > cut) inv2[k] = 1.0 / (sv[k] * sv[k]);
+  }
+  const Eigen::MatrixXd& v = svd.matrixV();
+  return d.asDiagonal() * (v * inv2.asDiagonal() * v.transpose()) * d.asDiagonal();
+}
+
 Fit LeastSquares(const Eigen::MatrixXd& a, const Eigen::VectorXd& r) {
   Fit fit;
   if (a.cols() == 0) {
@@ -63,18 +97,22 @@ Fit LeastSquares(const Eigen::MatrixXd& a, const Eigen::VectorXd& r) {
     fit.rss = r.squaredNorm();
     return fit;
   }
-  // Complete orthogonal decomposition: the minimum-norm solution when columns are (nearly) dependent,
-  // so an aliased direction carries no arbitrary value.
-  Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(a);
-  cod.setThreshold(1e-10);
-  fit.beta = cod.solve(r);
+  // Complete orthogonal decomposition of the unit-norm columns: the minimum-norm solution when
+  // columns are (nearly) dependent, so an aliased direction carries no arbitrary value.
+  const Eigen::VectorXd d = ColumnScales(a);
+  // The threshold before the decomposition: COD's compute() completes the orthogonalisation at the
+  // rank of its threshold then, and solve() uses the rank of the threshold now (a threshold set after
+  // the constructor made solve() use a decomposition of another rank: results at the mercy of the
+  // last bits, and the non-determinism of issue 20's regression part reg-pocket-a).
+  Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(a.rows(), a.cols());
+  cod.setThreshold(kRankThreshold);
+  cod.compute(a * d.asDiagonal());
+  fit.beta = d.asDiagonal() * cod.solve(r);
   fit.residual = r - a * fit.beta;
   fit.rss = fit.residual.squaredNorm();
   fit.rank = static_cast<int>(cod.rank());
   const double dof = std::max(1.0, static_cast<double>(r.size() - fit.rank));
-  const double s2 = fit.rss / dof;
-  const Eigen::MatrixXd ata = a.transpose() * a;
-  fit.cov = s2 * ata.completeOrthogonalDecomposition().pseudoInverse();
+  fit.cov = (fit.rss / dof) * InverseGram(a);
   return fit;
 }
 
@@ -163,7 +201,7 @@ TermFit FitTerm(const Problem& prob, const Term& term, const Eigen::MatrixXd& x,
   full.residual = lin_fit.residual;  // the exact nonlinear residual
   full.rss = lin_fit.rss;
   const double s2 = full.rss / std::max(1.0, static_cast<double>(prob.n() - x.cols() - p));
-  full.cov = s2 * (af.transpose() * af).completeOrthogonalDecomposition().pseudoInverse();
+  full.cov = s2 * InverseGram(af);
   out.fit = full;
   out.theta = theta;
   for (int k = 0; k < p; ++k) out.std_errors.push_back(std::sqrt(std::max(0.0, full.cov(x.cols() + k, x.cols() + k))));

@@ -61,6 +61,8 @@ struct Fit {
   int rank = 0;
 };
 Fit LeastSquares(const Eigen::MatrixXd& a, const Eigen::VectorXd& r);
+// (aᵀa)⁺ through a's unit-norm columns (the same rank decisions as LeastSquares).
+Eigen::MatrixXd InverseGram(const Eigen::MatrixXd& a);
 
 // A term fitted together with a fixed design X: its parameters, its linearised columns at them (the
 // full Jacobian, so a later fit with these columns can still move τ to first order) and the fit of

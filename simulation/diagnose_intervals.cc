@@ -77,7 +77,7 @@ std::vector<std::vector<std::pair<double, double>>> ProfileIntervals(const Probl
     const Fit f = LeastSquares(x, prob.r);
     a.rss = f.rss;
     a.beta = f.beta;
-    a.inverse = (x.transpose() * x).completeOrthogonalDecomposition().pseudoInverse();
+    a.inverse = InverseGram(x);
     return a;
   };
   std::vector<AtTau> fits;
