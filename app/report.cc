@@ -12,8 +12,10 @@
 
 #include <fmt/format.h>
 
-#include "app/report_charts.h"
+#include "app/report_html.h"
 #include "app/report_image.h"
+#include "app/report_sections.h"
+#include "app/report_svg.h"
 #include "core/atomic_file.h"
 #include "core/json_io.h"
 #include "core/number_text.h"
@@ -26,29 +28,7 @@ namespace formloop::app {
 namespace {
 
 namespace fs = std::filesystem;
-
-constexpr const char* kNotAvailable = "not available";
-
-// An optional input: the parsed JSON, or why it is absent (empty: the file does not exist).
-struct OptionalJson {
-  std::optional<Json> value;
-  std::string note;
-};
-
-struct LoopData {
-  int loop = 0;
-  std::optional<PointSet> points;  // loop-K/deviations.csv
-  std::string points_note;
-  OptionalJson analysis;  // loop-K/analysis.json
-};
-
-struct RunData {
-  bool analysis_folder = false;  // a `formloop analyse` folder: one cycle, no run-only sections
-  Json summary;
-  OptionalJson retrieval, plan, sim_correction, diagnosis, retain;
-  std::vector<LoopData> loops;  // loop-0, loop-1, ... as long as the folders exist
-  MapMask part_mask;            // a run on a trimmed Q: (x, y) over the part (TrimMask); empty otherwise
-};
+using namespace report;  // NOLINT: the report's own building blocks
 
 // For a trimmed Q (surface/Q.step holds the trimmed face): whether the point of Q above (x, y) lies inside
 // the trim, so the deviation maps stay blank outside the face and over its holes. Results are kept per
@@ -93,14 +73,6 @@ MapMask TrimMask(const fs::path& run_dir) {
   };
 }
 
-OptionalJson ReadOptionalJson(const fs::path& path) {
-  std::error_code ec;
-  if (!fs::exists(path, ec)) return {std::nullopt, ""};
-  Result<Json> json = ReadJsonFile(path);
-  if (!json.ok()) return {std::nullopt, json.status().message()};
-  return {std::move(json).value(), ""};
-}
-
 Status CheckSummary(const Json& summary, const std::string& source) {
   if (!summary.is_object()) {
     return Status::BadInput(Where{.file = source}, "summary.json must be a JSON object",
@@ -118,63 +90,6 @@ Status CheckSummary(const Json& summary, const std::string& source) {
   return Status::Ok();
 }
 
-// ---- Text and number formatting (locale-free) ----
-
-std::string Esc(std::string_view text) {
-  std::string out;
-  out.reserve(text.size());
-  for (char c : text) {
-    switch (c) {
-      case '&':
-        out += "&amp;";
-        break;
-      case '<':
-        out += "&lt;";
-        break;
-      case '>':
-        out += "&gt;";
-        break;
-      case '"':
-        out += "&quot;";
-        break;
-      default:
-        out += c;
-    }
-  }
-  return out;
-}
-
-const Json& Member(const Json& object, const char* key) {
-  static const Json kNull;
-  if (!object.is_object()) return kNull;
-  const auto it = object.find(key);
-  return it == object.end() ? kNull : *it;
-}
-
-// A number with fixed decimals, "—" when absent or not a number.
-std::string Num(const Json& value, int decimals) {
-  return value.is_number() ? FormatFixed(value.get<double>(), decimals) : "—";
-}
-
-// Any JSON value as table-cell text: 4 significant digits for floats, yes/no, compact JSON otherwise.
-std::string Scalar(const Json& value) {
-  if (value.is_null()) return "—";
-  if (value.is_string()) return value.get<std::string>();
-  if (value.is_boolean()) return value.get<bool>() ? "yes" : "no";
-  if (value.is_number_integer() || value.is_number_unsigned()) return value.dump();
-  if (value.is_number_float()) return fmt::format("{:.4g}", value.get<double>());
-  if (value.is_array() && std::all_of(value.begin(), value.end(), [](const Json& v) { return v.is_primitive(); })) {
-    std::string out;
-    for (const Json& v : value) out += (out.empty() ? "" : ", ") + Scalar(v);
-    return out;
-  }
-  return value.dump();
-}
-
-std::string StringOr(const Json& value, const std::string& fallback) {
-  return value.is_string() ? value.get<std::string>() : fallback;
-}
-
 // ---- Reading the folder ----
 
 LoopData ReadLoop(const fs::path& dir, int k) {
@@ -189,6 +104,7 @@ LoopData ReadLoop(const fs::path& dir, int k) {
     }
   }
   loop.analysis = ReadOptionalJson(dir / "analysis.json");
+  loop.machine = ReadOptionalJson(dir / "machine.json");
   return loop;
 }
 
@@ -210,7 +126,7 @@ Result<RunData> LoadAnalysis(const fs::path& dir, const Json& analysis, const st
                {"within_tolerance", Member(evaluation, "within_tolerance")},
                {"decision", evaluation.is_object() ? Member(evaluation, "decision") : Json("no tolerance given")}};
   const Json& inputs = Member(analysis, "inputs");
-  RunData run{.analysis_folder = true};
+  RunData run{.analysis_folder = true, .dir = dir};
   run.summary = {{"part", "analysis of " + StringOr(Member(Member(inputs, "probe_log"), "file"), "a probe log")},
                  {"surface", Member(Member(inputs, "surface"), "file")},
                  {"tolerance_um", Member(evaluation, "tolerance_um")},
@@ -241,11 +157,12 @@ Result<RunData> LoadRun(const fs::path& run_dir) {
   Result<Json> summary = ReadJsonFile(summary_path);
   if (!summary.ok()) return Status::BadInput(summary.status().message());
   FL_RETURN_IF_ERROR(CheckSummary(*summary, summary_path.string()));
-  RunData run{.summary = std::move(summary).value()};
+  RunData run{.dir = run_dir, .summary = std::move(summary).value()};
   run.retrieval = ReadOptionalJson(run_dir / "retrieval.json");
   run.plan = ReadOptionalJson(run_dir / "plan.json");
   run.sim_correction = ReadOptionalJson(run_dir / "sim_correction.json");
   run.diagnosis = ReadOptionalJson(run_dir / "loop-0" / "diagnosis" / "diagnosis.json");
+  run.diagnosis_model = ReadOptionalJson(run_dir / "loop-0" / "diagnosis" / "model.json");
   run.retain = ReadOptionalJson(run_dir / "retain.json");
   run.part_mask = TrimMask(run_dir);
   for (int k = 0; fs::is_directory(run_dir / ("loop-" + std::to_string(k)), ec); ++k) {
@@ -254,139 +171,33 @@ Result<RunData> LoadRun(const fs::path& run_dir) {
   return run;
 }
 
-// ---- HTML building blocks ----
-
-void OpenSection(std::string& html, const std::string& id, const std::string& title, const std::string& intro) {
-  html += fmt::format("<section id=\"{}\">\n<h2>{}</h2>\n<p class=\"intro\">{}</p>\n", id, Esc(title), Esc(intro));
-}
-
-void CloseSection(std::string& html) { html += "</section>\n"; }
-
-// "<what>: not available (<why>)." — why may be empty (the file simply does not exist).
-void NotAvailable(std::string& html, const std::string& what, const std::string& why) {
-  html += fmt::format("<p class=\"na\">{}: {}{}.</p>\n", Esc(what), kNotAvailable,
-                      why.empty() ? "" : " (" + Esc(why) + ")");
-}
-
-// Table with a header row; cells are already HTML.
-std::string Table(const std::vector<std::string>& header, const std::vector<std::vector<std::string>>& rows) {
-  std::string out = "<table>\n<tr>";
-  for (const std::string& h : header) out += "<th>" + h + "</th>";
-  out += "</tr>\n";
-  for (const auto& row : rows) {
-    out += "<tr>";
-    for (const std::string& cell : row) out += "<td>" + cell + "</td>";
-    out += "</tr>\n";
-  }
-  return out + "</table>\n";
-}
-
-bool IsTableOfObjects(const Json& value) {
-  return value.is_array() && !value.empty() &&
-         std::all_of(value.begin(), value.end(), [](const Json& v) { return v.is_object(); });
-}
-
-// Scalars (and nested objects' scalars, with dotted keys) into key/value rows; arrays of objects
-// are collected for their own tables.
-void Flatten(const Json& object, const std::string& prefix, std::vector<std::vector<std::string>>* rows,
-             std::vector<std::pair<std::string, const Json*>>* tables) {
-  for (const auto& [key, value] : object.items()) {
-    const std::string path = prefix.empty() ? key : prefix + "." + key;
-    if (value.is_object() && !value.empty()) {
-      Flatten(value, path, rows, tables);
-    } else if (IsTableOfObjects(value)) {
-      tables->emplace_back(path, &value);
-    } else {
-      rows->push_back({"<code>" + Esc(path) + "</code>", Esc(Scalar(value))});
-    }
-  }
-}
-
-// An array of objects as one table, columns in order of first appearance.
-std::string ObjectsTable(const Json& array) {
-  std::vector<std::string> columns;
-  for (const Json& row : array) {
-    for (const auto& [key, value] : row.items()) {
-      if (std::find(columns.begin(), columns.end(), key) == columns.end()) columns.push_back(key);
-    }
-  }
-  std::vector<std::vector<std::string>> rows;
-  for (const Json& row : array) {
-    std::vector<std::string> cells;
-    for (const std::string& c : columns) cells.push_back(Esc(Scalar(Member(row, c.c_str()))));
-    rows.push_back(std::move(cells));
-  }
-  std::vector<std::string> header;
-  for (const std::string& c : columns) header.push_back(Esc(c));
-  return Table(header, rows);
-}
-
-// Any JSON object: a key/value table of its scalars, then one table per array of objects.
-std::string GenericJson(const Json& object) {
-  std::vector<std::vector<std::string>> rows;
-  std::vector<std::pair<std::string, const Json*>> tables;
-  if (object.is_object()) {
-    Flatten(object, "", &rows, &tables);
-  } else {
-    rows.push_back({"value", Esc(Scalar(object))});
-  }
-  std::string out = rows.empty() ? "" : Table({"key", "value"}, rows);
-  for (const auto& [path, array] : tables) out += "<h3>" + Esc(path) + "</h3>\n" + ObjectsTable(*array);
-  return out;
-}
-
-Result<std::string> Figure(const Canvas& canvas, const std::string& alt, const std::string& caption) {
-  FL_ASSIGN_OR_RETURN(std::string png, EncodePng(canvas));
-  return fmt::format(
-      "<figure><img src=\"data:image/png;base64,{}\" width=\"{}\" height=\"{}\" alt=\"{}\">"
-      "<figcaption>{}</figcaption></figure>\n",
-      Base64(png), canvas.width(), canvas.height(), Esc(alt), Esc(caption));
-}
-
-// ---- Point columns ----
-
-std::vector<double> Column(const PointSet& points, const std::string& name) {
-  if (name == "x" || name == "y") {
-    std::vector<double> out;
-    for (const auto& p : points.points) out.push_back(name == "x" ? p.x() : p.y());
-    return out;
-  }
-  const std::vector<double>* column = points.FindScalar(name);
-  return column != nullptr ? *column : std::vector<double>{};
-}
-
-std::vector<int> Clusters(const PointSet& points) {
-  std::vector<int> out;
-  const std::vector<double>* lisa = points.FindScalar("lisa_cluster");
-  if (lisa == nullptr) lisa = points.FindScalar("lisa");  // run folders written before the one analysis
-  if (lisa != nullptr) {
-    for (double v : *lisa) out.push_back(static_cast<int>(std::lround(v)));
-  }
-  return out;
-}
-
-double MaxAbs(const std::vector<double>& values) {
-  double m = 0;
-  for (double v : values) m = std::max(m, std::abs(v));
-  return m;
-}
-
 // ---- Sections ----
 
-// The tolerance α in µm; NaN when none was given (an `analyse` folder without --tolerance-um).
-double ToleranceUm(const Json& summary) {
-  const Json& t = Member(summary, "tolerance_um");
-  return t.is_number() ? t.get<double>() : std::numeric_limits<double>::quiet_NaN();
+// Compensation loops until within tolerance: the index of the first loop within it (loop 0 is the first
+// cut); -1 when none is.
+long CompensationLoops(const Json& summary) {
+  const Json& loops = Member(summary, "loops");
+  for (std::size_t k = 0; loops.is_array() && k < loops.size(); ++k) {
+    if (Member(loops[k], "within_tolerance") == Json(true)) return static_cast<long>(k);
+  }
+  return -1;
 }
 
-std::string VerdictText(const Json& summary) {
+std::string Plural(long n, const char* word) { return fmt::format("{} {}{}", n, word, n == 1 ? "" : "s"); }
+
+std::string VerdictText(const RunData& run) {
+  const Json& summary = run.summary;
+  const long cycles = static_cast<long>(Member(summary, "loops").size());
   if (!Member(summary, "tolerance_um").is_number()) {
     return "No tolerance given: form error " + Num(Member(Member(summary, "loops").back(), "form_error_um"), 2) + " µm";
   }
-  if (Member(summary, "within_tolerance") != Json(true)) return "NOT within tolerance";
-  const Json& n = Member(summary, "loops_to_tolerance");
-  const long loops = n.is_number() ? n.get<long>() : static_cast<long>(Member(summary, "loops").size());
-  return fmt::format("Within tolerance after {} loop{}", loops, loops == 1 ? "" : "s");
+  if (Member(summary, "within_tolerance") != Json(true)) {
+    return "NOT within tolerance after " + Plural(cycles, "machined cycle");
+  }
+  const long loops = CompensationLoops(summary);
+  if (loops <= 0) return "Within tolerance at the first cut";
+  return fmt::format("Within tolerance after {} ({})", Plural(loops, "compensation loop"),
+                     Plural(loops + 1, "machined cycle"));
 }
 
 // The route as written by the run (summary.json) or by retrieval (retrieval.json); the latter adds the rule.
@@ -406,7 +217,6 @@ void HeaderSection(std::string& html, const RunData& run) {
   const Json& s = run.summary;
   const bool ok = Member(s, "within_tolerance") == Json(true);
   const Json route = RouteOf(run);
-  const std::string route_name = StringOr(Member(route, "name"), "not recorded");
   const Json& loops = Member(s, "loops");
   html += fmt::format("<header>\n<h1>{} report: {}</h1>\n", run.analysis_folder ? "Analysis" : "Run",
                       Esc(StringOr(Member(s, "part"), "")));
@@ -415,18 +225,30 @@ void HeaderSection(std::string& html, const RunData& run) {
                       !has_tolerance ? "na"
                       : ok           ? "ok"
                                      : "bad",
-                      Esc(VerdictText(s)));
+                      Esc(VerdictText(run)));
   if (!run.analysis_folder) {
+    const std::string route_name = StringOr(Member(route, "name"), "not recorded");
     html += fmt::format(
         "<p><span class=\"badge route-{0}\">route: {0}</span>{1}</p>\n", Esc(route_name),
         Member(route, "flag_engineer") == Json(true) ? " <span class=\"badge flag\">engineer review</span>" : "");
   }
   const Json last = loops.empty() ? Json() : loops.back();
-  html += Table({"surface", "form tolerance α", "loops run", "final form error", "fit check max"},
-                {{Esc(StringOr(Member(s, "surface"), "—")), Num(Member(s, "tolerance_um"), 2) + " µm",
-                  std::to_string(loops.size()), Num(Member(last, "form_error_um"), 2) + " µm",
-                  Num(Member(s, "fit_check_max_um"), 3) + " µm"}});
-  html += "</header>\n";
+  const Json first = loops.empty() ? Json() : loops.front();
+  html +=
+      Table({"Surface", "Form tolerance α", "Machined cycles", "First-cycle form error", "Final form error",
+             "Surface fit check (max)"},
+            {{Esc(StringOr(Member(s, "surface"), "—")), Num(Member(s, "tolerance_um"), 2) + " µm",
+              std::to_string(loops.size()), Num(Member(first, "form_error_um"), 2) + " µm",
+              Num(Member(last, "form_error_um"), 2) + " µm",
+              Member(s, "fit_check_max_um").is_number() ? Readable(Member(s, "fit_check_max_um").get<double>()) + " µm"
+                                                        : "—"}});
+  html +=
+      "<nav class=\"toc\"><a href=\"#view3d\">3-D view</a> <a href=\"#loops\">Loops</a> <a "
+      "href=\"#deviations\">Deviations</a> <a href=\"#spatial\">Spatial analysis</a>" +
+      std::string(run.analysis_folder ? ""
+                                      : " <a href=\"#diagnosis\">Diagnosis</a> <a href=\"#retrieval\">Retrieval</a> "
+                                        "<a href=\"#plan\">Plan</a> <a href=\"#retain\">Retain</a>") +
+      "</nav>\n</header>\n";
 }
 
 void RetrievalSection(std::string& html, const RunData& run) {
@@ -434,16 +256,17 @@ void RetrievalSection(std::string& html, const RunData& run) {
               "Which past cases of the library resemble this part, how similar they are facet by facet, and the "
               "route that similarity chose (direct reuse, simulation, or the default plan).");
   const Json route = RouteOf(run);
-  html += Table({"route", "similarity A", "closest case", "rule", "engineer review"},
+  html += Table({"Route", "Similarity A", "Closest case", "Rule", "Engineer review"},
                 {{Esc(StringOr(Member(route, "name"), "—")), Num(Member(route, "similarity"), 3),
                   Esc(Scalar(Member(route, "case_uid"))), Esc(Scalar(Member(route, "rule"))),
                   Esc(Scalar(Member(route, "flag_engineer")))}});
   if (!run.retrieval.value) {
-    NotAvailable(html, "Ranked candidates (retrieval.json)", run.retrieval.note);
+    NotAvailable(html, "Ranked candidates",
+                 run.retrieval.note.empty() ? "this run did not search a case library" : run.retrieval.note);
     CloseSection(html);
     return;
   }
-  std::vector<std::vector<std::string>> rows;
+  std::vector<std::string> rows;
   const Json& ranked = Member(*run.retrieval.value, "ranked");
   for (const Json& c : ranked.is_array() ? ranked : Json::array()) {
     const Json& facets = Member(c, "facets");
@@ -453,41 +276,64 @@ void RetrievalSection(std::string& html, const RunData& run) {
         "<td rowspan=\"{0}\">{4}</td>",
         span, Esc(Scalar(Member(c, "rank"))), Esc(Scalar(Member(c, "uid"))), Esc(Scalar(Member(c, "family"))),
         Num(Member(c, "similarity"), 3));
-    if (!facets.is_array() || facets.empty()) rows.push_back({lead + "<td colspan=\"5\">no facets</td>"});
+    if (!facets.is_array() || facets.empty()) rows.push_back(lead + "<td colspan=\"5\">no facets</td>");
     for (std::size_t k = 0; facets.is_array() && k < facets.size(); ++k) {
       const Json& f = facets[k];
-      rows.push_back(
-          {(k == 0 ? lead : "") + fmt::format("<td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>",
-                                              Esc(Scalar(Member(f, "facet"))), Esc(Scalar(Member(f, "query_concept"))),
-                                              Esc(Scalar(Member(f, "case_concept"))),
-                                              Esc(Scalar(Member(f, "common_node"))), Num(Member(f, "lin"), 3))});
+      rows.push_back((k == 0 ? lead : "") +
+                     fmt::format("<td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>",
+                                 Esc(Scalar(Member(f, "facet"))), Esc(Scalar(Member(f, "query_concept"))),
+                                 Esc(Scalar(Member(f, "case_concept"))), Esc(Scalar(Member(f, "common_node"))),
+                                 Num(Member(f, "lin"), 3)));
     }
   }
   // Rows carry their own <td>s (rowspan), so the table is assembled here rather than by Table().
   html +=
-      "<table>\n<tr><th>rank</th><th>case uid</th><th>family</th><th>similarity A</th><th>facet</th>"
-      "<th>query concept</th><th>case concept</th><th>common node</th><th>Lin similarity</th></tr>\n";
-  for (const auto& row : rows) html += "<tr>" + row[0] + "</tr>\n";
-  html += "</table>\n";
+      "<div class=\"tw\"><table>\n<caption>Ranked candidates</caption>\n<tr><th>Rank</th><th>Case</th><th>Family</th>"
+      "<th>Similarity A</th><th>Facet</th><th>This part</th><th>The case</th><th>Common concept</th><th>Lin "
+      "similarity</th></tr>\n";
+  for (const auto& row : rows) html += "<tr>" + row + "</tr>\n";
+  html += "</table></div>\n";
   CloseSection(html);
 }
 
-void GenericSection(std::string& html, const std::string& id, const std::string& title, const std::string& intro,
-                    const OptionalJson& input, const std::string& file) {
-  OpenSection(html, id, title, intro);
-  if (input.value) {
-    html += GenericJson(*input.value);
+// What happens after a first cycle that cut below nominal: material removed cannot be put back, so the
+// compensated program either re-cuts this workpiece (only where material was left) or cuts a new blank.
+void NextCycleNote(std::string& html, const RunData& run) {
+  if (run.loops.empty() || !run.loops.front().points || Member(run.summary, "loops").size() < 2) return;
+  const std::vector<double> d = Column(*run.loops.front().points, "deviation_um");
+  const double tol = ToleranceUm(run.summary);
+  const double limit = std::isfinite(tol) ? -tol / 2 : 0;
+  const long overcut = std::count_if(d.begin(), d.end(), [&](double v) { return v < limit; });
+  const double deepest = d.empty() ? 0 : *std::min_element(d.begin(), d.end());
+  const LoopData& next = run.loops.size() > 1 ? run.loops[1] : run.loops.front();
+  const std::string machine = next.machine.value ? StringOr(Member(*next.machine.value, "machine"), "") : "";
+  const bool virtual_machine = machine.rfind("virtual", 0) == 0;
+  std::string text;
+  if (overcut > 0) {
+    text = fmt::format(
+        "Loop 0 cut below nominal: {} of {} probe points lie more than α/2 = {} µm under the surface (deepest {} "
+        "µm). Material removed cannot be put back, so loop 1's compensated program was ",
+        overcut, d.size(), Readable(-limit), FormatFixed(deepest, 1));
+    text += virtual_machine ? "cut on a new blank (the virtual machine machines every cycle from a new blank)."
+                            : "to be cut on a new blank; a re-cut of this workpiece (with the material left as "
+                              "allowance) would leave the overcut regions as they are.";
   } else {
-    NotAvailable(html, file, input.note);
+    text = fmt::format(
+        "Loop 0 left material everywhere within α/2 (deepest point {} µm), so the compensated program of loop 1 "
+        "can re-cut this workpiece with the material left as allowance. ",
+        FormatFixed(deepest, 1));
+    text += virtual_machine ? "In this run the virtual machine cut it on a new blank (every virtual cycle starts "
+                              "from a new blank)."
+                            : "Whether it re-cut this workpiece or a new blank is not recorded in the run folder.";
   }
-  CloseSection(html);
+  html += "<p class=\"note\"><strong>Next cycle:</strong> " + Esc(text) + "</p>\n";
 }
 
 Status LoopHistorySection(std::string& html, const RunData& run) {
   OpenSection(html, "loops", "Loop history",
-              "Each machining–probing loop: the form error (max |systematic| + 2σ of the random part) against the "
-              "tolerance, how strongly the deviations cluster (Moran z), the model chosen for the systematic part "
-              "and what the loop decided.");
+              "Each machining–probing cycle (loop 0 is the first cut, each later loop a compensation loop): the form "
+              "error (max |systematic| + 2σ of the random part) against the tolerance, how strongly the deviations "
+              "cluster (Moran z), the model chosen for the systematic part and what the loop decided.");
   const Json& loops = Member(run.summary, "loops");
   std::vector<std::vector<std::string>> rows;
   std::vector<std::string> labels;
@@ -498,22 +344,22 @@ Status LoopHistorySection(std::string& html, const RunData& run) {
                     Num(Member(l, "raw_moran_z"), 2), Esc(Scalar(Member(l, "chosen_model"))),
                     Num(Member(l, "residual_moran_z"), 2), Esc(Scalar(Member(l, "within_tolerance"))),
                     Esc(Scalar(Member(l, "decision")))});
-    labels.push_back("LOOP " + Scalar(Member(l, "loop")));
+    labels.push_back("loop " + Scalar(Member(l, "loop")));
     errors.push_back(Member(l, "form_error_um").is_number() ? Member(l, "form_error_um").get<double>() : 0.0);
   }
-  html += Table({"loop", "form error (µm)", "d<sub>s</sub> peak (µm)", "σ(d<sub>u</sub>) (µm)", "raw Moran z",
-                 "chosen model", "residual Moran z", "within tolerance", "decision"},
+  html += Table({"Loop", "Form error (µm)", "d<sub>s</sub> peak (µm)", "σ(d<sub>u</sub>) (µm)", "Raw Moran z",
+                 "Chosen model", "Residual Moran z", "Within tolerance", "Decision"},
                 rows);
+  NextCycleNote(html, run);
   const double tol = ToleranceUm(run.summary);
-  FL_ASSIGN_OR_RETURN(
-      std::string figure,
-      Figure(DrawBars(labels, errors, tol, "TOLERANCE " + FormatFixed(tol, 1) + " µm", "FORM ERROR (µm)",
-                      "FORM ERROR PER LOOP"),
-             "Bar chart of the form error of each loop with the tolerance as a dashed line",
-             std::isfinite(tol) ? "Form error per loop (µm). Green bars are within the tolerance α = " +
-                                      FormatFixed(tol, 2) + " µm (dashed red line), orange bars are not."
-                                : std::string("Form error per loop (µm); no tolerance was given.")));
-  html += figure;
+  html +=
+      "<div class=\"figs\"><figure>" +
+      SvgBars(labels, errors, tol, "tolerance α = " + Readable(tol) + " µm", "form error (µm)", "Form error per loop") +
+      "<figcaption>" +
+      Esc(std::isfinite(tol) ? "Form error per loop (µm). Green bars are within the tolerance α = " +
+                                   FormatFixed(tol, 2) + " µm (dashed red line), orange bars are not."
+                             : std::string("Form error per loop (µm); no tolerance was given.")) +
+      "</figcaption></figure></div>\n";
   CloseSection(html);
   return Status::Ok();
 }
@@ -533,62 +379,57 @@ std::vector<std::string> DeviationStats(const LoopData& loop) {
           d.empty() ? "—" : FormatFixed(*hi, 2)};
 }
 
-Status DeviationFigures(std::string& html, const LoopData& first, const LoopData& last, double tol,
-                        const MapMask& part_mask) {
-  const PointSet& p0 = *first.points;
-  const PointSet& p1 = *last.points;
-  const std::vector<double> d0 = Column(p0, "deviation_um"), d1 = Column(p1, "deviation_um");
-  const double scale = std::max({MaxAbs(d0), MaxAbs(d1), 1e-3});
-  const std::string common =
-      "Both maps share one symmetric colour scale (±" + FormatFixed(scale, 2) +
-      " µm): red = material left, blue = material removed beyond nominal; dots are probe points.";
+// The one colour scale of the report (maps and 3-D view): the largest |deviation| of the first and last loop.
+double ReportScale(const RunData& run) {
+  double scale = 1e-3;
+  for (const LoopData& l : run.loops) {
+    if (l.points) scale = std::max(scale, MaxAbs(Column(*l.points, "deviation_um")));
+  }
+  return scale;
+}
+
+// "d_s (µm)" with a real subscript.
+const char* kDsLabel = "d<tspan class=\"sub\" dy=\"4\">s</tspan><tspan dy=\"-4\"> (µm)</tspan>";
+
+void DeviationFigures(std::string& html, const RunData& run, const LoopData& first, const LoopData& last,
+                      double scale) {
+  const double tol = ToleranceUm(run.summary);
+  html += "<div class=\"figs\">";
   std::vector<const LoopData*> shown{&first};
   if (last.loop != first.loop) shown.push_back(&last);
   for (const LoopData* loop : shown) {
+    const MapField field = FieldOf(*loop);
+    const std::vector<double> x = Column(*loop->points, "x"), y = Column(*loop->points, "y");
+    const FieldGrid grid = InterpolateField(x, y, field.values, 160, run.part_mask);
     const std::string when = loop == &first ? "before compensation" : "after compensation";
-    FL_ASSIGN_OR_RETURN(
-        std::string fig,
-        Figure(
-            DrawFieldMap(Column(*loop->points, "x"), Column(*loop->points, "y"), Column(*loop->points, "deviation_um"),
-                         scale, "DEVIATION LOOP " + std::to_string(loop->loop), "DEVIATION (µm)", part_mask),
-            "Colour map of the deviations of loop " + std::to_string(loop->loop) + " " + when,
-            "Deviation of loop " + std::to_string(loop->loop) + " (" + when + "). " + common));
-    html += fig;
+    const std::string what = field.systematic ? "Systematic field" : "Deviation";
+    html += FigureHtml(
+        SvgFieldMap(grid, x, y, scale, what + " of loop " + std::to_string(loop->loop),
+                    field.systematic ? std::string(kDsLabel) : "deviation (µm)"),
+        what + " of loop " + std::to_string(loop->loop) + " (" + when + ")" +
+            (field.systematic ? ", d_s as the analysis fitted it" : ", the measured deviations") +
+            ", interpolated between the probe points (dots). Red = material left, blue = removed beyond nominal; "
+            "scale ±" +
+            FormatFixed(scale, 2) + " µm, the same in every map and the 3-D view.");
   }
-  const std::vector<double> ds = Column(p0, "systematic_um");
-  if (ds.empty()) {
-    NotAvailable(html, "Systematic field map", "deviations.csv of loop 0 has no systematic_um column");
-  } else {
-    FL_ASSIGN_OR_RETURN(std::string fig,
-                        Figure(DrawFieldMap(Column(p0, "x"), Column(p0, "y"), ds, std::max(MaxAbs(ds), 1e-3),
-                                            "SYSTEMATIC FIELD LOOP 0", "d_s (µm)", part_mask),
-                               "Colour map of the systematic deviation field of loop 0",
-                               "Systematic field d_s of loop 0 (the part compensation acts on), on its own symmetric "
-                               "scale ±" +
-                                   FormatFixed(MaxAbs(ds), 2) + " µm."));
-    html += fig;
-  }
-  std::vector<HistogramSeries> series{{d0, "LOOP " + std::to_string(first.loop), HexColour(0xe66101)}};
-  if (last.loop != first.loop) series.push_back({d1, "LOOP " + std::to_string(last.loop), HexColour(0x5e3c99)});
-  FL_ASSIGN_OR_RETURN(
-      std::string hist,
-      Figure(DrawHistogram(series, tol, "DEVIATION HISTOGRAM"),
-             "Histogram of the deviations before and after compensation with the tolerance limits",
-             "Distribution of the deviations (µm), loop " + std::to_string(first.loop) + " (orange)" +
-                 (last.loop != first.loop ? " and loop " + std::to_string(last.loop) + " (purple)" : "") +
-                 (std::isfinite(tol) ? "; dashed lines at ±α = ±" + FormatFixed(tol, 2) + " µm."
-                                     : std::string("; no tolerance was given."))));
-  html += hist;
-  return Status::Ok();
+  const std::vector<double> d0 = Column(*first.points, "deviation_um"), d1 = Column(*last.points, "deviation_um");
+  std::vector<HistogramSeries> series{{d0, "loop " + std::to_string(first.loop), HexColour(0xe66101)}};
+  if (last.loop != first.loop) series.push_back({d1, "loop " + std::to_string(last.loop), HexColour(0x5e3c99)});
+  html += FigureHtml(SvgHistogram(series, tol, "Deviation histogram"),
+                     "Distribution of the measured deviations (µm), loop " + std::to_string(first.loop) + " (orange)" +
+                         (last.loop != first.loop ? " and loop " + std::to_string(last.loop) + " (purple)" : "") +
+                         (std::isfinite(tol) ? "; dashed lines at ±α = ±" + FormatFixed(tol, 2) + " µm."
+                                             : std::string("; no tolerance was given.")));
+  html += "</div>\n";
 }
 
-Status DeviationsSection(std::string& html, const RunData& run) {
+Status DeviationsSection(std::string& html, const RunData& run, double scale) {
   OpenSection(html, "deviations", "Deviations before and after",
               "Where the surface deviates from the ideal shape before compensation (loop 0) and after the last loop, "
-              "the systematic part of loop 0 and the distribution of the deviations against the tolerance.");
+              "and the distribution of the deviations against the tolerance.");
   if (run.loops.empty() || !run.loops.front().points) {
-    NotAvailable(html, "Deviations of loop 0 (loop-0/deviations.csv)",
-                 run.loops.empty() ? std::string("no loop-0 folder") : run.loops.front().points_note);
+    NotAvailable(html, "Deviations of loop 0",
+                 run.loops.empty() ? std::string("the run has no cycle") : run.loops.front().points_note);
     CloseSection(html);
     return Status::Ok();
   }
@@ -598,20 +439,21 @@ Status DeviationsSection(std::string& html, const RunData& run) {
   }
   std::vector<std::vector<std::string>> rows{DeviationStats(run.loops.front())};
   if (last->loop != 0) rows.push_back(DeviationStats(*last));
-  html += Table({"loop", "points", "mean (µm)", "rms (µm)", "min (µm)", "max (µm)"}, rows);
+  html += Table({"Loop", "Probe points", "Mean (µm)", "RMS (µm)", "Min (µm)", "Max (µm)"}, rows);
   if (last->loop == 0) html += "<p>Only loop 0 has deviations, so there is no after-compensation map.</p>\n";
-  FL_RETURN_IF_ERROR(DeviationFigures(html, run.loops.front(), *last, ToleranceUm(run.summary), run.part_mask));
+  DeviationFigures(html, run, run.loops.front(), *last, scale);
   CloseSection(html);
   return Status::Ok();
 }
 
 // Moran scatter of loop 0; "not available" without lag_um.
-Status MoranScatter(std::string& html, const LoopData& loop, double moran_i) {
+std::string MoranScatter(const LoopData& loop, double moran_i) {
   const std::vector<double> d = Column(*loop.points, "deviation_um");
   const std::vector<double> lag = Column(*loop.points, "lag_um");
   if (lag.empty() || d.empty()) {
-    NotAvailable(html, "Moran scatter plot", "deviations.csv of loop 0 has no lag_um column");
-    return Status::Ok();
+    std::string html;
+    NotAvailable(html, "Moran scatter plot", "the analysis wrote no spatial lag for loop 0");
+    return html;
   }
   double mean = 0, var = 0;
   for (double v : d) mean += v;
@@ -624,40 +466,11 @@ Status MoranScatter(std::string& html, const LoopData& loop, double moran_i) {
     z.push_back(sd > 0 ? (d[i] - mean) / sd : 0);
     lag_z.push_back(sd > 0 ? lag[i] / sd : 0);
   }
-  FL_ASSIGN_OR_RETURN(std::string fig,
-                      Figure(DrawMoranScatter(z, lag_z, Clusters(*loop.points), moran_i,
-                                              "MORAN SCATTER LOOP 0  I = " + FormatFixed(moran_i, 3)),
-                             "Moran scatter plot of loop 0: standardised deviation against its spatial lag",
-                             "Moran scatter of loop 0: each point's standardised deviation z against the average z of "
-                             "its neighbours; the red line has slope I = " +
-                                 FormatFixed(moran_i, 3) + ". Points in HH/LL quadrants sit in like neighbourhoods."));
-  html += fig;
-  return Status::Ok();
-}
-
-Status LisaMap(std::string& html, const LoopData& loop) {
-  const std::vector<int> clusters = Clusters(*loop.points);
-  if (clusters.empty()) {
-    NotAvailable(html, "LISA cluster map", "deviations.csv of loop 0 has no lisa column");
-    return Status::Ok();
-  }
-  FL_ASSIGN_OR_RETURN(
-      std::string fig,
-      Figure(DrawClusterMap(Column(*loop.points, "x"), Column(*loop.points, "y"), clusters, "LISA CLUSTERS LOOP 0"),
-             "Map of the local Moran (LISA) clusters of loop 0",
-             "LISA clusters of loop 0: HH = high deviation among high neighbours (red), LL = low among "
-             "low (blue), LH/HL = outliers, grey = not significant or island."));
-  html += fig;
-  std::vector<int> counts(kLisaClusterCount, 0);
-  for (int k : clusters) {
-    if (k >= 0 && k < kLisaClusterCount) ++counts[static_cast<std::size_t>(k)];
-  }
-  std::vector<std::vector<std::string>> rows;
-  for (int k = 0; k < kLisaClusterCount; ++k) {
-    rows.push_back({LisaName(k), std::to_string(counts[static_cast<std::size_t>(k)])});
-  }
-  html += Table({"LISA cluster", "points"}, rows);
-  return Status::Ok();
+  return FigureHtml(SvgMoranScatter(z, lag_z, Clusters(*loop.points), moran_i,
+                                    "Moran scatter of loop 0 (I = " + FormatFixed(moran_i, 3) + ")"),
+                    "Each point's standardised deviation z against the average z of its neighbours; the red line has "
+                    "slope I = " +
+                        FormatFixed(moran_i, 3) + ". Points in the HH/LL quadrants sit in like neighbourhoods.");
 }
 
 Status SpatialSection(std::string& html, const RunData& run) {
@@ -665,134 +478,139 @@ Status SpatialSection(std::string& html, const RunData& run) {
               "Whether the deviations of loop 0 cluster in space (global Moran's I) and where (local Moran, LISA): "
               "clustered deviations are systematic and can be compensated; scattered ones are random.");
   if (run.loops.empty() || !run.loops.front().points) {
-    NotAvailable(html, "Spatial analysis of loop 0", "no deviations for loop 0");
+    NotAvailable(html, "Spatial analysis of loop 0", "loop 0 has no deviations");
     CloseSection(html);
     return Status::Ok();
   }
   const LoopData& loop = run.loops.front();
   const Json moran = loop.analysis.value ? Member(*loop.analysis.value, "raw_moran") : Json();
-  html += Table({"Moran's I", "expected E[I]", "z (normality)", "chosen model"},
+  html += Table({"Moran's I", "Expected E[I]", "z (normality)", "Chosen model"},
                 {{Num(Member(moran, "I"), 4), Num(Member(moran, "expected"), 4), Num(Member(moran, "z_normality"), 2),
                   loop.analysis.value ? Esc(Scalar(Member(*loop.analysis.value, "chosen_model"))) : "—"}});
+  html += "<div class=\"figs\">";
   if (!Member(moran, "I").is_number()) {
-    NotAvailable(html, "Moran scatter plot", "loop-0/analysis.json has no raw_moran.I");
+    NotAvailable(html, "Moran scatter plot", "the analysis of loop 0 recorded no Moran's I");
   } else {
-    FL_RETURN_IF_ERROR(MoranScatter(html, loop, Member(moran, "I").get<double>()));
+    html += MoranScatter(loop, Member(moran, "I").get<double>());
   }
-  FL_RETURN_IF_ERROR(LisaMap(html, loop));
+  const std::vector<int> clusters = Clusters(*loop.points);
+  if (clusters.empty()) {
+    NotAvailable(html, "LISA cluster map", "the analysis wrote no LISA clusters for loop 0");
+  } else {
+    html += FigureHtml(
+        SvgClusterMap(Column(*loop.points, "x"), Column(*loop.points, "y"), clusters, "LISA clusters of loop 0"),
+        "HH = high deviation among high neighbours (red), LL = low among low (blue), LH/HL = "
+        "outliers, grey = not significant or island.");
+  }
+  html += "</div>\n";
   CloseSection(html);
   return Status::Ok();
 }
 
-// "name = value ± se" per parameter; parameters and std_errors may be objects or arrays.
-std::string Parameters(const Json& cause) {
-  const Json& params = Member(cause, "parameters");
-  const Json& errors = Member(cause, "std_errors");
-  std::string out;
-  std::size_t index = 0;
-  for (auto it = params.begin(); (params.is_object() || params.is_array()) && it != params.end(); ++it, ++index) {
-    const std::string name = params.is_object() ? it.key() : "p" + std::to_string(index);
-    Json se;
-    if (errors.is_object() && params.is_object()) se = Member(errors, it.key().c_str());
-    if (errors.is_array() && index < errors.size()) se = errors[index];
-    out += (out.empty() ? "" : "<br>") + Esc(name) + " = " + Esc(Scalar(*it)) +
-           (se.is_number() ? " ± " + Esc(Scalar(se)) : "");
-  }
-  return out.empty() ? Esc(Scalar(params)) : out;
-}
-
-void DiagnosisSection(std::string& html, const RunData& run) {
-  OpenSection(
-      html, "diagnosis", "Diagnosis",
-      "Which physical effects of the machine, tool, set-up or probe explain the systematic deviation of loop 0, "
-      "with their fitted parameters, and how much a model of them reduces the error.");
-  if (!run.diagnosis.value) {
-    NotAvailable(html, "Diagnosis (loop-0/diagnosis/diagnosis.json)", run.diagnosis.note);
-    CloseSection(html);
-    return;
-  }
-  const Json& d = *run.diagnosis.value;
-  std::vector<std::vector<std::string>> rows;
-  const Json& causes = Member(d, "causes");
-  for (const Json& c : causes.is_array() ? causes : Json::array()) {
-    rows.push_back({Esc(Scalar(Member(c, "effect"))), Parameters(c), Num(Member(c, "variance_explained"), 3),
-                    Num(Member(c, "z_before"), 2) + " → " + Num(Member(c, "z_after"), 2)});
-  }
-  if (rows.empty()) {
-    html += "<p>No effect of the catalogue explains the systematic deviation.</p>\n";
-  } else {
-    html += Table({"effect", "parameters ± std. error", "variance explained", "Moran z before → after"}, rows);
-  }
-  const Json& unexplained = Member(d, "unexplained");
-  html += "<h3>Unexplained residual</h3>\n";
-  html += unexplained.is_null() ? "<p>None: the causes above account for the systematic deviation.</p>\n"
-                                : GenericJson(unexplained);
-  const Json& gain = Member(d, "gain");
-  html += "<h3>Gain</h3>\n";
-  html += Table(
-      {"", "before (µm)", "after (µm)"},
-      {{"rms", Num(Member(gain, "rms_before_um"), 2), Num(Member(gain, "rms_after_um"), 2)},
-       {"held-out rms", Num(Member(gain, "heldout_rms_before_um"), 2), Num(Member(gain, "heldout_rms_after_um"), 2)}});
-  CloseSection(html);
-}
-
 constexpr const char* kStyle = R"(<style>
-body{font-family:"DejaVu Sans",Helvetica,Arial,sans-serif;max-width:1280px;margin:2em auto;padding:0 1em;color:#222;line-height:1.4}
-h1{margin-bottom:.2em}h2{border-bottom:2px solid #ddd;padding-bottom:.2em;margin-top:2em}
+*{box-sizing:border-box}
+body{font-family:"DejaVu Sans",Helvetica,Arial,sans-serif;max-width:1280px;margin:1.5em auto;padding:0 1em;color:#222;line-height:1.4}
+h1{margin-bottom:.2em;overflow-wrap:anywhere}h2{border-bottom:2px solid #ddd;padding-bottom:.2em;margin-top:2em}
+h3{margin-bottom:.3em}
 .intro{color:#555;font-style:italic}
+.tw{max-width:100%;overflow-x:auto}
 table{border-collapse:collapse;margin:.6em 0;font-size:.92em}
-th,td{border:1px solid #ccc;padding:.25em .6em;text-align:left;vertical-align:top}th{background:#f3f3f3}
+caption{text-align:left;font-weight:bold;padding:.2em 0}
+th,td{border:1px solid #ccc;padding:.25em .6em;text-align:left;vertical-align:top;overflow-wrap:break-word}th{background:#f3f3f3}
+td.n{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}
 .verdict{font-size:1.4em;font-weight:bold;padding:.4em .8em;border-radius:6px;display:inline-block}
 .verdict.ok{background:#e3f4e1;color:#1b5e20}.verdict.bad{background:#fde2e1;color:#b71c1c}
 .badge{display:inline-block;padding:.15em .6em;border-radius:1em;background:#e0e7f1;color:#1f3b63;font-size:.9em;margin-right:.4em}
 .badge.flag{background:#fff1cc;color:#7a5200}
-.na{color:#8a6d3b;background:#fcf8e3;padding:.3em .6em;display:inline-block}
-figure{display:inline-block;margin:.6em 1em .6em 0;vertical-align:top;max-width:calc(50% - 1.5em)}
+.na{color:#8a6d3b;background:#fcf8e3;padding:.3em .6em;display:inline-block}.na:empty{display:none}
+.note{background:#eef4fb;border-left:4px solid #4a78b0;padding:.4em .8em}
+.caveat{background:#fff8e6;border-left:4px solid #d8a200;padding:.4em .8em}
+.toc a{margin-right:1em}
+.figs{display:grid;grid-template-columns:repeat(auto-fill,minmax(400px,1fr));gap:1em}
+figure{margin:.6em 0;min-width:0}
 figcaption{font-size:.88em;color:#444}
-img{border:1px solid #ddd;max-width:100%;height:auto}footer{margin-top:3em;color:#777;font-size:.85em;border-top:1px solid #ddd;padding-top:.5em}
-code{font-size:.92em}
+svg.chart{max-width:100%;height:auto;display:block}
+svg.chart text{font-family:"DejaVu Sans",Helvetica,Arial,sans-serif;font-size:14px}
+svg.chart text.title{font-size:16px;font-weight:bold}svg.chart text.axis{font-size:14px;font-weight:bold}
+svg.chart text.quadrant{font-size:18px}svg.chart .sub{font-size:10px}
+svg.scalebar{max-width:100%;height:auto;display:block}svg.scalebar text{font-family:"DejaVu Sans",Helvetica,Arial,sans-serif;font-size:13px}
+footer{margin-top:3em;color:#777;font-size:.85em;border-top:1px solid #ddd;padding-top:.5em}
+code{font-size:.92em;overflow-wrap:break-word}
+#view3d .stage{position:relative;width:100%;max-width:900px;aspect-ratio:4/3;border:1px solid #ccc;background:#fafafa}
+#view3d canvas{width:100%;height:100%;display:block;touch-action:none}
+#view3d .tip{position:absolute;pointer-events:none;background:rgba(255,255,255,.92);border:1px solid #999;padding:2px 6px;font-size:.85em;display:none;white-space:nowrap}
+#view3d .controls label{margin-right:1em;white-space:nowrap}
+#view3d .print-only{display:none}
+@media print{#view3d .stage,#view3d .controls{display:none}#view3d .print-only{display:block}}
 </style>
 )";
 
-// Records how many pictures decoded, for headless checks (tests/app/report_test.cc).
+// Records in <body data-*> what rendered, for headless checks (tests/app/report_test.cc): how many SVG
+// charts have a size, how many of their embedded rasters decoded, and every script error.
 constexpr const char* kScript = R"(<script>
+window.formloopErrors = [];
+window.addEventListener("error", function (e) { window.formloopErrors.push(String(e.message)); });
 window.addEventListener("load", function () {
-  var images = document.images, loaded = 0;
-  for (var i = 0; i < images.length; ++i) if (images[i].complete && images[i].naturalWidth > 0) ++loaded;
-  document.body.dataset.imagesLoaded = loaded + "/" + images.length;
+  var charts = document.querySelectorAll("svg.chart"), drawn = 0;
+  for (var i = 0; i < charts.length; ++i) { var r = charts[i].getBoundingClientRect(); if (r.width > 0 && r.height > 0) ++drawn; }
+  var rasters = document.querySelectorAll("svg.chart image"), pending = rasters.length, decoded = 0;
+  function done() {
+    document.body.dataset.chartsDrawn = drawn + "/" + charts.length;
+    document.body.dataset.rastersDecoded = decoded + "/" + rasters.length;
+    var wide = [], limit = document.documentElement.clientWidth;
+    document.querySelectorAll("body *").forEach(function (el) {
+      var r = el.getBoundingClientRect();
+      if (r.right > limit + 1 && !el.closest(".tw")) wide.push(el.tagName.toLowerCase() + (el.id ? "#" + el.id : ""));
+    });
+    document.body.dataset.tooWide = wide.slice(0, 5).join(" ") || "none";
+    document.body.dataset.errors = window.formloopErrors.join(" | ") || "none";
+    document.body.dataset.pageHeight = document.documentElement.scrollHeight;
+    document.body.dataset.renderMs = Math.round(performance.now());
+  }
+  if (pending === 0) done();
+  for (var k = 0; k < rasters.length; ++k) {
+    var img = new Image();
+    img.onload = function () { ++decoded; if (--pending === 0) done(); };
+    img.onerror = function () { if (--pending === 0) done(); };
+    img.src = rasters[k].getAttribute("href");
+  }
 });
 </script>
 )";
 
-// The run folder's own name ("runs/demo/" -> "demo"), not its absolute path, so a report does not
-// change when the folder moves.
-
 }  // namespace
+
+namespace report {
+
+MapField FieldOf(const LoopData& loop) {
+  std::vector<double> ds = Column(*loop.points, "systematic_um");
+  if (!ds.empty()) return {std::move(ds), true};
+  return {Column(*loop.points, "deviation_um"), false};
+}
+
+}  // namespace report
 
 Result<std::string> RenderRunReport(const fs::path& run_dir) {
   FL_ASSIGN_OR_RETURN(RunData run, LoadRun(run_dir));
+  const double scale = ReportScale(run);
   std::string html = "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n";
+  html += "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n";
   html += "<title>formloop report: " + Esc(StringOr(Member(run.summary, "part"), "")) + "</title>\n";
   html += kStyle;
   html += kScript;
   html += "</head>\n<body>\n";
+  html += ScaleDefinitions();
   HeaderSection(html, run);
-  if (!run.analysis_folder) {
-    RetrievalSection(html, run);
-    GenericSection(html, "plan", "Plan", "The process plan the run used (tool, feeds, step-over, probing ...).",
-                   run.plan, "Plan (plan.json)");
-    GenericSection(html, "sim-correction", "Simulation correction",
-                   "Defects the virtual machine predicted for the plan before and after correction, the plan chosen "
-                   "and why.",
-                   run.sim_correction, "Simulation correction (sim_correction.json)");
-  }
+  FL_RETURN_IF_ERROR(View3dSection(html, run, scale));
   FL_RETURN_IF_ERROR(LoopHistorySection(html, run));
-  FL_RETURN_IF_ERROR(DeviationsSection(html, run));
+  FL_RETURN_IF_ERROR(DeviationsSection(html, run, scale));
   FL_RETURN_IF_ERROR(SpatialSection(html, run));
   if (!run.analysis_folder) {
     DiagnosisSection(html, run);
-    GenericSection(html, "retain", "Retain", "What this run stores back into the case library for future parts.",
-                   run.retain, "Retain (retain.json)");
+    RetrievalSection(html, run);
+    PlanSection(html, run);
+    SimCorrectionSection(html, run);
+    RetainSection(html, run);
   }
   if (run.analysis_folder) {
     html += "<footer>formloop analyse — report of the <code>" + Esc(StringOr(Member(run.summary, "part"), "?")) +

@@ -27,7 +27,8 @@ PACKAGES=(
   libssl-dev        # SHA-256 (OpenSSL EVP) of the CAD and scan files a run copies into its folder
   libfuzzylite-dev  # the fuzzy feed controller's Mamdani inference (planning/fuzzy_feed.h)
   libnlopt-dev      # tests only: an independent optimum (COBYLA) for the cutting-parameter GA
-  chromium          # headless browser: the report test checks every picture of report.html loads
+  chromium          # headless browser: the report tests render report.html (charts, 3-D view, width, errors)
+  libjs-three       # three.js + OrbitControls, inlined into report.html for its 3-D view (no network)
   linuxcnc-uspace   # rs274 checks our LinuxCNC programs; the controller itself runs them (tests/linuxcnc)
 )
 
