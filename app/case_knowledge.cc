@@ -1,9 +1,49 @@
 #include "app/case_knowledge.h"
 
+#include <algorithm>
+#include <vector>
+
 #include "planning/case_plan.h"
 #include "retrieval/starter.h"
 
 namespace formloop::app {
+
+Result<sim::PlausibleRanges> PlausibleRangesFor(kb::Library* library, const std::filesystem::path& data_dir) {
+  if (library != nullptr) {
+    FL_ASSIGN_OR_RETURN(const kb::RuleSet rules, library->GetRules());
+    if (const kb::Rule* rule = rules.Find(sim::kPlausibleRangesRule)) {
+      return sim::PlausibleRanges::FromJson(rule->choice, "case library rule set v" + std::to_string(rules.version));
+    }
+  }
+  return sim::ReadPlausibleRanges((data_dir / "starter" / "rules.json").string());
+}
+
+nlohmann::json LearnedModelEntry(const sim::Model& model, const std::string& machine, const std::string& tool,
+                                 const std::string& material, const nlohmann::json& provenance) {
+  nlohmann::json rows = nlohmann::json::array();
+  std::vector<std::string> aliased_parameters;
+  for (const auto& g : model.alias_groups) {
+    for (const auto& m : g.members) aliased_parameters.push_back(m);
+  }
+  for (const auto& e : model.effects) {
+    if (!e.alias_group.empty()) continue;
+    const auto& spec = e.effect->parameters();
+    for (std::size_t k = 0; k < spec.size(); ++k) {
+      const std::string parameter = std::string(e.effect->name()) + "(" + spec[k].name + ")";
+      if (std::find(aliased_parameters.begin(), aliased_parameters.end(), parameter) != aliased_parameters.end()) {
+        continue;
+      }
+      rows.push_back({{"name", std::string(e.effect->name()) + "." + spec[k].name},
+                      {"estimate", e.values[k]},
+                      {"standard_error", e.std_errors.empty() ? 0.0 : e.std_errors[k]}});
+    }
+  }
+  nlohmann::json groups = nlohmann::json::array();
+  for (const auto& g : model.alias_groups) groups.push_back({{"id", g.id}, {"members", g.members}});
+  return {{"machine", machine},      {"tool", tool},           {"material", material},
+          {"effects", rows},         {"alias_groups", groups}, {"model", model.ToJson()},
+          {"provenance", provenance}};
+}
 
 retrieval::PartDescription DescriptionOf(const PartSpec& part, const nc::ToolpathOptions& plan) {
   retrieval::PartDescription d;
@@ -38,18 +78,8 @@ Result<kb::CaseRecord> MakeRetainedCase(const RetainInput& in) {
   record.concepts = in.features->Concepts();
   const std::string tool = planning::ToolKey(in.plan.tool.radius_mm);
   if (in.learned) {
-    nlohmann::json rows = nlohmann::json::array();
-    for (const auto& e : in.learned->effects) {
-      const auto& spec = e.effect->parameters();
-      for (std::size_t k = 0; k < spec.size(); ++k) {
-        rows.push_back({{"name", std::string(e.effect->name()) + "." + spec[k].name},
-                        {"estimate", e.values[k]},
-                        {"standard_error", e.std_errors.empty() ? 0.0 : e.std_errors[k]}});
-      }
-    }
-    nlohmann::json entry = {{"machine", part.machine_name},  {"tool", tool},
-                            {"material", part.material},     {"effects", rows},
-                            {"model", in.learned->ToJson()}, {"provenance", in.learned_provenance}};
+    const nlohmann::json entry =
+        LearnedModelEntry(*in.learned, part.machine_name, tool, part.material, in.learned_provenance);
     nlohmann::json models = record.simulation.value("effect_models", nlohmann::json::array());
     if (!models.is_array()) models = nlohmann::json::array();
     bool replaced = false;

@@ -3,6 +3,7 @@
 // description and the case the finished run retains (new, or an update of the same part's case). What it
 // takes from a retrieved case (the plan, the learned model) is planning/case_plan.h.
 
+#include <filesystem>
 #include <optional>
 #include <string>
 
@@ -13,8 +14,19 @@
 #include "nc-gen/toolpath.h"
 #include "retrieval/features.h"
 #include "simulation/model.h"
+#include "simulation/plausible_ranges.h"
 
 namespace formloop::app {
+
+// The plausible parameter ranges a diagnosis names effects within (sim::PlausibleRanges, rule
+// "diagnose.plausible_ranges"): the library's active rule when it has one, else data_dir/starter/rules.json.
+Result<sim::PlausibleRanges> PlausibleRangesFor(kb::Library* library, const std::filesystem::path& data_dir);
+
+// The learned-model entry of a case (simulation.effect_models[]): the model, and as {name, estimate,
+// standard_error} rows only the parameters of its named effects — an alias group's members carry a
+// combined prediction, not estimates, and are listed under "alias_groups" instead.
+nlohmann::json LearnedModelEntry(const sim::Model& model, const std::string& machine, const std::string& tool,
+                                 const std::string& material, const nlohmann::json& provenance);
 
 // The retrieval description of a part (retrieval::PartDescription) from its part file.
 retrieval::PartDescription DescriptionOf(const PartSpec& part, const nc::ToolpathOptions& plan);

@@ -36,6 +36,19 @@ void PrintTable(const RegressResult& r) {
                              f.contains("loops_to_tolerance") && f["loops_to_tolerance"].is_number()
                                  ? std::to_string(f["loops_to_tolerance"].get<int>())
                                  : "-");
+    if (row.contains("truth") && row["truth"].contains("true_effects")) {
+      const nlohmann::json& t = row["truth"];
+      auto names = [](const nlohmann::json& list) {
+        std::string out;
+        for (const auto& x : list) out += (out.empty() ? "" : ",") + (x.is_string() ? x.get<std::string>() : x.dump());
+        return out.empty() ? std::string("-") : out;
+      };
+      std::cerr << fmt::format(
+          "    truth: machine has {}; named not in it: {}; true effects not found: {}; named "
+          "parameters outside their 95% interval: {}/{}\n",
+          names(t["true_effects"]), names(t["named_not_in_profile"]), names(t["true_missed"]),
+          t["parameters_outside"].size(), t["parameters"].get<int>());
+    }
     for (const auto& d : row.value("differences", nlohmann::json::array())) {
       std::cerr << fmt::format("    {}: golden {} now {} (allowed {})\n", d["figure"].get<std::string>(),
                                d["golden"].dump(), d["value"].dump(), d["allowed"].get<std::string>());
@@ -47,6 +60,11 @@ void PrintTable(const RegressResult& r) {
   }
   std::cerr << fmt::format("within tolerance after at most one compensation loop: {}/{}; regressions: {}\n",
                            r.within_one_loop, r.parts, r.regressions);
+  std::cerr << fmt::format(
+      "truth (against the machine profiles, not a golden): effects named that the machine lacks: "
+      "{}; true effects neither named, in an alias group nor in the baseline: {}/{}; named "
+      "parameters outside their 95% interval: {}/{}\n",
+      r.named_not_in_profile, r.true_missed, r.true_effects, r.parameters_outside, r.parameters);
 }
 
 }  // namespace

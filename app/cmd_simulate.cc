@@ -1,7 +1,10 @@
 // `formloop simulate` and `formloop diagnose`: thin CLI over app/model_jobs.h.
 
+#include <algorithm>
 #include <iostream>
 #include <memory>
+#include <string>
+#include <vector>
 
 #include "app/command.h"
 #include "app/model_jobs.h"
@@ -32,9 +35,13 @@ void AddDiagnoseCommand(CLI::App& root, CommandAction* action) {
       "catalogue effect, the named cause(s) with parameters and standard errors, confounded effects, an unexplained "
       "systematic residual when nothing explains it, the extended model and its gain on held-out data. Writes "
       "DIR/diagnosis.json, DIR/model.json, DIR/residuals.csv and DIR/inputs/; prints diagnosis.json on stdout.");
-  cmd->add_option("--measured", args->measured, "measured probe log LOG.csv");
+  auto measured = std::make_shared<std::vector<std::string>>();
+  auto runs = std::make_shared<std::vector<std::string>>();
+  cmd->add_option("--measured", *measured,
+                  "measured probe log LOG.csv; give --measured/--run again for more parts of the same machine, tool "
+                  "and material (shared effects fitted over all, each part's set-up on its own)");
   cmd->add_option("--features", args->features, "feature positions F.csv: id,x_nom,y_nom,[z_nom,]x,y,[z] (mm)");
-  cmd->add_option("--run", args->run, "the `formloop run` folder that made the part (with --measured)");
+  cmd->add_option("--run", *runs, "the `formloop run` folder that made the part (with --measured, one per log)");
   cmd->add_option("--plan", args->plan,
                   "its probing plan (.json/.csv); default: the run's. Without --run: plan-only diagnosis of the "
                   "effects that do not need the tool path");
@@ -52,7 +59,12 @@ void AddDiagnoseCommand(CLI::App& root, CommandAction* action) {
                   "screen only these catalogue effects (e.g. setup_offset,setup_rotation when only the set-up is in "
                   "question); default: all")
       ->delimiter(',');
-  cmd->callback([args, action] {
+  cmd->add_flag("!--no-proposal", args->propose, "do not propose the experiment that separates an alias group");
+  cmd->callback([args, action, measured, runs] {
+    if (!measured->empty()) args->measured = measured->front();
+    if (!runs->empty()) args->run = runs->front();
+    args->more_measured.assign(measured->begin() + std::min<std::size_t>(1, measured->size()), measured->end());
+    args->more_runs.assign(runs->begin() + std::min<std::size_t>(1, runs->size()), runs->end());
     *action = [args]() -> Status {
       FL_ASSIGN_OR_RETURN(const nlohmann::json out, RunDiagnose(*args));
       std::cout << out.dump(2) << std::endl;

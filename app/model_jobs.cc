@@ -1,10 +1,15 @@
 #include "app/model_jobs.h"
 
+#include <algorithm>
+#include <cmath>
+#include <deque>
 #include <filesystem>
 #include <optional>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
+#include "app/case_knowledge.h"
 #include "app/run_folder.h"
 #include "core/atomic_file.h"
 #include "core/json_io.h"
@@ -12,7 +17,11 @@
 #include "core/output_folder.h"
 #include "core/point_io.h"
 #include "kb/library.h"
+#include "nc-gen/cutter_locations.h"
+#include "planning/case_plan.h"
+#include "retrieval/starter.h"
 #include "simulation/diagnose.h"
+#include "simulation/experiment_design.h"
 #include "simulation/virtual_machine.h"
 
 namespace formloop::app {
@@ -47,28 +56,16 @@ sim::ProbeDataInput ProbeInputOf(const RunFolder& run, const PlanWithApproaches&
 Status StoreLearnedModel(const DiagnoseArgs& args, const RunFolder& run, const sim::Diagnosis& diagnosis) {
   FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args.library));
   FL_ASSIGN_OR_RETURN(kb::CaseRecord record, library->GetCase(args.case_uid));
-  const std::string tool = "ball r" + fmt::format("{:g}", run.part.toolpath.tool.radius_mm);
-  nlohmann::json rows = nlohmann::json::array();
-  for (const auto& e : diagnosis.extended.effects) {
-    const auto& spec = e.effect->parameters();
-    for (std::size_t k = 0; k < spec.size(); ++k) {
-      rows.push_back({{"name", std::string(e.effect->name()) + "." + spec[k].name},
-                      {"estimate", e.values[k]},
-                      {"standard_error", e.std_errors[k]}});
-    }
-  }
-  nlohmann::json entry = {{"machine", args.machine},
-                          {"tool", tool},
-                          {"material", run.part.material},
-                          {"effects", rows},
-                          {"model", diagnosis.extended.ToJson()},
-                          {"provenance",
-                           {{"measured", args.measured},
-                            {"run", args.run},
-                            {"baseline", args.baseline},
-                            {"points", diagnosis.n},
-                            {"heldout_rms_before_um", diagnosis.heldout_rms_before_um},
-                            {"heldout_rms_after_um", diagnosis.heldout_rms_after_um}}}};
+  const std::string tool = planning::ToolKey(run.part.toolpath.tool.radius_mm);
+  const nlohmann::json entry = LearnedModelEntry(diagnosis.extended, args.machine, tool, run.part.material,
+                                                 {{"measured", args.measured},
+                                                  {"run", args.run},
+                                                  {"more_measured", args.more_measured},
+                                                  {"more_runs", args.more_runs},
+                                                  {"baseline", args.baseline},
+                                                  {"points", diagnosis.n},
+                                                  {"heldout_rms_before_um", diagnosis.heldout_rms_before_um},
+                                                  {"heldout_rms_after_um", diagnosis.heldout_rms_after_um}});
   nlohmann::json& models = record.simulation["effect_models"];
   if (!models.is_array()) models = nlohmann::json::array();
   bool replaced = false;
@@ -154,22 +151,37 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
   // The output folder is checked (and its staging folder started) before any work: it is built whole in
   // DIR.partial and renamed into place at the end, replacing only a folder formloop wrote.
   const fs::path dir(args.out);
-  const std::vector<NamedPath> inputs = {
+  std::vector<NamedPath> input_paths = {
       {"--measured", args.measured}, {"--features", args.features},           {"--run", args.run},
       {"--plan", args.plan},         {"--probe-profile", args.probe_profile}, {"--baseline", args.baseline},
       {"--validate", args.validate}, {"--validate-run", args.validate_run},   {"--validate-plan", args.validate_plan},
       {"--library", args.library}};
+  for (const auto& m : args.more_measured) input_paths.push_back({"--measured", m});
+  for (const auto& r : args.more_runs) input_paths.push_back({"--run", r});
   StagedOutputFolder folder;
-  FL_RETURN_IF_ERROR(folder.Open(dir, "--out", "diagnose", inputs));
+  FL_RETURN_IF_ERROR(folder.Open(dir, "--out", "diagnose", input_paths));
   const fs::path& staging = folder.dir();
   sim::Model baseline;
   if (!args.baseline.empty()) {
     FL_ASSIGN_OR_RETURN(baseline, sim::ReadModel(args.baseline));
   }
+  if (args.more_measured.size() != args.more_runs.size() || (!args.more_measured.empty() && args.run.empty())) {
+    return Status::BadInput(Where{.field = "--measured/--run"}, "give them in pairs, one run folder per log",
+                            "--measured A.csv --run RUN_A --measured B.csv --run RUN_B ...");
+  }
   sim::DiagnoseOptions options;
   options.candidates = args.effects;
+  {
+    std::unique_ptr<kb::Library> library;
+    if (!args.library.empty()) {
+      FL_ASSIGN_OR_RETURN(library, kb::Library::Open(args.library));
+    }
+    const fs::path data_dir = args.data_dir.empty() ? retrieval::DefaultDataDir() : fs::path(args.data_dir);
+    FL_ASSIGN_OR_RETURN(options.plausible, PlausibleRangesFor(library.get(), data_dir));
+  }
   FL_RETURN_IF_ERROR(options.Validate());
   sim::Diagnosis diagnosis;
+  nlohmann::json proposals = nlohmann::json::array();
   nlohmann::json second_part = nullptr;
   PointSet residuals;
   std::optional<RunFolder> stored_run;  // kept when the model goes into the case library
@@ -192,21 +204,67 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
     FL_ASSIGN_OR_RETURN(const metrology::ProbeModel probe, metrology::ReadProbeProfile(args.probe_profile));
     FL_ASSIGN_OR_RETURN(diagnosis, sim::DiagnosePlanOnly(plan.plan, log, probe, baseline, options));
   } else {
-    FL_ASSIGN_OR_RETURN(const RunFolder run, ReadRunFolder(args.run));
-    FL_ASSIGN_OR_RETURN(const PlanWithApproaches plan, PlanFor(run, args.plan));
-    FL_ASSIGN_OR_RETURN(const metrology::ProbeLog log, metrology::ReadProbeLog(args.measured));
-    const sim::ProbeDataInput in = ProbeInputOf(run, plan, log);
-    FL_ASSIGN_OR_RETURN(const sim::ProbeResidualData data, sim::ProbeResiduals(in, baseline));
-    FL_ASSIGN_OR_RETURN(diagnosis,
-                        sim::DiagnoseResiduals(data.contexts, data.residual_um, baseline, options, &data.sensitivity));
-    if (!args.library.empty()) stored_run = run;
-    for (std::size_t i = 0; i < data.contexts.size(); ++i) {
-      residuals.points.push_back(data.contexts[i].point);
-      residuals.normals.push_back(data.contexts[i].normal);
-      residuals.ids.push_back(data.contexts[i].id);
+    // One part, or several of the same machine/tool/material (the first with --plan when given).
+    std::vector<std::string> measured = {args.measured}, runs = {args.run};
+    measured.insert(measured.end(), args.more_measured.begin(), args.more_measured.end());
+    runs.insert(runs.end(), args.more_runs.begin(), args.more_runs.end());
+    std::deque<RunFolder> folders;
+    std::deque<PlanWithApproaches> plans;
+    std::deque<metrology::ProbeLog> logs;
+    std::vector<sim::ProbeDataInput> inputs;
+    std::vector<sim::ProbeResidualData> data;
+    std::vector<std::string> labels;
+    for (std::size_t p = 0; p < measured.size(); ++p) {
+      FL_ASSIGN_OR_RETURN(folders.emplace_back(), ReadRunFolder(runs[p]));
+      FL_ASSIGN_OR_RETURN(plans.emplace_back(), PlanFor(folders.back(), p == 0 ? args.plan : std::string()));
+      FL_ASSIGN_OR_RETURN(logs.emplace_back(), metrology::ReadProbeLog(measured[p]));
+      inputs.push_back(ProbeInputOf(folders.back(), plans.back(), logs.back()));
+      FL_ASSIGN_OR_RETURN(data.emplace_back(), sim::ProbeResiduals(inputs.back(), baseline));
+      std::string label = fs::path(runs[p]).lexically_normal().filename().string();
+      if (label.empty()) label = fs::path(runs[p]).lexically_normal().parent_path().filename().string();
+      if (label.empty() || std::find(labels.begin(), labels.end(), label) != labels.end())
+        label = std::to_string(p + 1);
+      labels.push_back(label);
+    }
+    if (data.size() == 1) {
+      FL_ASSIGN_OR_RETURN(diagnosis, sim::DiagnoseResiduals(data[0].contexts, data[0].residual_um, baseline, options,
+                                                            &data[0].sensitivity));
+    } else {
+      FL_ASSIGN_OR_RETURN(diagnosis, sim::DiagnosePooledResiduals(data, baseline, options, labels));
+    }
+    if (!args.library.empty()) stored_run = folders.front();
+    std::vector<double> part_index;
+    for (std::size_t p = 0; p < data.size(); ++p) {
+      for (std::size_t i = 0; i < data[p].contexts.size(); ++i) {
+        residuals.points.push_back(data[p].contexts[i].point);
+        residuals.normals.push_back(data[p].contexts[i].normal);
+        residuals.ids.push_back(data[p].contexts[i].id);
+        part_index.push_back(static_cast<double>(p + 1));
+      }
     }
     residuals.SetScalar("residual_um", diagnosis.residual_um);
     residuals.SetScalar("residual_after_um", diagnosis.residual_after_um);
+    if (data.size() > 1) residuals.SetScalar("part", part_index);
+    if (args.propose && !diagnosis.alias_groups.empty()) {
+      // The experiment that would separate each alias group, the next part re-planned by nc-gen.
+      sim::ExperimentOptions eo;
+      eo.plausible = options.plausible;
+      const RunFolder& first = folders.front();
+      eo.replan = [&first](double turn_deg, double feed_scale) -> Result<std::vector<sim::CutterLocation>> {
+        nc::ToolpathOptions o = first.toolpath.options;
+        o.raster_angle_deg = std::fmod(o.raster_angle_deg + turn_deg, 360.0);
+        o.feed_mm_per_min *= feed_scale;
+        FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::PlanRaster(first.q, o));
+        return nc::CutterLocationsOf(path);
+      };
+      FL_ASSIGN_OR_RETURN(const auto found, sim::ProposeExperiments(inputs, diagnosis, baseline, eo));
+      for (const auto& p : found) {
+        proposals.push_back(p.ToJson());
+        log::Info("proposal for {}: {} (cost {:.0f} s; design correlation {:.4f} -> {:.4f}{})",
+                  fmt::format("{}", fmt::join(p.members, ", ")), p.change, p.cost_s, p.correlation_before,
+                  p.correlation_after, p.predicted_to_split ? "" : "; not predicted to split it on its own");
+      }
+    }
     if (!args.validate.empty()) {
       FL_ASSIGN_OR_RETURN(const RunFolder run2, ReadRunFolder(args.validate_run));
       FL_ASSIGN_OR_RETURN(const PlanWithApproaches plan2, PlanFor(run2, args.validate_plan));
@@ -220,6 +278,7 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
   }
   nlohmann::json out = diagnosis.ToJson();
   out["gain"]["second_part"] = second_part;
+  out["proposals"] = proposals;
   FL_RETURN_IF_ERROR(MakeDirectories(staging / "inputs"));
   for (const auto& [from, name] :
        std::vector<std::pair<std::string, std::string>>{{args.measured, "measured.csv"},
@@ -230,10 +289,15 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
                                                         {args.probe_profile, "probe_profile.json"}}) {
     if (!from.empty()) FL_RETURN_IF_ERROR(CopyInto(from, staging / "inputs" / name));
   }
+  for (std::size_t p = 0; p < args.more_measured.size(); ++p) {
+    FL_RETURN_IF_ERROR(
+        CopyInto(args.more_measured[p], staging / "inputs" / ("measured_" + std::to_string(p + 2) + ".csv")));
+  }
   nlohmann::json args_json = {
-      {"measured", args.measured}, {"features", args.features},           {"run", args.run},
-      {"plan", args.plan},         {"probe_profile", args.probe_profile}, {"baseline", args.baseline},
-      {"validate", args.validate}, {"validate_run", args.validate_run}};
+      {"measured", args.measured},           {"features", args.features},   {"run", args.run},
+      {"more_measured", args.more_measured}, {"more_runs", args.more_runs}, {"plan", args.plan},
+      {"probe_profile", args.probe_profile}, {"baseline", args.baseline},   {"validate", args.validate},
+      {"validate_run", args.validate_run}};
   FL_RETURN_IF_ERROR(WriteJsonFile(staging / "inputs" / "arguments.json", args_json));
   FL_RETURN_IF_ERROR(WriteJsonFile(staging / "diagnosis.json", out));
   FL_RETURN_IF_ERROR(sim::WriteModel(staging / "model.json", diagnosis.extended));

@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -22,9 +23,12 @@ struct SimulateArgs {
 Status RunSimulate(const SimulateArgs& args);
 
 struct DiagnoseArgs {
-  std::string measured;       // LOG.csv (probe data) ...
-  std::string features;       // ... or F.csv (feature positions)
-  std::string run;            // the run that made the part (probe data)
+  std::string measured;  // LOG.csv (probe data) ...
+  std::string features;  // ... or F.csv (feature positions)
+  std::string run;       // the run that made the part (probe data)
+  // More parts of the same machine, tool and material (--measured/--run given again, in pairs): the
+  // shared effects are fitted over all parts, each part's set-up on its own (sim::DiagnosePooled).
+  std::vector<std::string> more_measured, more_runs;
   std::string plan;           // its probing plan (default: the run's); without --run: plan-only diagnosis
   std::string probe_profile;  // without --run: the probe the log was measured with (else the run's)
   std::string baseline;       // MODEL.json (default: no effects)
@@ -36,6 +40,10 @@ struct DiagnoseArgs {
   std::string case_uid;       // ... as its learned model for this machine/tool/material (replacing one with that key)
   std::string machine = "unspecified";  // the machine the part was cut on (the key's machine)
   std::vector<std::string> effects;     // screen only these catalogue effects (empty: all)
+  // The rule base the plausible parameter ranges come from (rule "diagnose.plausible_ranges"): the
+  // library's when --library is given, else data/starter/rules.json of `data_dir`.
+  std::string data_dir;  // empty: retrieval::DefaultDataDir()
+  bool propose = true;   // with --run: propose the experiment that separates each alias group
 };
 // Returns diagnosis.json's content; the summary goes to the log (stderr).
 Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args);

@@ -1,8 +1,10 @@
 #include "app/pipeline.h"
 
 #include <chrono>
+#include <memory>
 #include <optional>
 
+#include "app/case_knowledge.h"
 #include "app/machine_profile.h"
 #include "app/pipeline_stages.h"
 #include "app/report.h"
@@ -88,9 +90,14 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
     FL_ASSIGN_OR_RETURN(stages::Analysed analysed, std::move(analysed_or));
     if (loop == 0) {
       FL_RETURN_IF_ERROR(folder.Begin("7/9: loop 0 diagnosis"));
-      FL_ASSIGN_OR_RETURN(sim::Diagnosis d,
-                          stages::DiagnoseFirstCycle(part, q, machined, analysed.flagged_ids, plan.tool.radius_mm,
-                                                     programs.probing_plan, choice, summary->case_uid, folder));
+      std::unique_ptr<kb::Library> library;
+      if (!options.kb.empty()) {
+        FL_ASSIGN_OR_RETURN(library, kb::Library::Open(options.kb));
+      }
+      FL_ASSIGN_OR_RETURN(const sim::PlausibleRanges plausible, PlausibleRangesFor(library.get(), data_dir));
+      FL_ASSIGN_OR_RETURN(sim::Diagnosis d, stages::DiagnoseFirstCycle(part, q, machined, analysed.flagged_ids,
+                                                                       plan.tool.radius_mm, programs.probing_plan,
+                                                                       choice, summary->case_uid, plausible, folder));
       for (const auto& c : d.causes) summary->causes.push_back(c.effect);
       diagnosis = std::move(d);
     }

@@ -466,7 +466,7 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
                                           const Machined& machined, const std::vector<std::int64_t>& excluded_ids,
                                           double tool_radius_mm, const metrology::ProbingPlan& plan,
                                           const planning::PlanChoice& choice, const std::string& case_uid,
-                                          const RunFolderWriter& folder) {
+                                          const sim::PlausibleRanges& plausible, const RunFolderWriter& folder) {
   metrology::ProbeLog used = machined.log;
   if (!excluded_ids.empty()) {
     const std::set<std::int64_t> excluded(excluded_ids.begin(), excluded_ids.end());
@@ -480,17 +480,20 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
   input.measured = &used;
   input.probe = part.probe;
   const sim::Model baseline = choice.learned ? *choice.learned : sim::Model{};
+  sim::DiagnoseOptions options;
+  options.plausible = plausible;
   sim::Diagnosis d;
   if (machined.cut) {
-    FL_ASSIGN_OR_RETURN(d, sim::Diagnose(input, baseline, sim::DiagnoseOptions{}));
+    FL_ASSIGN_OR_RETURN(d, sim::Diagnose(input, baseline, options));
   } else {
-    FL_ASSIGN_OR_RETURN(d, sim::DiagnosePlanOnly(plan, machined.log, part.probe, baseline, sim::DiagnoseOptions{}));
+    FL_ASSIGN_OR_RETURN(d, sim::DiagnosePlanOnly(plan, machined.log, part.probe, baseline, options));
   }
   const fs::path dir = RunFolderWriter::LoopDir(0) / "diagnosis";
   json dj = d.ToJson();
   if (!machined.cut)
     dj["data"] = "probe data of a part the program did not cut: the tool-path effects are not screened";
   dj["baseline"] = choice.learned ? "learned model of case " + case_uid : "no effects (no learned model)";
+  dj["baseline_model"] = baseline.ToJson();
   FL_RETURN_IF_ERROR(folder.WriteJson(dir / "diagnosis.json", dj));
   FL_RETURN_IF_ERROR(sim::WriteModel(folder.Path(dir / "model.json"), d.extended));
   log::Info("[diagnosis] {}", d.Summary());

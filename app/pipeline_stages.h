@@ -146,13 +146,13 @@ Result<Analysed> AnalyseCycle(const PartSpec& part, const recon::BSplineSurface&
                               const RunFolderWriter& folder);
 
 // 7c. Loop 0: what the simulation (the case's model) gets wrong on this part, and the extended model
-// (loop-0/diagnosis/).
+// (loop-0/diagnosis/); effects are named only within `plausible` (app/case_knowledge.h PlausibleRangesFor).
 // The points the analysis flagged (`excluded_ids`) are left out of the diagnosis too.
 Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSplineSurface& q,
                                           const Machined& machined, const std::vector<std::int64_t>& excluded_ids,
                                           double tool_radius_mm, const metrology::ProbingPlan& plan,
                                           const planning::PlanChoice& choice, const std::string& case_uid,
-                                          const RunFolderWriter& folder);
+                                          const sim::PlausibleRanges& plausible, const RunFolderWriter& folder);
 
 // 7d. The mirror-compensated program of the next cycle from the sum of the fields so far
 // (loop-K/program_compensated.*, compensation_side.csv, compensation.json).

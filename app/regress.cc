@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 
 #include "app/kb_jobs.h"
+#include "app/machine_profile.h"
 #include "core/atomic_file.h"
 #include "core/json_io.h"
 #include "core/log.h"
@@ -113,11 +114,75 @@ std::vector<FigureDifference> CompareFigures(const json& golden, const json& val
   return out;
 }
 
+Result<json> TruthCheck(const fs::path& run_dir, const sim::Model& truth) {
+  FL_ASSIGN_OR_RETURN(Json d, ReadJsonFile(run_dir / "loop-0" / "diagnosis" / "diagnosis.json"));
+  auto effect_of = [](const std::string& label) { return label.substr(0, label.find_first_of("@(")); };
+  std::vector<std::string> baseline;
+  if (d.contains("baseline_model") && d["baseline_model"].is_object()) {
+    for (const auto& e : d["baseline_model"].value("effects", json::array())) baseline.push_back(e.value("name", ""));
+  }
+  std::vector<std::string> grouped;
+  json groups = json::array();
+  for (const auto& g : d.value("alias_groups", json::array())) {
+    groups.push_back(g.value("members", json::array()));
+    for (const auto& m : g.value("members", json::array())) grouped.push_back(effect_of(m.get<std::string>()));
+  }
+  json named = json::array(), not_in_profile = json::array(), outside = json::array();
+  int parameters = 0;
+  std::vector<std::string> named_effects;
+  for (const auto& c : d.value("causes", json::array())) {
+    const std::string effect = c.value("effect", "");
+    named.push_back(effect);
+    named_effects.push_back(effect);
+    const sim::EffectInstance* t = truth.Find(effect);
+    if (t == nullptr) {
+      not_in_profile.push_back(effect);
+      continue;
+    }
+    const auto& spec = t->effect->parameters();
+    for (std::size_t k = 0; k < spec.size(); ++k) {
+      const json& interval = c["interval_95"][spec[k].name];
+      if (!interval.is_array() || !interval[0].is_number() || !interval[1].is_number()) continue;  // aliased
+      ++parameters;
+      const double lo = interval[0].get<double>(), hi = interval[1].get<double>();
+      if (t->values[k] < lo || t->values[k] > hi) {
+        outside.push_back(
+            {{"effect", effect}, {"parameter", spec[k].name}, {"truth", t->values[k]}, {"interval", {lo, hi}}});
+      }
+    }
+  }
+  json true_effects = json::array(), missed = json::array();
+  for (const auto& e : truth.effects) {
+    if (e.effect->kind() == sim::EffectKind::kNoise) continue;
+    const std::string name(e.effect->name());
+    true_effects.push_back(name);
+    const bool found = std::count(named_effects.begin(), named_effects.end(), name) +
+                           std::count(grouped.begin(), grouped.end(), name) +
+                           std::count(baseline.begin(), baseline.end(), name) >
+                       0;
+    if (!found) missed.push_back(name);
+  }
+  return json{{"true_effects", true_effects},
+              {"baseline", baseline},
+              {"named", named},
+              {"alias_groups", groups},
+              {"named_not_in_profile", not_in_profile},
+              {"true_missed", missed},
+              {"parameters", parameters},
+              {"parameters_outside", outside}};
+}
+
 json RegressResult::ToJson() const {
   return {{"parts", table},
           {"regressions", regressions},
           {"within_tolerance_after_at_most_one_compensation", within_one_loop},
-          {"count", parts}};
+          {"count", parts},
+          {"truth",
+           {{"named_not_in_profile", named_not_in_profile},
+            {"true_effects", true_effects},
+            {"true_missed", true_missed},
+            {"parameters", parameters},
+            {"parameters_outside", parameters_outside}}}};
 }
 
 Result<RegressResult> RunRegress(const RegressOptions& options) {
@@ -179,6 +244,19 @@ Result<RegressResult> RunRegress(const RegressOptions& options) {
     }
     FL_ASSIGN_OR_RETURN(json figures, KeyFigures(run.out));
     row["figures"] = figures;
+    // The truth line: the named causes against the virtual machine's profile (never a golden figure).
+    if (auto profile = ReadMachineProfile(part.machine_name, data_dir); profile.ok()) {
+      if (auto truth = TruthCheck(run.out, profile->model); truth.ok()) {
+        row["truth"] = *truth;
+        result.named_not_in_profile += static_cast<int>((*truth)["named_not_in_profile"].size());
+        result.true_effects += static_cast<int>((*truth)["true_effects"].size());
+        result.true_missed += static_cast<int>((*truth)["true_missed"].size());
+        result.parameters += (*truth)["parameters"].get<int>();
+        result.parameters_outside += static_cast<int>((*truth)["parameters_outside"].size());
+      } else {
+        row["truth"] = {{"error", truth.status().ToString()}};
+      }
+    }
     const int to_tolerance = summary->LoopsToTolerance();
     if (to_tolerance >= 0 && to_tolerance <= 1) ++result.within_one_loop;
     const fs::path golden_path = options.goldens / (part.name + ".json");

@@ -11,6 +11,7 @@
 
 #include "app/pipeline.h"
 #include "core/status.h"
+#include "simulation/model.h"
 
 namespace formloop::app {
 
@@ -34,6 +35,13 @@ struct FigureDifference {
 // The figures outside tolerance (missing figures count as different).
 std::vector<FigureDifference> CompareFigures(const nlohmann::json& golden, const nlohmann::json& value);
 
+// The causes a finished run named (loop-0/diagnosis/diagnosis.json) scored against the true effects of
+// the virtual machine it was cut on: effects named that the machine does not have, true effects neither
+// named, inside a reported alias group nor already in the baseline (the case's learned model) the
+// diagnosis started from, and named parameters whose 95 % interval misses the true value. `truth` is
+// the profile's model (noise ignored).
+Result<nlohmann::json> TruthCheck(const std::filesystem::path& run_dir, const sim::Model& truth);
+
 struct RegressOptions {
   std::filesystem::path parts;     // folder of part files
   std::filesystem::path goldens;   // folder of <part>.json goldens
@@ -47,6 +55,8 @@ struct RegressResult {
   int regressions = 0;      // parts whose figures left the golden tolerances (or failed)
   int within_one_loop = 0;  // parts within tolerance after at most one compensation loop
   int parts = 0;
+  // The truth line (TruthCheck summed over the parts): not compared with goldens.
+  int named_not_in_profile = 0, true_effects = 0, true_missed = 0, parameters = 0, parameters_outside = 0;
   nlohmann::json ToJson() const;
 };
 Result<RegressResult> RunRegress(const RegressOptions& options);

@@ -1,28 +1,51 @@
 #pragma once
-// Model discovery (spec/simulation.md §5): what the simulation gets wrong, which catalogue effect
-// explains it, the extended model, and the gain on held-out data.
+// Model discovery (spec/simulation.md §5, issue 20): what the simulation gets wrong, which catalogue
+// effects explain it — or, when the data cannot tell several apart, which group of them does — the
+// extended model, and the gain on held-out data.
 //
 //   1. Residuals r = measured − simulated(baseline), µm, both read through the same probe
 //      compensation and foot-point projection (so the measurement process cancels), with the
 //      residual's Moran's I (k-NN weights).
-//   2. Screening: every catalogue effect not in the baseline is fitted to r together with the effects
-//      already named (linear least squares by QR; thermal_drift_z's τ by a profile search in log τ and
-//      golden-section refinement), scored by its drop in RSS, the partial F test, ΔBIC and the
-//      residual Moran's z after adding it.
-//   3. Forward selection: the effect with the lowest ΔBIC among those significant at α/K (Bonferroni
-//      over the K candidates of the step) that also explains at least `min_share` of the systematic
-//      part of the current residual (RSS drop over RSS − n σ̂², σ̂² the nugget variance from
-//      nearest-neighbour differences) is named; repeated while one qualifies. The share guard keeps a
-//      localised pattern outside the catalogue from being pinned on an effect that fits a sliver of it.
-//   4. Confounding: a candidate whose fitted column predicts the named effect's contribution with
-//      correlation ≥ `confounded_correlation` is reported with what data would separate the two.
-//   5. If the residual after the named effects is still spatially correlated (z > z_critical):
-//      "unexplained systematic residual", with where (local Moran HH/LL clusters).
-//   6. Gain: RMS before/after in-sample, and spatial block cross-validation (contiguous blocks in x-y,
-//      leave one block out, the named effects' parameters refitted without it).
+//   2. Terms: every catalogue effect not in the baseline. Over several parts (DiagnosePooled) an
+//      effect of the machine, tool or probe is one term shared by all parts and a set-up effect
+//      (Effect::part_specific) one term per part; each part's rows are weighted by 1/σ̂ of its noise.
+//   3. Selection: forward steps add the term with the lowest ΔBIC among those significant at α/K
+//      (Bonferroni over the K candidates of the step; partial F test, linear least squares by QR,
+//      thermal_drift_z's τ by a profile search in log τ inside its plausible range) that also explains
+//      at least `min_share` of the systematic part of the current residual (RSS drop over
+//      RSS − n σ̂², σ̂² the nugget variance from nearest-neighbour differences). Then, until nothing
+//      changes: exchange (a selected term for a candidate, when that lowers BIC), backward elimination
+//      (a selected term no longer significant at α given the others) and another forward step. The
+//      share guard keeps a localised pattern outside the catalogue from being pinned on an effect that
+//      fits a sliver of it.
+//   4. Identifiability: a selected term s and a candidate c are aliases when, in the model with both,
+//      s is not significant at `alias_alpha` given c and the rest (c can do s's work on this design:
+//      this path, this plan, these times). Alias edges joined into connected groups: a group of two
+//      or more is reported as one finding — "one or more of: ...; these data cannot tell them apart"
+//      — with its combined prediction and gain, and no parameter of its members is printed. A single
+//      parameter of a selected effect joins a group when it is significant without a candidate and
+//      not with it ("setup_offset(tz_um)": the effect stays named, that parameter is not printed).
+//      Design correlations between named effects and the candidates they resemble are reported too.
+//   5. Plausibility: a named effect whose value lies outside its plausible range (rule base,
+//      plausible_ranges.h) is not named; the finding says which value the data asked for, and the
+//      selection runs again without that effect.
+//   6. Intervals: 95 % profile likelihood (the values whose profiled RSS stays below
+//      RSS_min (1 + F(0.95; 1, ν)/ν); the t interval for a linear parameter when no τ is fitted; τ
+//      clipped to its plausible range), joined over the selected model and the model plus each
+//      candidate left out: an interval does not assume that a look-alike too weak to be selected is
+//      absent (extreme-bounds analysis, Leamer 1983).
+//   7. If the residual after the selected terms is still spatially correlated (z > z_critical):
+//      "unexplained systematic residual", with where (local Moran HH/LL clusters); a localised region
+//      is set aside and the selection repeated outside it (RunEngine).
+//   8. Gain: RMS before/after in-sample, and spatial block cross-validation (contiguous blocks in x-y,
+//      leave one block out, the selected terms' parameters refitted without it).
 //
 // The same screening runs on feature positions (DiagnoseFeatures) with the effects that act on
 // positions, each coordinate of each feature an observation.
+//
+// References: Bonferroni-guarded forward selection with exchange and backward steps (Miller, Subset
+// Selection in Regression, 2nd ed. 2002, ch. 3); profile-likelihood intervals for a nonlinear
+// parameter (Bates & Watts, Nonlinear Regression Analysis, 1988, §6.1; Venzon & Moolgavkar 1988).
 
 #include <string>
 #include <vector>
@@ -35,26 +58,31 @@
 #include "reconstruction/bspline_surface.h"
 #include "simulation/covariates.h"
 #include "simulation/model.h"
+#include "simulation/plausible_ranges.h"
 
 namespace formloop::sim {
 
 struct DiagnoseOptions {
   double alpha = 0.01;        // family-wise level of the F test per step (spec: 0.01)
+  double alias_alpha = 0.01;  // a selected term not significant at this level given a candidate is its alias
   double z_critical = 2.326;  // residual Moran's z above which the residual is "systematic" (α = 0.01)
   double min_share = 0.3;     // of the systematic variance an effect must explain to be named (see above)
   double confounded_correlation = 0.95;
-  int knn = 8;  // Moran's I weights
-  int max_causes = 4;
+  int knn = 8;                          // Moran's I weights
+  int max_causes = 8;                   // selected terms (a pooled set-up counts once per part)
   int cv_blocks = 4;                    // block CV: cv_blocks × cv_blocks contiguous blocks over x-y
   std::vector<std::string> candidates;  // empty = the whole catalogue (minus the baseline's effects)
   bool toolpath_known = true;           // false: effects that need the tool path are not screened (reported)
+  // Plausible parameter ranges (the rule base's "diagnose.plausible_ranges"); empty: none, and τ is
+  // searched over [T/100, 100 T], T the longest cutting time.
+  PlausibleRanges plausible;
   Status Validate() const;
 };
 
 struct ScreenedEffect {
-  std::string effect;
+  std::string effect;  // a term: the effect, "@part" for a part's own set-up when pooling
   std::vector<double> parameters, std_errors;
-  double rss_drop = 0;  // µm²
+  double rss_drop = 0;  // µm² (pooled: in units of each part's σ̂²)
   double f = 0, p_value = 1;
   double delta_bic = 0;
   double share = 0;    // of the systematic variance of the residual it was fitted to
@@ -64,10 +92,35 @@ struct ScreenedEffect {
 
 struct Cause {
   std::string effect;
+  std::string part;  // empty: shared by every part; else the part whose set-up it is
   std::vector<std::string> parameter_names;
   std::vector<double> parameters, std_errors;
-  double variance_explained = 0;  // fraction of the baseline residual's variance it removes
-  double z_before = 0, z_after = 0;
+  std::vector<double> lower, upper;  // 95 % interval per parameter (profile likelihood for τ)
+  // Per parameter: inside an alias group (another effect can do its work); its value, error and
+  // interval are then NaN (reported as null) — the group carries it.
+  std::vector<bool> aliased;
+  double variance_explained = 0;     // fraction of the baseline residual's variance it removes (given the others)
+  double z_before = 0, z_after = 0;  // residual Moran's z without it and with it (the others fitted)
+  std::string Label() const { return part.empty() ? effect : effect + "@" + part; }
+};
+
+// Effects the data cannot tell apart: one finding, named by its members, with what they predict together.
+struct AliasGroup {
+  std::vector<std::string> members;   // term labels, every effect that can do the group's work
+  std::vector<std::string> in_model;  // the members whose columns carry the combined prediction
+  double variance_explained = 0;      // fraction of the baseline residual's variance the group removes
+  double combined_rms_um = 0;         // RMS of the combined prediction over the points
+  double max_correlation = 0;         // largest correlation between two members' best fits of the group's prediction
+  std::string separate_by;            // what would tell them apart (the members' hints)
+  std::string Message() const;        // "one or more of: a, b, c; these data cannot tell them apart"
+};
+
+// An effect the data fit best with a value outside its plausible range: not named.
+struct Implausible {
+  std::string effect, part;
+  std::vector<std::string> parameter_names;
+  std::vector<double> parameters;
+  std::vector<std::string> violations;  // "tau_s = 34700 outside [60, 14400]"
 };
 
 struct Confounding {
@@ -78,20 +131,25 @@ struct Confounding {
 
 struct Diagnosis {
   int n = 0;
+  std::vector<std::string> parts;  // part labels (one empty label for a single part)
   double rms_before_um = 0, rms_after_um = 0;
   double heldout_rms_before_um = 0, heldout_rms_after_um = 0;
   double z_before = 0, z_after = 0;
   double noise_sigma_um = 0;  // nugget estimate
   bool explained_by_baseline = false;
-  std::vector<Cause> causes;
+  std::vector<Cause> causes;             // named: significant, identifiable, plausible; by variance explained
+  std::vector<AliasGroup> alias_groups;  // findings the data cannot split
+  std::vector<Implausible> implausible;
   std::vector<std::vector<ScreenedEffect>> screening;  // per forward-selection step
-  std::vector<Confounding> confounded;
+  std::vector<Confounding> confounded;                 // named effects with a look-alike the data still separate
   std::vector<std::string> not_screened;  // effects the data cannot test (e.g. no tool path), with the reason in ToJson
   bool unexplained = false;
   nlohmann::json unexplained_where = nlohmann::json::array();  // clusters of the remaining residual
   std::vector<double> residual_um, residual_after_um;
-  Model extended;
-  nlohmann::json ToJson() const;  // diagnosis.json (fixed schema: causes, unexplained, gain, ...)
+  Model extended;  // baseline + named causes + alias groups' combined predictions (pooled: the first part's set-up)
+  // True when `effect` is among the members of a reported alias group (any part).
+  bool InAliasGroup(std::string_view effect) const;
+  nlohmann::json ToJson() const;  // diagnosis.json (fixed schema: causes, alias_groups, unexplained, gain, ...)
   std::string Summary() const;    // the readable summary for stderr
 };
 
@@ -128,6 +186,15 @@ struct ProbeDataInput {
 };
 Result<ProbeResidualData> ProbeResiduals(const ProbeDataInput& input, const Model& baseline);
 Result<Diagnosis> Diagnose(const ProbeDataInput& input, const Model& baseline, const DiagnoseOptions& options);
+
+// Several parts of one machine, tool and material (different shapes, raster angles, cutting orders,
+// probing plans): the shared effects fitted jointly, each part's set-up on its own (see above).
+// `labels` name the parts in the output (default "1", "2", ...). One part gives Diagnose's result.
+Result<Diagnosis> DiagnosePooled(const std::vector<ProbeDataInput>& inputs, const Model& baseline,
+                                 const DiagnoseOptions& options, const std::vector<std::string>& labels = {});
+// The residual-level form of DiagnosePooled.
+Result<Diagnosis> DiagnosePooledResiduals(const std::vector<ProbeResidualData>& parts, const Model& baseline,
+                                          const DiagnoseOptions& options, const std::vector<std::string>& labels = {});
 
 // Held-out RMS (µm) of `model` against measured data (e.g. a second part): r = measured − simulated(model).
 Result<double> PredictionRms(const ProbeDataInput& input, const Model& model);

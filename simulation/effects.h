@@ -69,6 +69,9 @@ class Effect {
   // True when the basis needs the tool path's covariates (path length, cut time, feed, engagement):
   // such an effect cannot be screened from a probing plan and a log alone.
   virtual bool uses_toolpath() const { return false; }
+  // True when every part has its own value (the set-up: each part is clamped on its own), false when
+  // the machine, tool or probe give every part the same (what a diagnosis over several parts shares).
+  virtual bool part_specific() const { return false; }
   virtual const std::vector<EffectParameter>& parameters() const = 0;
   int parameter_count() const { return static_cast<int>(parameters().size()); }
   bool linear() const;

@@ -15,6 +15,7 @@ class SetupOffset final : public Effect {
   std::string_view name() const override { return "setup_offset"; }
   std::string_view physics() const override { return "the workpiece is shifted from its programmed position"; }
   std::string_view basis() const override { return "t . n"; }
+  bool part_specific() const override { return true; }
   const std::vector<EffectParameter>& parameters() const override {
     static const std::vector<EffectParameter> p = {{"tx_um", "shift along x, um", true, -20, 20},
                                                    {"ty_um", "shift along y, um", true, -20, 20},
@@ -37,6 +38,7 @@ class SetupRotation final : public Effect {
   std::string_view name() const override { return "setup_rotation"; }
   std::string_view physics() const override { return "the workpiece is rotated about the part origin"; }
   std::string_view basis() const override { return "(w x p) . n = w . (p x n), w in urad, p in m"; }
+  bool part_specific() const override { return true; }
   const std::vector<EffectParameter>& parameters() const override {
     static const std::vector<EffectParameter> p = {{"wx_urad", "rotation about x, urad", true, -200, 200},
                                                    {"wy_urad", "rotation about y, urad", true, -200, 200},

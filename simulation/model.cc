@@ -21,6 +21,11 @@ const EffectInstance* Model::Find(std::string_view name) const {
   return nullptr;
 }
 
+bool Model::Names(std::string_view name) const {
+  const EffectInstance* e = Find(name);
+  return e != nullptr && e->alias_group.empty();
+}
+
 Status Model::Set(std::string_view name, std::vector<double> values, std::vector<double> std_errors) {
   const Effect* effect = FindEffect(name);
   if (effect == nullptr) {
@@ -39,7 +44,7 @@ Status Model::Set(std::string_view name, std::vector<double> values, std::vector
       return Status::Ok();
     }
   }
-  effects.push_back({effect, std::move(values), std::move(std_errors)});
+  effects.push_back({effect, std::move(values), std::move(std_errors), {}});
   return Status::Ok();
 }
 
@@ -62,6 +67,7 @@ double Model::DeviationUm(const PointContext& c) const {
 Model Model::WithoutNoise() const {
   Model m;
   m.provenance = provenance;
+  m.alias_groups = alias_groups;
   for (const EffectInstance& e : effects) {
     if (e.effect->name() != "noise") m.effects.push_back(e);
   }
@@ -86,9 +92,23 @@ nlohmann::json Model::ToJson() const {
       params[spec[k].name] = e.values[k];
       errors[spec[k].name] = e.std_errors[k];
     }
-    list.push_back({{"name", std::string(e.effect->name())}, {"parameters", params}, {"std_errors", errors}});
+    nlohmann::json entry = {{"name", std::string(e.effect->name())}, {"parameters", params}, {"std_errors", errors}};
+    if (!e.alias_group.empty()) entry["alias_group"] = e.alias_group;
+    list.push_back(entry);
   }
-  return {{"format", kFormat}, {"version", kVersion}, {"effects", list}, {"provenance", provenance}};
+  nlohmann::json out = {{"format", kFormat}, {"version", kVersion}, {"effects", list}, {"provenance", provenance}};
+  if (!alias_groups.empty()) {
+    nlohmann::json groups = nlohmann::json::array();
+    for (const auto& g : alias_groups) {
+      groups.push_back({{"id", g.id},
+                        {"members", g.members},
+                        {"note",
+                         "the data could not tell these effects apart: the entries of this group carry their "
+                         "combined prediction, not estimates of each"}});
+    }
+    out["alias_groups"] = groups;
+  }
+  return out;
 }
 
 Result<Model> Model::FromJson(const nlohmann::json& json, const std::string& source) {
@@ -151,7 +171,41 @@ Result<Model> Model::FromJson(const nlohmann::json& json, const std::string& sou
     FL_RETURN_IF_ERROR(params->CheckKnown(names).WithContext("effect '" + name + "'"));
     if (name == "noise" && (values[0] < 0 || values[1] < 0)) return bad(item.Path("parameters"), "sigmas must be >= 0");
     if (name == "thermal_drift_z" && !(values[1] > 0)) return bad(item.Path("parameters.tau_s"), "must be > 0");
-    model.effects.push_back({effect, std::move(values), std::move(ses)});
+    std::string group;
+    FL_RETURN_IF_ERROR(item.OptionalString("alias_group", &group));
+    if (item.Has("alias_group") && group.empty()) {
+      return bad(item.Path("alias_group"), "must be a non-empty string (the id of an entry of alias_groups)");
+    }
+    model.effects.push_back({effect, std::move(values), std::move(ses), std::move(group)});
+  }
+  std::vector<JsonFields> groups;
+  if (f.Has("alias_groups")) FL_RETURN_IF_ERROR(f.ObjectArray("alias_groups", &groups));
+  for (const JsonFields& g : groups) {
+    ModelAliasGroup group;
+    FL_RETURN_IF_ERROR(g.String("id", &group.id));
+    if (group.id.empty()) return bad(g.Path("id"), "must be a non-empty string");
+    for (const auto& other : model.alias_groups) {
+      if (other.id == group.id) return bad(g.Path("id"), "alias group '" + group.id + "' is listed twice");
+    }
+    std::vector<std::string> members;
+    FL_RETURN_IF_ERROR(g.StringArray("members", &members));
+    if (members.size() < 2) return bad(g.Path("members"), "must list at least two effects");
+    for (const std::string& member : members) {
+      if (FindEffect(member.substr(0, member.find_first_of("@("))) == nullptr) {
+        return bad(g.Path("members"), "unknown effect '" + member + "'", "use one of " + EffectNames());
+      }
+    }
+    group.members = std::move(members);
+    model.alias_groups.push_back(std::move(group));
+  }
+  for (const auto& e : model.effects) {
+    if (e.alias_group.empty()) continue;
+    bool found = false;
+    for (const auto& g : model.alias_groups) found = found || g.id == e.alias_group;
+    if (!found) {
+      return bad("effects", "effect '" + std::string(e.effect->name()) + "' names alias group '" + e.alias_group +
+                                "', which alias_groups does not list");
+    }
   }
   model.provenance = json.value("provenance", nlohmann::json::object());
   return model;

@@ -11,6 +11,13 @@
 //
 // scallop is in every model (it is geometry) whether listed or not; noise is the one effect whose
 // parameters are scatter, not a mean.
+//
+// Alias groups (issue 20): when the data that taught a model could not tell some effects apart, the
+// model holds what the data do support — their combined prediction. Its effects then carry
+// "alias_group": ID, and "alias_groups": [{"id": ID, "members": [...], "note": ...}] lists every
+// effect of the group (also those with no entry, which the combined prediction stands for as well).
+// Such an effect's parameters are one split of the combined prediction among its members, not an
+// estimate of that effect: they predict like the group and are not named causes.
 
 #include <filesystem>
 #include <string>
@@ -27,16 +34,25 @@ struct EffectInstance {
   const Effect* effect = nullptr;
   std::vector<double> values;      // one per effect->parameters()
   std::vector<double> std_errors;  // same size; 0 = exact (injected or assumed)
+  std::string alias_group;         // empty: a named effect; else the id of its alias group
+};
+
+struct ModelAliasGroup {
+  std::string id;                    // "G1", unique in the model
+  std::vector<std::string> members;  // every effect the group stands for ("setup_offset@B" for a part's own)
 };
 
 struct Model {
   std::vector<EffectInstance> effects;  // at most one instance per effect name
+  std::vector<ModelAliasGroup> alias_groups;
   nlohmann::json provenance = nlohmann::json::object();
 
   bool Has(std::string_view name) const { return Find(name) != nullptr; }
   const EffectInstance* Find(std::string_view name) const;
   // Sets (or replaces) an effect's parameters; values must have the effect's parameter count.
   Status Set(std::string_view name, std::vector<double> values, std::vector<double> std_errors = {});
+  // True when the model names the effect as a cause (it is in the model and in no alias group).
+  bool Names(std::string_view name) const;
   // The mean measured normal deviation the model predicts at c (µm): scallop plus every surface and
   // measurement effect; noise adds nothing here.
   double DeviationUm(const PointContext& c) const;

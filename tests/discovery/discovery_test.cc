@@ -3,6 +3,7 @@
 // tool path and a baseline without them. The truth is read only to grade. Rates are asserted per
 // effect and the tables printed; bench/discovery_bench runs the larger sweep.
 
+#include <algorithm>
 #include <cstdio>
 #include <map>
 #include <string>
@@ -25,7 +26,7 @@ TEST_P(SingleEffect, IsNamedFirstWithItsParameterAndAHeldOutGain) {
   const std::string effect = GetParam();
   const sim::Effect* e = sim::FindEffect(effect);
   ASSERT_NE(e, nullptr);
-  int named_first = 0, parameters = 0, in_interval = 0, gain_ok = 0;
+  int named_first = 0, grouped = 0, parameters = 0, in_interval = 0, gain_ok = 0;
   const std::vector<std::string> all = InjectableEffects();
   std::uint64_t seed = 1000 + 100 * static_cast<std::uint64_t>(std::find(all.begin(), all.end(), effect) - all.begin());
   for (int k = 0; k < kPerEffect; ++k) {
@@ -33,24 +34,36 @@ TEST_P(SingleEffect, IsNamedFirstWithItsParameterAndAHeldOutGain) {
     const auto d = DiagnoseScenario(s);
     ASSERT_TRUE(d.ok()) << d.status().message();
     const sim::EffectInstance* truth = s.truth.Find(effect);
-    parameters += e->parameter_count();
     if (!d->causes.empty() && d->causes.front().effect == effect) {
       ++named_first;
+      const sim::Cause& c = d->causes.front();
       for (int j = 0; j < e->parameter_count(); ++j) {
-        const double err = std::abs(d->causes.front().parameters[j] - truth->values[j]);
-        if (err <= 1.96 * d->causes.front().std_errors[j]) ++in_interval;
+        if (c.aliased[static_cast<std::size_t>(j)]) continue;  // no interval: the alias group carries it
+        ++parameters;
+        if (truth->values[j] >= c.lower[j] && truth->values[j] <= c.upper[j]) ++in_interval;
       }
     } else {
-      std::printf("  miss: seed %llu %s n %d snr %.1f -> %s\n", static_cast<unsigned long long>(seed),
-                  s.surface.c_str(), s.points, s.snr, d->causes.empty() ? "(none)" : d->causes.front().effect.c_str());
+      parameters += e->parameter_count();
+      // Not named, but honestly reported: inside an alias group ("one or more of: ...") and nothing
+      // else named in its place.
+      if (d->causes.empty() && d->InAliasGroup(effect)) ++grouped;
+      std::printf("  miss: seed %llu %s n %d snr %.1f -> %s", static_cast<unsigned long long>(seed), s.surface.c_str(),
+                  s.points, s.snr, d->causes.empty() ? "(none)" : d->causes.front().effect.c_str());
+      for (const auto& g : d->alias_groups) std::printf("; %s", g.Message().c_str());
+      std::printf("\n");
     }
     if (d->heldout_rms_before_um - d->heldout_rms_after_um >= 0.5 * s.effect_rms_um) ++gain_ok;
   }
   std::printf(
-      "%-16s scenarios %d  named first %.0f%%  parameters in 95%% interval %.0f%%  held-out gain >= 50%%: %.0f%%\n",
-      effect.c_str(), kPerEffect, 100.0 * named_first / kPerEffect, 100.0 * in_interval / parameters,
-      100.0 * gain_ok / kPerEffect);
-  EXPECT_GE(named_first, 0.95 * kPerEffect);
+      "%-16s scenarios %d  named first %.0f%%  only in an alias group %.0f%%  parameters in 95%% interval "
+      "%.0f%%  held-out gain >= 50%%: %.0f%%\n",
+      effect.c_str(), kPerEffect, 100.0 * named_first / kPerEffect, 100.0 * grouped / kPerEffect,
+      100.0 * in_interval / std::max(1, parameters), 100.0 * gain_ok / kPerEffect);
+  // Issue 20: an effect whose look-alike the design cannot exclude (wear and thermal drift at SNR 3–5,
+  // squareness and a rotation on a saddle) is reported as an alias group, not named. Named or so
+  // reported in ≥ 95 %; named first in ≥ 85 % (before issue 20 the bound was named first in ≥ 95 %).
+  EXPECT_GE(named_first + grouped, 0.95 * kPerEffect);
+  EXPECT_GE(named_first, 0.85 * kPerEffect);
   // 20 draws cannot pin a 95 % coverage per effect (P(≤ 17 of 20) is 7.5 % at exactly 95 %); this is
   // the per-effect sanity bound, the ≥ 90 % requirement is asserted pooled in ParametersLie... below.
   EXPECT_GE(in_interval, 0.75 * parameters);
@@ -60,9 +73,10 @@ TEST_P(SingleEffect, IsNamedFirstWithItsParameterAndAHeldOutGain) {
 INSTANTIATE_TEST_SUITE_P(Catalogue, SingleEffect, ::testing::ValuesIn(InjectableEffects()),
                          [](const ::testing::TestParamInfo<std::string>& param_info) { return param_info.param; });
 
-// The reported 95 % intervals, pooled over every effect (10 scenarios each, other seeds than above).
+// The reported 95 % intervals, pooled over every effect (10 scenarios each, other seeds than above). A
+// parameter inside an alias group has no interval (the group carries it, issue 20): counted apart.
 TEST(DiscoveryTest, ParametersLieInTheirReported95PercentIntervals) {
-  int parameters = 0, inside = 0, not_named = 0;
+  int parameters = 0, inside = 0, not_named = 0, aliased = 0;
   std::uint64_t seed = 50000;
   for (const std::string& effect : InjectableEffects()) {
     int p_e = 0, in_e = 0;
@@ -71,22 +85,29 @@ TEST(DiscoveryTest, ParametersLieInTheirReported95PercentIntervals) {
       const auto d = DiagnoseScenario(s);
       ASSERT_TRUE(d.ok()) << d.status().message();
       const sim::EffectInstance* truth = s.truth.Find(effect);
-      p_e += static_cast<int>(truth->values.size());
       if (d->causes.empty() || d->causes.front().effect != effect) {
+        p_e += static_cast<int>(truth->values.size());
         ++not_named;
         continue;
       }
+      const sim::Cause& c = d->causes.front();
       for (std::size_t j = 0; j < truth->values.size(); ++j) {
-        if (std::abs(d->causes.front().parameters[j] - truth->values[j]) <= 1.96 * d->causes.front().std_errors[j])
-          ++in_e;
+        if (c.aliased[j]) {
+          ++aliased;
+          continue;
+        }
+        ++p_e;
+        if (truth->values[j] >= c.lower[j] && truth->values[j] <= c.upper[j]) ++in_e;
       }
     }
-    std::printf("%-16s parameters %3d inside %5.1f%%\n", effect.c_str(), p_e, 100.0 * in_e / p_e);
+    std::printf("%-16s parameters %3d inside %5.1f%%\n", effect.c_str(), p_e, 100.0 * in_e / std::max(1, p_e));
     parameters += p_e;
     inside += in_e;
   }
-  std::printf("pooled: %d of %d parameters inside their 95%% interval (%.1f%%); %d scenarios not named first\n", inside,
-              parameters, 100.0 * inside / parameters, not_named);
+  std::printf(
+      "pooled: %d of %d parameters inside their 95%% interval (%.1f%%); %d scenarios not named first; %d "
+      "parameters of named effects inside an alias group (no interval)\n",
+      inside, parameters, 100.0 * inside / parameters, not_named, aliased);
   EXPECT_GE(inside, 0.90 * parameters);
 }
 
@@ -174,8 +195,11 @@ TEST(DiscoveryTest, AModelLearnedOnOnePartPredictsAnother) {
   const auto d = DiagnoseScenario(part1);
   ASSERT_TRUE(d.ok()) << d.status().message();
   std::printf("%s", d->Summary().c_str());
+  // On a saddle a rotation about x or y through the part origin moves the surface like a shift: the
+  // set-up may be reported as an alias group of offset and rotation; the others are named.
   for (const char* effect : {"tool_wear", "thermal_drift_z", "setup_offset"}) {
-    EXPECT_TRUE(d->extended.Has(effect)) << effect << " not named on part 1";
+    EXPECT_TRUE(d->extended.Names(effect) || d->InAliasGroup(effect))
+        << effect << " neither named nor aliased on part 1";
   }
   const auto before = sim::PredictionRms(InputOf(part2), part2.baseline);
   const auto after = sim::PredictionRms(InputOf(part2), d->extended);
@@ -185,24 +209,25 @@ TEST(DiscoveryTest, AModelLearnedOnOnePartPredictsAnother) {
   EXPECT_LE(*after, 0.5 * *before);
 }
 
-// A rotation of a sphere about an axis through the origin is a translation of it: diagnose names one
-// of the two and reports the other as confounded, with how to separate them.
-TEST(DiscoveryTest, RotatingASphereCapIsReportedConfoundedWithAnOffset) {
+// A rotation of a sphere about an axis through the origin is a translation of it: the two form one alias
+// group, neither is named, and the group carries the prediction.
+TEST(DiscoveryTest, RotatingASphereCapIsReportedAsAnAliasGroupWithAnOffset) {
   sim::Model machine;
   ASSERT_TRUE(machine.Set("setup_rotation", {120.0, -80.0, 0.0}).ok());
   Rng rng(99);
   const Scenario s = MakeScenario(rng, "sphere_cap", 1500, 0, {}, false, &machine);
   const auto d = DiagnoseScenario(s);
   ASSERT_TRUE(d.ok()) << d.status().message();
-  ASSERT_FALSE(d->causes.empty());
-  const std::string named = d->causes.front().effect;
-  EXPECT_TRUE(named == "setup_rotation" || named == "setup_offset") << named;
-  bool reported = false;
-  for (const auto& c : d->confounded) {
-    reported = reported || ((c.named == "setup_rotation" && c.other == "setup_offset") ||
-                            (c.named == "setup_offset" && c.other == "setup_rotation"));
-  }
-  EXPECT_TRUE(reported) << d->ToJson()["confounded"].dump();
+  std::printf("%s", d->Summary().c_str());
+  for (const auto& c : d->causes) EXPECT_TRUE(c.effect != "setup_rotation" && c.effect != "setup_offset") << c.effect;
+  ASSERT_FALSE(d->alias_groups.empty());
+  const auto& members = d->alias_groups.front().members;
+  EXPECT_TRUE(std::count(members.begin(), members.end(), "setup_rotation") == 1 &&
+              std::count(members.begin(), members.end(), "setup_offset") == 1)
+      << d->alias_groups.front().Message();
+  EXPECT_GT(d->alias_groups.front().max_correlation, 0.99);
+  EXPECT_LT(d->heldout_rms_after_um, 0.5 * d->heldout_rms_before_um);
+  EXPECT_FALSE(d->extended.alias_groups.empty());
 }
 
 }  // namespace

@@ -60,6 +60,13 @@ TEST(RegressGoldens, ReferencePartsMatchTheirGoldensAndReachTolerance) {
   ASSERT_TRUE(result.ok()) << text;
   const Json& r = *result;
   EXPECT_EQ(r["regressions"], 0) << err;
+  // The truth line (issue 20): effects named that the machine profile does not have. Issue 20 asks for
+  // none; today reg-dome-a still names axis_scale_z beside thermal drift for the profile's 8 µm tool
+  // radius error (1 of 10 parts): this bound keeps it from growing and is to become 0. True effects
+  // neither named nor in an alias group (9 of 30 today, mostly tool_deflection and tool_radius) are
+  // printed in the table, not asserted.
+  ASSERT_TRUE(r.contains("truth")) << text;
+  EXPECT_LE(r["truth"]["named_not_in_profile"].get<int>(), 1) << err;
   const int parts = r["count"].get<int>();
   EXPECT_GE(parts, 8);
   EXPECT_GE(r["within_tolerance_after_at_most_one_compensation"].get<int>() * 10, parts * 9) << err;

@@ -49,14 +49,17 @@ struct MachinedSurface {
   recon::BSplineSurface q;
   std::vector<sim::CutterLocation> cls;
   double total_time_s = 0;
+  double raster_angle_deg = 30;
+  double feed_mm_per_min = 1500;
 };
 
-// Planned once per surface (and per process): raster at 30° so feeds have x and y components.
-inline const MachinedSurface& Machined(const std::string& surface) {
+// Planned once per (surface, raster angle, feed) and per process: a ball of 3 mm, 8 µm scallop target, zig-zag.
+inline const MachinedSurface& MachinedWith(const std::string& surface, double raster_angle_deg,
+                                           double feed_mm_per_min = 1500) {
   static std::mutex mutex;
   static std::map<std::string, std::unique_ptr<MachinedSurface>> cache;
   std::lock_guard<std::mutex> lock(mutex);
-  auto& slot = cache[surface];
+  auto& slot = cache[surface + "@" + std::to_string(raster_angle_deg) + "/" + std::to_string(feed_mm_per_min)];
   if (!slot) {
     slot = std::make_unique<MachinedSurface>();
     auto analytic = recon::MakeReferenceSurface(surface);
@@ -65,13 +68,19 @@ inline const MachinedSurface& Machined(const std::string& surface) {
     o.tool.radius_mm = 3.0;
     o.scallop_um = 8.0;
     o.max_point_spacing_mm = 1.0;
-    o.raster_angle_deg = 30;
+    o.raster_angle_deg = raster_angle_deg;
+    o.feed_mm_per_min = feed_mm_per_min;
     const nc::Toolpath path = nc::PlanRaster(slot->q, o).value();
     slot->cls = nc::CutterLocationsOf(path);
     slot->total_time_s = path.total_time_s;
+    slot->raster_angle_deg = raster_angle_deg;
+    slot->feed_mm_per_min = feed_mm_per_min;
   }
   return *slot;
 }
+
+// The single-effect suite's raster: 30° so feeds have x and y components.
+inline const MachinedSurface& Machined(const std::string& surface) { return MachinedWith(surface, 30); }
 
 struct Scenario {
   std::string surface;

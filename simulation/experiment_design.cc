@@ -1,0 +1,525 @@
+#include "simulation/experiment_design.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+
+#include <fmt/format.h>
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
+
+#include "simulation/diagnose_engine.h"
+#include "simulation/virtual_machine.h"
+
+namespace formloop::sim {
+namespace {
+
+using detail::Concat;
+using detail::Problem;
+using detail::Term;
+
+// A member or other effect of the design: a term, or one column of it.
+struct Block {
+  Term term;
+  int column = -1;  // −1: every column of the term
+  std::string label;
+};
+
+// "effect", "effect@each part", "effect@PART", "effect(param)", "effect(param)@PART" → a block. A
+// part-specific effect is always one block per part (so a new part gets its own parameters).
+Result<Block> ParseLabel(const std::string& label, const std::vector<std::string>& parts) {
+  const std::size_t at = label.find('@'), open = label.find('(');
+  const std::string effect_name = label.substr(0, std::min(at, open));
+  const Effect* e = FindEffect(effect_name);
+  if (e == nullptr) return Status::Internal("experiment design: unknown effect in '" + label + "'");
+  Block b{{e, e->part_specific() ? detail::kEachPart : detail::kShared}, -1, label};
+  int part = 0;
+  if (at != std::string::npos && label.substr(at + 1) != "each part") {
+    const auto it = std::find(parts.begin(), parts.end(), label.substr(at + 1));
+    if (it == parts.end()) return Status::Internal("experiment design: unknown part in '" + label + "'");
+    part = static_cast<int>(it - parts.begin());
+  }
+  if (open != std::string::npos) {
+    const std::string param = label.substr(open + 1, label.find(')') - open - 1);
+    for (int j = 0; j < e->parameter_count(); ++j) {
+      if (e->parameters()[j].name == param) b.column = (e->part_specific() ? part * e->parameter_count() : 0) + j;
+    }
+    if (b.column < 0) return Status::Internal("experiment design: unknown parameter in '" + label + "'");
+  }
+  return b;
+}
+
+// The group's design on a problem: member blocks and the others' columns, scaled by `scale` (per member
+// column; computed on the first problem evaluated and reused for augmented ones).
+struct GroupDesign {
+  std::vector<Eigen::MatrixXd> members;
+  Eigen::MatrixXd others;
+  Eigen::VectorXd combined;  // the group's combined prediction, σ units
+};
+
+class Designer {
+ public:
+  Designer(const Diagnosis& diagnosis, const AliasGroup& group, double tau) : d_(diagnosis), group_(group), tau_(tau) {}
+
+  Status Init(const std::vector<std::string>& parts) {
+    for (const auto& m : group_.members) {
+      FL_ASSIGN_OR_RETURN(Block b, ParseLabel(m, parts));
+      members_.push_back(b);
+    }
+    // Others: the extended model's effects beyond the baseline that are not members (a member column's
+    // sibling columns stay among the others).
+    auto add_other = [&](const Block& b) {
+      for (const auto& o : others_) {
+        if (o.term == b.term && o.column == b.column) return;
+      }
+      others_.push_back(b);
+    };
+    for (const Cause& c : d_.causes) {
+      FL_ASSIGN_OR_RETURN(Block b, ParseLabel(c.effect, parts));
+      add_other(b);
+    }
+    for (const auto& g : d_.alias_groups) {
+      if (g.members == group_.members) continue;
+      for (const auto& m : g.in_model) {
+        FL_ASSIGN_OR_RETURN(Block b, ParseLabel(m, parts));
+        b.column = -1;
+        add_other(b);
+      }
+    }
+    for (const Block& m : members_) {
+      for (auto it = others_.begin(); it != others_.end();) {
+        it = it->term == m.term && m.column < 0 ? others_.erase(it) : it + 1;
+      }
+    }
+    // In-model members' values (the combined prediction).
+    for (const std::string& label : group_.in_model) {
+      FL_ASSIGN_OR_RETURN(Block b, ParseLabel(label, parts));
+      values_.push_back({b, ValuesOf(b.term)});
+    }
+    return Status::Ok();
+  }
+
+  Result<GroupDesign> Evaluate(const Problem& prob) {
+    GroupDesign out;
+    out.others = Eigen::MatrixXd(prob.n(), 0);
+    for (const Block& o : others_) {
+      Eigen::MatrixXd c = Columns(prob, o.term);
+      if (o.column >= 0) {
+        // The member column is taken out of its term; the rest stays.
+        Eigen::MatrixXd rest(prob.n(), 0);
+        for (Eigen::Index k = 0; k < c.cols(); ++k) {
+          if (k != o.column) rest = Concat(rest, c.col(k));
+        }
+        c = rest;
+      }
+      out.others = Concat(out.others, c);
+    }
+    for (const Block& m : members_) {
+      Eigen::MatrixXd c = Columns(prob, m.term);
+      if (m.column >= 0) c = Eigen::MatrixXd(c.col(m.column));
+      out.members.push_back(c);
+    }
+    if (scales_.empty()) {
+      for (const auto& m : out.members) {
+        Eigen::VectorXd s(m.cols());
+        for (Eigen::Index k = 0; k < m.cols(); ++k) s[k] = m.col(k).norm() > 0 ? 1.0 / m.col(k).norm() : 1.0;
+        scales_.push_back(s);
+      }
+    }
+    for (std::size_t m = 0; m < out.members.size(); ++m) out.members[m] *= scales_[m].asDiagonal();
+    out.combined = Eigen::VectorXd::Zero(prob.n());
+    for (const auto& [b, own] : values_) {
+      const Eigen::MatrixXd c = Columns(prob, b.term);
+      // A part the diagnosis did not see (the next part) is given the first part's set-up as a stand-in.
+      std::vector<double> v;
+      for (Eigen::Index k = 0; k < c.cols(); ++k) v.push_back(own[static_cast<std::size_t>(k) % own.size()]);
+      if (b.column >= 0) {
+        out.combined += c.col(b.column) * v[static_cast<std::size_t>(b.column)];
+      } else {
+        const int p = b.term.effect->parameter_count();
+        for (Eigen::Index k = 0; k < c.cols(); ++k) {
+          if (b.term.effect->parameters()[k % p].linear) out.combined += c.col(k) * v[static_cast<std::size_t>(k)];
+        }
+      }
+    }
+    return out;
+  }
+
+ private:
+  Eigen::MatrixXd Columns(const Problem& prob, const Term& t) const {
+    if (t.effect->linear()) return prob.Columns(t, {});
+    std::vector<double> theta(static_cast<std::size_t>(t.effect->parameter_count()), 1.0);
+    for (int j = 0; j < t.effect->parameter_count(); ++j) {
+      if (!t.effect->parameters()[j].linear) theta[static_cast<std::size_t>(j)] = tau_;
+    }
+    return prob.Columns(t, theta);
+  }
+  // The values of a model effect, one per column (a part-specific effect: the first part's values, the
+  // only ones the extended model holds, repeated; they scale the combined prediction only).
+  std::vector<double> ValuesOf(const Term& t) const {
+    const EffectInstance* e = d_.extended.Find(t.effect->name());
+    std::vector<double> v;
+    const int copies = t.part == detail::kEachPart ? std::max<int>(1, static_cast<int>(d_.parts.size())) : 1;
+    for (int c = 0; c < copies; ++c) {
+      for (int j = 0; j < t.effect->parameter_count(); ++j) v.push_back(e != nullptr ? e->values[j] : 0.0);
+    }
+    return v;
+  }
+
+  const Diagnosis& d_;
+  const AliasGroup& group_;
+  double tau_;
+  std::vector<Block> members_, others_;
+  std::vector<std::pair<Block, std::vector<double>>> values_;
+  std::vector<Eigen::VectorXd> scales_;
+};
+
+// log det of the members' information with the others profiled out (Ds-optimality), floored.
+double LogDetInformation(const GroupDesign& g) {
+  Eigen::MatrixXd members(g.others.rows(), 0);
+  for (const auto& m : g.members) members = Concat(members, m);
+  Eigen::MatrixXd projected = members;
+  if (g.others.cols() > 0) {
+    const Eigen::MatrixXd q = Eigen::HouseholderQR<Eigen::MatrixXd>(g.others).householderQ() *
+                              Eigen::MatrixXd::Identity(g.others.rows(), g.others.cols());
+    projected -= q * (q.transpose() * members);
+  }
+  const Eigen::VectorXd ev =
+      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(projected.transpose() * projected).eigenvalues();
+  double sum = 0;
+  for (Eigen::Index k = 0; k < ev.size(); ++k) sum += std::log(std::max(ev[k], 1e-12));
+  return sum;
+}
+
+// min over members of λ_m (see the header), on the rows of `g`, θ_m fitted on the first `fit_rows`.
+double Separation(const GroupDesign& g, Eigen::Index fit_rows) {
+  const double total = g.combined.head(fit_rows).squaredNorm();
+  if (!(total > 0)) return 0;
+  double worst = std::numeric_limits<double>::infinity();
+  for (std::size_t m = 0; m < g.members.size(); ++m) {
+    const Eigen::MatrixXd a = Concat(g.others, g.members[m]);
+    const detail::Fit fit = detail::LeastSquares(a.topRows(fit_rows), g.combined.head(fit_rows));
+    if (fit.beta.size() == 0) continue;
+    const Eigen::VectorXd h = g.members[m] * fit.beta.tail(g.members[m].cols());
+    if (h.head(fit_rows).squaredNorm() < 0.1 * total) continue;  // m cannot stand for the group alone
+    Eigen::MatrixXd rest = g.others;
+    for (std::size_t o = 0; o < g.members.size(); ++o) {
+      if (o != m) rest = Concat(rest, g.members[o]);
+    }
+    worst = std::min(worst, detail::LeastSquares(rest, h).rss);
+  }
+  return std::isfinite(worst) ? worst : 0.0;
+}
+
+}  // namespace
+
+Status ExperimentOptions::Validate() const {
+  if (!(tilt_deg > 0 && tilt_deg < 75)) return Status::BadInput(Where{.field = "tilt_deg"}, "must be in (0, 75)");
+  if (candidate_grid < 4) return Status::BadInput(Where{.field = "candidate_grid"}, "must be >= 4");
+  if (!(probe_seconds_per_point > 0)) return Status::BadInput(Where{.field = "probe_seconds_per_point"}, "must be > 0");
+  for (int k : reprobe_counts) {
+    if (k < 1) return Status::BadInput(Where{.field = "reprobe_counts"}, "must be >= 1");
+  }
+  for (double f : feed_scales) {
+    if (!(f > 0)) return Status::BadInput(Where{.field = "feed_scales"}, "must be > 0");
+  }
+  return Status::Ok();
+}
+
+nlohmann::json ExperimentProposal::ToJson() const {
+  nlohmann::json j = {{"alias_group", members},
+                      {"kind", kind},
+                      {"change", change},
+                      {"cost_s", cost_s},
+                      {"design_correlation_before", correlation_before},
+                      {"design_correlation_predicted", correlation_after},
+                      {"log_det_information_gain", log_det_gain},
+                      {"separation_predicted", separation},
+                      {"predicted_to_split", predicted_to_split}};
+  if (kind == "reprobe") {
+    nlohmann::json points = nlohmann::json::array();
+    for (std::size_t i = 0; i < plan.points.size(); ++i) {
+      const auto& p = plan.points[i];
+      points.push_back({{"id", p.id},
+                        {"u", p.u},
+                        {"v", p.v},
+                        {"point_mm", {p.point.x(), p.point.y(), p.point.z()}},
+                        {"normal", {p.normal.x(), p.normal.y(), p.normal.z()}},
+                        {"approach", {approaches[i].x(), approaches[i].y(), approaches[i].z()}}});
+    }
+    j["points"] = points;
+  } else {
+    j["raster_turn_deg"] = raster_turn_deg;
+    j["feed_scale"] = feed_scale;
+  }
+  return j;
+}
+
+namespace {
+
+struct PartData {
+  std::vector<ProbeResidualData> data;
+  std::vector<double> sigma;
+  std::vector<std::string> labels;
+};
+
+Result<PartData> ReadParts(const std::vector<ProbeDataInput>& parts, const Diagnosis& diagnosis,
+                           const Model& baseline) {
+  PartData out;
+  std::size_t row = 0;
+  for (const auto& in : parts) {
+    FL_ASSIGN_OR_RETURN(ProbeResidualData data, ProbeResiduals(in, baseline));
+    // σ of the part: the RMS of the diagnosis' residual after its model over the part's rows.
+    double sum = 0;
+    const std::size_t m = data.contexts.size();
+    if (row + m > diagnosis.residual_after_um.size()) {
+      return Status::Internal("experiment design: the diagnosis was made from other data");
+    }
+    for (std::size_t i = 0; i < m; ++i)
+      sum += diagnosis.residual_after_um[row + i] * diagnosis.residual_after_um[row + i];
+    row += m;
+    out.sigma.push_back(std::max(1e-3, std::sqrt(sum / static_cast<double>(m))));
+    out.data.push_back(std::move(data));
+  }
+  out.labels = diagnosis.parts.size() == parts.size() && parts.size() > 1 ? diagnosis.parts
+                                                                          : std::vector<std::string>(parts.size(), "");
+  if (parts.size() > 1 && diagnosis.parts.size() != parts.size()) {
+    for (std::size_t p = 0; p < parts.size(); ++p) out.labels[p] = std::to_string(p + 1);
+  }
+  return out;
+}
+
+double TauOf(const Diagnosis& d, const Problem& prob, const PlausibleRanges& plausible) {
+  if (const EffectInstance* t = d.extended.Find("thermal_drift_z")) return t->values[1];
+  double lo = prob.time_scale_s / 100, hi = prob.time_scale_s * 100;
+  if (const ParameterRange* r = plausible.Find(*FindEffect("thermal_drift_z"), 1)) {
+    lo = r->min;
+    hi = r->max;
+  }
+  const auto f =
+      detail::FitTerm(prob, {FindEffect("thermal_drift_z"), detail::kShared}, Eigen::MatrixXd(prob.n(), 0), lo, hi);
+  return f.theta[1];
+}
+
+// Re-probe candidates on the first part: a grid of locations × (−n and four tilted approaches).
+Result<std::pair<metrology::ProbingPlan, std::vector<Eigen::Vector3d>>> Candidates(const ProbeDataInput& part,
+                                                                                   const ExperimentOptions& o) {
+  FL_ASSIGN_OR_RETURN(const metrology::ProbingPlan grid,
+                      metrology::PlanProbingGrid(*part.surface, o.candidate_grid, o.candidate_grid, 0.05));
+  std::int64_t next_id = 0;
+  for (const auto& p : part.plan->points) next_id = std::max(next_id, p.id);
+  metrology::ProbingPlan plan;
+  std::vector<Eigen::Vector3d> approaches;
+  const double tilt = o.tilt_deg * M_PI / 180;
+  for (const auto& p : grid.points) {
+    Eigen::Vector3d t1 = p.normal.cross(Eigen::Vector3d::UnitX());
+    if (t1.norm() < 0.1) t1 = p.normal.cross(Eigen::Vector3d::UnitY());
+    t1.normalize();
+    const Eigen::Vector3d t2 = p.normal.cross(t1);
+    for (int a = 0; a < 5; ++a) {
+      metrology::ProbePoint q = p;
+      q.id = ++next_id;
+      Eigen::Vector3d dir = -p.normal;
+      if (a > 0) {
+        const double phi = (a - 1) * M_PI / 2;
+        dir = -(std::cos(tilt) * p.normal + std::sin(tilt) * (std::cos(phi) * t1 + std::sin(phi) * t2));
+      }
+      plan.points.push_back(q);
+      approaches.push_back(dir.normalized());
+    }
+  }
+  return std::make_pair(plan, approaches);
+}
+
+}  // namespace
+
+Result<double> GroupCorrelation(const std::vector<ProbeDataInput>& parts, const Diagnosis& diagnosis,
+                                const Model& baseline, const std::vector<std::string>& members) {
+  FL_ASSIGN_OR_RETURN(const PartData pd, ReadParts(parts, diagnosis, baseline));
+  std::vector<detail::PartRows> rows;
+  for (std::size_t p = 0; p < pd.data.size(); ++p) {
+    rows.push_back(
+        {&pd.data[p].contexts, &pd.data[p].residual_um, &pd.data[p].sensitivity, static_cast<int>(p), pd.sigma[p]});
+  }
+  FL_ASSIGN_OR_RETURN(const Problem prob, detail::BuildProbeProblem(rows, pd.labels, 8));
+  AliasGroup group;
+  group.members = members;
+  Designer designer(diagnosis, group, TauOf(diagnosis, prob, PlausibleRanges{}));
+  FL_RETURN_IF_ERROR(designer.Init(pd.labels));
+  FL_ASSIGN_OR_RETURN(const GroupDesign g, designer.Evaluate(prob));
+  return detail::GroupDesignCorrelation(g.members, g.others);
+}
+
+Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<ProbeDataInput>& parts,
+                                                           const Diagnosis& diagnosis, const Model& baseline,
+                                                           const ExperimentOptions& options) {
+  FL_RETURN_IF_ERROR(options.Validate());
+  std::vector<ExperimentProposal> out;
+  if (diagnosis.alias_groups.empty()) return out;
+  if (parts.empty() || parts.front().surface == nullptr || parts.front().plan == nullptr) {
+    return Status::Internal("ProposeExperiments: the first part needs its surface and plan");
+  }
+  FL_ASSIGN_OR_RETURN(const PartData pd, ReadParts(parts, diagnosis, baseline));
+  std::vector<detail::PartRows> current;
+  for (std::size_t p = 0; p < pd.data.size(); ++p) {
+    current.push_back(
+        {&pd.data[p].contexts, &pd.data[p].residual_um, &pd.data[p].sensitivity, static_cast<int>(p), pd.sigma[p]});
+  }
+  FL_ASSIGN_OR_RETURN(const Problem now, detail::BuildProbeProblem(current, pd.labels, 8));
+  const Eigen::Index n_now = now.n();
+  // Re-probe candidates with their contexts (the first part's path).
+  FL_ASSIGN_OR_RETURN(const auto candidates, Candidates(parts.front(), options));
+  FL_ASSIGN_OR_RETURN(const std::vector<PointContext> candidate_contexts,
+                      AssociateWithToolpath(*parts.front().cutter_locations, parts.front().tool_radius_mm,
+                                            MeasuredPointsOf(candidates.first, candidates.second)));
+  const Eigen::VectorXd candidate_zero = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(candidate_contexts.size()));
+  // Next parts: the first part's plan on a re-planned path.
+  struct NextPart {
+    double turn = 0, feed = 1, cut_time_s = 0;
+    std::vector<PointContext> contexts;
+  };
+  std::vector<NextPart> next_parts;
+  if (options.replan) {
+    std::vector<std::pair<double, double>> changes;
+    for (double turn : options.raster_turns_deg) changes.push_back({turn, 1.0});
+    for (double feed : options.feed_scales) changes.push_back({0.0, feed});
+    for (const auto& [turn, feed] : changes) {
+      FL_ASSIGN_OR_RETURN(const std::vector<CutterLocation> cls, options.replan(turn, feed));
+      if (cls.empty()) continue;
+      NextPart np{turn, feed, cls.back().time_s, {}};
+      FL_ASSIGN_OR_RETURN(
+          np.contexts, AssociateWithToolpath(cls, parts.front().tool_radius_mm, MeasuredPointsOf(*parts.front().plan)));
+      next_parts.push_back(std::move(np));
+    }
+  }
+  const Eigen::VectorXd next_zero = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(parts.front().plan->points.size()));
+  std::vector<std::string> labels_plus = pd.labels;
+  if (labels_plus.size() == 1) labels_plus = {"1"};
+  labels_plus.push_back("next");
+
+  for (const AliasGroup& group : diagnosis.alias_groups) {
+    Designer designer(diagnosis, group, TauOf(diagnosis, now, options.plausible));
+    FL_RETURN_IF_ERROR(designer.Init(pd.labels));
+    FL_ASSIGN_OR_RETURN(const GroupDesign base, designer.Evaluate(now));
+    const double rho0 = detail::GroupDesignCorrelation(base.members, base.others);
+    const double logdet0 = LogDetInformation(base);
+    std::vector<ExperimentProposal> options_for_group;
+    auto assess = [&](const Problem& augmented, ExperimentProposal p) -> Status {
+      FL_ASSIGN_OR_RETURN(const GroupDesign g, designer.Evaluate(augmented));
+      p.members = group.members;
+      p.correlation_before = rho0;
+      p.correlation_after = detail::GroupDesignCorrelation(g.members, g.others);
+      p.log_det_gain = LogDetInformation(g) - logdet0;
+      p.separation = Separation(g, n_now);
+      p.predicted_to_split = p.separation >= options.required_noncentrality;
+      options_for_group.push_back(std::move(p));
+      return Status::Ok();
+    };
+    // Re-probe: sequential Ds-optimal choice among the candidates. Adding a row x to the information
+    // M of all parameters changes log det M − log det M_OO by log(1 + xᵀM⁻¹x) − log(1 + x_Oᵀ M_OO⁻¹ x_O)
+    // (matrix determinant lemma); M is kept regularised (aliased columns make it singular).
+    {
+      std::vector<detail::PartRows> rows = current;
+      rows.push_back({&candidate_contexts, &candidate_zero, nullptr, 0, pd.sigma[0]});
+      FL_ASSIGN_OR_RETURN(const Problem all, detail::BuildProbeProblem(rows, pd.labels, 8));
+      FL_ASSIGN_OR_RETURN(const GroupDesign g, designer.Evaluate(all));
+      Eigen::MatrixXd x = g.others;
+      for (const auto& m : g.members) x = Concat(x, m);
+      const Eigen::Index k_o = g.others.cols(), k = x.cols();
+      Eigen::MatrixXd info = x.topRows(n_now).transpose() * x.topRows(n_now);
+      const double ridge = 1e-8 * std::max(1.0, info.trace() / std::max<Eigen::Index>(1, k));
+      info += ridge * Eigen::MatrixXd::Identity(k, k);
+      Eigen::MatrixXd inv = info.inverse();
+      Eigen::MatrixXd inv_o = k_o > 0 ? Eigen::MatrixXd(info.topLeftCorner(k_o, k_o).inverse()) : Eigen::MatrixXd();
+      std::vector<bool> taken(static_cast<std::size_t>(all.n() - n_now), false);
+      std::vector<int> order;
+      const int max_count = *std::max_element(options.reprobe_counts.begin(), options.reprobe_counts.end());
+      for (int step = 0; step < max_count && step < static_cast<int>(taken.size()); ++step) {
+        double best = -1;
+        int pick = -1;
+        for (Eigen::Index c = 0; c < static_cast<Eigen::Index>(taken.size()); ++c) {
+          if (taken[static_cast<std::size_t>(c)]) continue;
+          const Eigen::VectorXd row = x.row(n_now + c).transpose();
+          double gain = std::log1p(row.dot(inv * row));
+          if (k_o > 0) gain -= std::log1p(row.head(k_o).dot(inv_o * row.head(k_o)));
+          if (gain > best) {
+            best = gain;
+            pick = static_cast<int>(c);
+          }
+        }
+        if (pick < 0) break;
+        taken[static_cast<std::size_t>(pick)] = true;
+        order.push_back(pick);
+        const Eigen::VectorXd row = x.row(n_now + pick).transpose();
+        const Eigen::VectorXd u = inv * row;
+        inv -= u * u.transpose() / (1.0 + row.dot(u));
+        if (k_o > 0) {
+          const Eigen::VectorXd uo = inv_o * row.head(k_o);
+          inv_o -= uo * uo.transpose() / (1.0 + row.head(k_o).dot(uo));
+        }
+      }
+      for (int count : options.reprobe_counts) {
+        if (count > static_cast<int>(order.size())) continue;
+        std::vector<PointContext> chosen;
+        ExperimentProposal p;
+        p.kind = "reprobe";
+        for (int i = 0; i < count; ++i) {
+          chosen.push_back(candidate_contexts[static_cast<std::size_t>(order[static_cast<std::size_t>(i)])]);
+          p.plan.points.push_back(
+              candidates.first.points[static_cast<std::size_t>(order[static_cast<std::size_t>(i)])]);
+          p.approaches.push_back(candidates.second[static_cast<std::size_t>(order[static_cast<std::size_t>(i)])]);
+        }
+        int tilted = 0;
+        for (std::size_t i = 0; i < p.plan.points.size(); ++i) {
+          tilted += -p.approaches[i].dot(p.plan.points[i].normal) < 0.999;
+        }
+        p.change = fmt::format(
+            "re-probe {} more points of this part ({} of them with the approach tilted {:g} deg "
+            "from the normal), chosen for the information they add on this group",
+            count, tilted, options.tilt_deg);
+        p.cost_s = count * options.probe_seconds_per_point;
+        const Eigen::VectorXd zero = Eigen::VectorXd::Zero(count);
+        std::vector<detail::PartRows> aug = current;
+        aug.push_back({&chosen, &zero, nullptr, 0, pd.sigma[0]});
+        FL_ASSIGN_OR_RETURN(const Problem augmented, detail::BuildProbeProblem(aug, pd.labels, 8));
+        FL_RETURN_IF_ERROR(assess(augmented, std::move(p)));
+      }
+    }
+    // The next part cut another way, probed with this part's plan.
+    for (const NextPart& np : next_parts) {
+      std::vector<detail::PartRows> aug = current;
+      aug.push_back({&np.contexts, &next_zero, nullptr, static_cast<int>(pd.data.size()), pd.sigma[0]});
+      FL_ASSIGN_OR_RETURN(const Problem augmented, detail::BuildProbeProblem(aug, labels_plus, 8));
+      ExperimentProposal p;
+      p.kind = np.feed != 1.0 ? "feed" : "raster_turn";
+      p.raster_turn_deg = np.turn;
+      p.feed_scale = np.feed;
+      p.change = np.feed != 1.0 ? fmt::format(
+                                      "cut the next part with the feed scaled by {:g}, probe it with this plan "
+                                      "and diagnose the two parts together",
+                                      np.feed)
+                                : fmt::format(
+                                      "cut the next part with the raster turned by {:g} deg{}, probe it with "
+                                      "this plan and diagnose the two parts together",
+                                      np.turn, np.turn == 180 ? " (the cutting order reversed)" : "");
+      p.cost_s = np.cut_time_s + static_cast<double>(np.contexts.size()) * options.probe_seconds_per_point;
+      FL_RETURN_IF_ERROR(assess(augmented, std::move(p)));
+    }
+    if (options_for_group.empty()) continue;
+    // The cheapest change predicted to split the group; else the most separation per second.
+    auto best = options_for_group.begin();
+    for (auto it = options_for_group.begin(); it != options_for_group.end(); ++it) {
+      const bool better =
+          it->predicted_to_split
+              ? (!best->predicted_to_split || it->cost_s < best->cost_s ||
+                 (it->cost_s == best->cost_s && it->log_det_gain > best->log_det_gain))
+              : (!best->predicted_to_split && it->separation / it->cost_s > best->separation / best->cost_s);
+      if (better) best = it;
+    }
+    out.push_back(*best);
+  }
+  return out;
+}
+
+}  // namespace formloop::sim

@@ -1,0 +1,205 @@
+// Several causes at once (issue 20): the cases the issue measured on the old diagnosis, pooling of
+// parts, the separating experiment, and the learned model with its alias groups. Probe logs come from
+// the virtual machine (tests/support/multi_effect.h); the truth is read only to grade.
+
+#include <algorithm>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "tests/support/multi_effect.h"
+
+namespace formloop::testing {
+namespace {
+
+sim::DiagnoseOptions Options() {
+  sim::DiagnoseOptions o;
+  o.plausible = StarterPlausibleRanges();
+  return o;
+}
+
+sim::Model MachineOf(const std::vector<std::pair<std::string, std::vector<double>>>& effects) {
+  sim::Model m;
+  for (const auto& [name, values] : effects) EXPECT_TRUE(m.Set(name, values).ok()) << name;
+  EXPECT_TRUE(m.Set("noise", {0.8, 0.6}).ok());
+  return m;
+}
+
+// Every true effect named or inside an alias group, nothing named that is not there, every named
+// parameter's interval holding its true value.
+void ExpectHonest(const sim::Diagnosis& d, const sim::Model& truth) {
+  for (const auto& e : truth.effects) {
+    if (e.effect->kind() == sim::EffectKind::kNoise) continue;
+    bool named = false;
+    for (const auto& c : d.causes) named = named || c.effect == e.effect->name();
+    EXPECT_TRUE(named || d.InAliasGroup(e.effect->name())) << e.effect->name() << " lost\n" << d.Summary();
+  }
+  for (const auto& c : d.causes) {
+    const sim::EffectInstance* t = truth.Find(c.effect);
+    EXPECT_NE(t, nullptr) << c.effect << " named but not there\n" << d.Summary();
+    if (t == nullptr) continue;
+    for (std::size_t j = 0; j < t->values.size(); ++j) {
+      if (c.aliased[j]) continue;
+      EXPECT_TRUE(t->values[j] >= c.lower[j] && t->values[j] <= c.upper[j])
+          << c.effect << "." << c.parameter_names[j] << " = " << t->values[j] << " outside [" << c.lower[j] << ", "
+          << c.upper[j] << "]\n"
+          << d.Summary();
+    }
+  }
+}
+
+// The issue's first case: thermal drift 12 µm + set-up offset (10, −6, 0) µm + tool wear 2 µm/m on an
+// egg box, 30 × 30 probes. The old diagnosis added a false x-rotation of 118 µrad and gave thermal 21 µm.
+TEST(MultiEffectTest, ThermalOffsetAndWearOnAnEggBoxNameNothingFalse) {
+  const sim::Model m =
+      MachineOf({{"thermal_drift_z", {12.0, 900.0}}, {"setup_offset", {10.0, -6.0, 0.0}}, {"tool_wear", {2.0}}});
+  for (double angle : {0.0, 45.0, 90.0}) {
+    const Scenario s = ProbePart({"egg_box", angle, 30}, m, 11);
+    const auto d = sim::Diagnose(InputOf(s), s.baseline, Options());
+    ASSERT_TRUE(d.ok()) << d.status().message();
+    std::printf("raster %g deg:\n%s", angle, d->Summary().c_str());
+    ExpectHonest(*d, m);
+    EXPECT_LT(d->heldout_rms_after_um, 1.5 * 0.98 + 0.5) << "held-out RMS near the noise";
+  }
+}
+
+// The issue's second case: a ball 6 µm under size + set-up z 14 µm + wear 0.4 µm/m. The old diagnosis
+// named thermal drift with A = 168 µm and τ = 34,700 s beside a z offset of 20 µm.
+// NOT MET yet (issue 20 open): no thermal drift is named and the held-out residual is noise, but the
+// z offset is carried by the {tool_radius, probe_radius} group without setup_offset being listed in it
+// (its column lies close to the radius's on an egg box, yet it is neither selected nor a swap alias).
+//   build/tests/formloop_discovery_tests --gtest_also_run_disabled_tests
+//     --gtest_filter=MultiEffectTest.DISABLED_RadiusOffsetAndWearNameNoAbsurdThermalDrift
+TEST(MultiEffectTest, DISABLED_RadiusOffsetAndWearNameNoAbsurdThermalDrift) {
+  const sim::Model m = MachineOf({{"tool_radius", {6.0}}, {"setup_offset", {0.0, 0.0, 14.0}}, {"tool_wear", {0.4}}});
+  for (double angle : {0.0, 45.0, 90.0}) {
+    const Scenario s = ProbePart({"egg_box", angle, 30}, m, 12);
+    const auto d = sim::Diagnose(InputOf(s), s.baseline, Options());
+    ASSERT_TRUE(d.ok()) << d.status().message();
+    std::printf("raster %g deg:\n%s", angle, d->Summary().c_str());
+    for (const auto& c : d->causes) EXPECT_NE(c.effect, "thermal_drift_z") << d->Summary();
+    ExpectHonest(*d, m);
+    // Whatever carries the 20 µm, compensation gets it: the held-out residual is noise.
+    EXPECT_LT(d->heldout_rms_after_um, 1.5) << d->Summary();
+  }
+}
+
+// An implausible best fit is said, not named: a tool that grows by 3 µm per metre of cut (wear is a
+// loss: the rule base's range is 0–50 µm/m) is reported with the value it would need, not named.
+TEST(MultiEffectTest, AValueOutsideItsPlausibleRangeIsNotNamed) {
+  const sim::Model m = MachineOf({{"tool_wear", {-3.0}}});  // a tool that grows as it cuts
+  const Scenario s = ProbePart({"saddle", 0, 25}, m, 13);
+  const auto d = sim::Diagnose(InputOf(s), s.baseline, Options());
+  ASSERT_TRUE(d.ok()) << d.status().message();
+  std::printf("%s", d->Summary().c_str());
+  for (const auto& c : d->causes) EXPECT_NE(c.effect, "tool_wear") << d->Summary();
+  bool said = false;
+  for (const auto& b : d->implausible) said = said || b.effect == "tool_wear";
+  EXPECT_TRUE(said) << d->ToJson()["implausible"].dump();
+}
+
+// Probed along −n, a tool radius error and a probe radius error give identical columns: one alias group.
+// The proposed re-probe (tilted approaches) splits it when applied on the machine, as predicted.
+// NOT MET yet (issue 20 open): on this franke part the group also holds setup_offset and
+// tool_deflection, which a tilted re-probe cannot split; the proposal (8 tilted points) is not predicted
+// to split the group and does not.
+//   build/tests/formloop_discovery_tests --gtest_also_run_disabled_tests
+//     --gtest_filter=MultiEffectTest.DISABLED_ATiltedReprobeSplitsToolRadiusFromProbeRadius
+TEST(MultiEffectTest, DISABLED_ATiltedReprobeSplitsToolRadiusFromProbeRadius) {
+  const sim::Model m = MachineOf({{"tool_radius", {8.0}}, {"setup_offset", {5.0, -4.0, 0.0}}});
+  const Scenario s = ProbePart({"franke", 0, 24}, m, 21);
+  const auto d = sim::Diagnose(InputOf(s), s.baseline, Options());
+  ASSERT_TRUE(d.ok()) << d.status().message();
+  std::printf("%s", d->Summary().c_str());
+  ASSERT_TRUE(d->InAliasGroup("tool_radius")) << d->Summary();
+  ASSERT_TRUE(d->InAliasGroup("probe_radius")) << d->Summary();
+  const auto proposals = sim::ProposeExperiments({InputOf(s)}, *d, s.baseline, ExperimentOptionsFor(s));
+  ASSERT_TRUE(proposals.ok()) << proposals.status().message();
+  ASSERT_EQ(proposals->size(), d->alias_groups.size());
+  const sim::ExperimentProposal* p = nullptr;
+  for (const auto& q : *proposals) {
+    if (std::count(q.members.begin(), q.members.end(), "probe_radius") > 0) p = &q;
+  }
+  ASSERT_NE(p, nullptr);
+  std::printf("proposal: %s (cost %.0f s; correlation %.4f -> %.4f predicted; separation %.1f)\n", p->change.c_str(),
+              p->cost_s, p->correlation_before, p->correlation_after, p->separation);
+  EXPECT_EQ(p->kind, "reprobe");
+  EXPECT_TRUE(p->predicted_to_split);
+  EXPECT_GT(p->correlation_before, 0.999);
+  EXPECT_LT(p->correlation_after, p->correlation_before);
+  const Scenario again = Reprobed(s, *p, 22);
+  const auto d2 = sim::Diagnose(InputOf(again), s.baseline, Options());
+  ASSERT_TRUE(d2.ok()) << d2.status().message();
+  std::printf("after the re-probe:\n%s", d2->Summary().c_str());
+  const auto measured = sim::GroupCorrelation({InputOf(again)}, *d2, s.baseline, p->members);
+  ASSERT_TRUE(measured.ok()) << measured.status().message();
+  std::printf("measured correlation %.4f\n", *measured);
+  EXPECT_NEAR(*measured, p->correlation_after, 0.05);
+  EXPECT_FALSE(d2->InAliasGroup("tool_radius") && d2->InAliasGroup("probe_radius")) << d2->Summary();
+  ExpectHonest(*d2, m);
+}
+
+// Thermal drift and wear look alike on a flat part cut at one feed; a second part of the same machine
+// (another shape and raster, its own set-up) pooled with it separates them, each part's offset its own.
+TEST(MultiEffectTest, PoolingTwoPartsSplitsWhatOnePartCannot) {
+  const sim::Model machine = MachineOf({{"thermal_drift_z", {14.0, 700.0}}, {"tool_wear", {3.0}}});
+  sim::Model a = machine, b = machine;
+  ASSERT_TRUE(a.Set("setup_offset", {8.0, -5.0, 3.0}).ok());
+  ASSERT_TRUE(b.Set("setup_offset", {-6.0, 2.0, 9.0}).ok());
+  const Scenario part_a = ProbePart({"egg_box", 0, 24}, a, 31);
+  const Scenario part_b = ProbePart({"sphere_cap", 90, 24}, b, 32);
+  const auto one = sim::Diagnose(InputOf(part_a), part_a.baseline, Options());
+  ASSERT_TRUE(one.ok());
+  std::printf("part A alone:\n%s", one->Summary().c_str());
+  const auto both = sim::DiagnosePooled({InputOf(part_a), InputOf(part_b)}, part_a.baseline, Options(), {"A", "B"});
+  ASSERT_TRUE(both.ok()) << both.status().message();
+  std::printf("A and B pooled:\n%s", both->Summary().c_str());
+  std::vector<std::string> named;
+  for (const auto& c : both->causes) named.push_back(c.Label());
+  for (const char* label : {"thermal_drift_z", "tool_wear", "setup_offset@A", "setup_offset@B"}) {
+    EXPECT_TRUE(std::count(named.begin(), named.end(), label) == 1) << label << "\n" << both->Summary();
+  }
+  for (const auto& c : both->causes) {
+    const sim::Model& truth = c.part == "B" ? b : a;
+    const sim::EffectInstance* t = truth.Find(c.effect);
+    ASSERT_NE(t, nullptr) << c.Label();
+    for (std::size_t j = 0; j < t->values.size(); ++j) {
+      if (c.aliased[j]) continue;  // inside an alias group: no value is claimed
+      EXPECT_TRUE(t->values[j] >= c.lower[j] && t->values[j] <= c.upper[j])
+          << c.Label() << "." << c.parameter_names[j] << " = " << t->values[j] << " outside [" << c.lower[j] << ", "
+          << c.upper[j] << "]";
+    }
+  }
+}
+
+// The learned model keeps an alias group as its combined prediction: it predicts the part it came from
+// as well as the named effects would, it writes and reads back, and it names no member as a cause.
+TEST(MultiEffectTest, TheLearnedModelHoldsAnAliasGroupAsItsCombinedPrediction) {
+  const sim::Model m = MachineOf({{"tool_radius", {7.0}}, {"tool_wear", {1.5}}});
+  const Scenario s = ProbePart({"saddle", 0, 24}, m, 41);
+  const auto d = sim::Diagnose(InputOf(s), s.baseline, Options());
+  ASSERT_TRUE(d.ok());
+  ASSERT_FALSE(d->alias_groups.empty()) << d->Summary();
+  const sim::Model& learned = d->extended;
+  ASSERT_FALSE(learned.alias_groups.empty());
+  int in_group = 0;
+  for (const auto& e : learned.effects) {
+    if (!e.alias_group.empty()) {
+      ++in_group;
+      EXPECT_FALSE(learned.Names(e.effect->name()));
+    }
+  }
+  EXPECT_GE(in_group, 1);
+  const auto back = sim::Model::FromJson(learned.ToJson(), "round trip");
+  ASSERT_TRUE(back.ok()) << back.status().message();
+  EXPECT_EQ(back->ToJson(), learned.ToJson());
+  // Its prediction of the part: the residual against it is noise.
+  const auto rms = sim::PredictionRms(InputOf(s), learned);
+  ASSERT_TRUE(rms.ok());
+  EXPECT_LT(*rms, 1.3) << "prediction RMS with the learned model";
+}
+
+}  // namespace
+}  // namespace formloop::testing
