@@ -5,11 +5,16 @@
 // (0.41 µs per D2 on the franke fit, bench EvalGeomD2). GeomAdaptor_Surface keeps the current span as a
 // power-form polynomial (BSplSLib_Cache) and evaluates that (0.27 µs, EvalAdaptorD2), but rebuilds it
 // whenever a call leaves the span, which is nearly every new point, and the cache is mutable, so each
-// thread would need its own. The projector therefore builds the BSplSLib_Cache of every span once
-// (SpanCaches, read-only afterwards and shared by threads). Measured on 100,000 points (bench ours/, CPU
-// time): ProjectAll takes 384 ms on franke and 306 ms on egg_box with SpanCaches against 420 and 364 ms
-// with one GeomAdaptor_Surface per run. Surfaces whose caches would exceed kMaxSpanCacheBytes, and the
-// one-point functions, use a GeomAdaptor_Surface per call.
+// thread would need its own. The projector therefore converts every span once: for non-rational
+// surfaces into our own span polynomials (span_polynomials.h: 0.04 µs per bicubic D2, 0.09 µs at
+// degree 5, bench EvalSpanPolynomials), otherwise into OpenCASCADE's BSplSLib_Cache per span (SpanCaches);
+// both are read-only afterwards and shared by threads. Surfaces whose caches would exceed
+// kMaxSpanCacheBytes, and the one-point functions, use a GeomAdaptor_Surface per call.
+//
+// Where the time goes (perf, 100,000 points within 1 mm of the bench's franke fit, 2026-11): before,
+// 3.4 µs a point, a third of it in the PCL kd-tree (FLANN) searches and a quarter in OpenCASCADE's
+// evaluation; now 1.0 µs, about 40 % in the cell grid's two queries, 30 % in evaluation, 15 % in Newton.
+// The foot points agree with the earlier ones to 6e-12 mm (204,000 points, far and edge points included).
 
 #include "reconstruction/foot_point.h"
 
@@ -21,12 +26,10 @@
 #include <sstream>
 #include <string>
 
-#include <pcl/kdtree/kdtree_flann.h>
-#include <pcl/point_cloud.h>
-#include <pcl/point_types.h>
 #include <BSplSLib_Cache.hxx>
 #include <GeomAdaptor_Surface.hxx>
 #include <Geom_BSplineSurface.hxx>
+#include <TColStd_Array1OfReal.hxx>
 #include <gp_Pnt.hxx>
 #include <gp_Vec.hxx>
 
@@ -35,6 +38,8 @@
 #include "reconstruction/bspline_surface.h"
 #include "reconstruction/occt_support.h"
 #include "reconstruction/point_checks.h"
+#include "reconstruction/point_grid.h"
+#include "reconstruction/span_polynomials.h"
 #include "reconstruction/trim.h"
 
 namespace formloop::recon {
@@ -56,11 +61,10 @@ constexpr int kMaxRuns = 8;
 // Above this the span polynomials are not precomputed and each call caches one span at a time
 // (GeomAdaptor_Surface); 64 MB holds e.g. 10^5 spans of a bicubic.
 constexpr double kMaxSpanCacheBytes = 64e6;
-// Samples fetched by the first kd-tree query. On the automatic grid a point 2 mm from a gently curved
-// surface has up to about 16 samples within d + δ, so most points need no second (radius) query.
-// Measured on 100,000 points within 2 mm of franke and egg_box: with 16, 20-25 % of the points need the
-// second query; 8 (75 %) is 10-15 % slower overall and 32 (none) 10 % slower.
-constexpr int kNeighbours = 16;
+// Cell edge of the start samples' grid (PointGrid), in units of δ (seed_cover_mm): a query near the
+// surface then visits about 27 cells of a few samples each. Measured on 100,000 points within 1 mm of
+// the bench surfaces (bench/projection_bench.cc): 1 and 4 were slower than 2.
+constexpr double kGridCellDeltas = 2;
 // Start grid of the one-point Project(surface, p).
 constexpr int kOneShotGrid = 33;
 
@@ -149,6 +153,16 @@ class SpanCaches {
 
   std::vector<double> u_knots_, v_knots_;       // distinct knots
   std::vector<Handle(BSplSLib_Cache)> caches_;  // span (i, j) at j * (u spans) + i
+};
+
+// Non-rational surfaces: our own span polynomials (span_polynomials.h), all six outputs in one pass.
+class PolynomialEvaluator {
+ public:
+  explicit PolynomialEvaluator(const SpanPolynomials& polynomials) : eval_(polynomials) {}
+  SurfaceDerivatives D2(double u, double v) { return eval_.D2(u, v); }
+
+ private:
+  SpanPolynomials::Evaluator eval_;
 };
 
 class SpanCacheEvaluator {
@@ -343,21 +357,26 @@ struct FootPointProjector::Impl {
   ParamDomain domain;
   std::shared_ptr<const Trim> trim;               // of the B-spline it was built from (may be null)
   Handle(Geom_BSplineSurface) bspline;            // set for a B-spline projector
-  std::unique_ptr<const SpanCaches> span_caches;  // its span polynomials, unless they would be too large
+  SpanPolynomials polynomials;                    // its span polynomials (non-rational, not too large)
+  std::unique_ptr<const SpanCaches> span_caches;  // else OpenCASCADE's, unless they would be too large
   const AnalyticSurface* analytic = nullptr;      // set for an analytic projector (not owned)
 
-  // Start grid: samples[j * nu + i] = S(us[i], vs[j]), and the same points (float) in the kd-tree.
+  // Start grid: samples[j * nu + i] = S(us[i], vs[j]), and the same points in a cell grid.
   int nu = 0, nv = 0;
   std::vector<double> us, vs;
   std::vector<Vector3d> samples;
   double delta_mm = 0;  // every surface point lies within delta_mm of a sample
-  pcl::KdTreeFLANN<pcl::PointXYZ> tree;
+  PointGrid grid;
 
   // Calls f(evaluator) with a fresh evaluator for this surface.
   template <typename F>
   auto Visit(F&& f) const {
     if (analytic != nullptr) {
       AnalyticEvaluator eval(*analytic);
+      return f(eval);
+    }
+    if (!polynomials.empty()) {
+      PolynomialEvaluator eval(polynomials);
       return f(eval);
     }
     if (span_caches != nullptr) {
@@ -375,22 +394,19 @@ struct FootPointProjector::Impl {
   double CoverRadius(double d) const { return 1.5 * std::sqrt(2 * d * delta_mm + delta_mm * delta_mm) + delta_mm; }
 
   template <typename Evaluator>
-  Result<FootPoint> GlobalProject(Evaluator& eval, const Vector3d& p, pcl::Indices& found,
-                                  std::vector<float>& found_d2) const;
+  Result<FootPoint> GlobalProject(Evaluator& eval, const Vector3d& p, std::vector<std::pair<double, int>>& found) const;
   template <typename Evaluator>
   Status BuildSamples(Evaluator& eval, int spans_u, int spans_v, const ProjectorOptions& options);
 };
 
 template <typename Evaluator>
-Result<FootPoint> FootPointProjector::Impl::GlobalProject(Evaluator& eval, const Vector3d& p, pcl::Indices& found,
-                                                          std::vector<float>& found_d2) const {
+Result<FootPoint> FootPointProjector::Impl::GlobalProject(Evaluator& eval, const Vector3d& p,
+                                                          std::vector<std::pair<double, int>>& found) const {
   FL_RETURN_IF_ERROR(CheckPoint(p));
-  const pcl::PointXYZ query(static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()));
-  // The nearest kNeighbours samples, nearest first: the first starts Newton, and they usually hold every
-  // sample the global check must see, which saves a second (radius) search.
-  if (tree.nearestKSearch(query, kNeighbours, found, found_d2) < 1) {
-    return Status::Internal("projection of " + PointText(p) + ": the kd-tree returned no sample");
-  }
+  // The nearest sample starts Newton.
+  double nearest_d = 0, complete_mm = 0;
+  const int nearest = grid.Nearest(p, &nearest_d, &found, &complete_mm);
+  if (nearest < 0) return Status::Internal("projection of " + PointText(p) + ": the start grid holds no sample");
 
   // Each Newton run covers the samples of its own sheet near its end point: parameter offsets Δ with
   // √(Δᵀ I Δ) <= cover_mm, I the first fundamental form there (the geodesic distance to first order).
@@ -424,20 +440,27 @@ Result<FootPoint> FootPointProjector::Impl::GlobalProject(Evaluator& eval, const
       return delta.dot(r.metric * delta) <= r.cover_mm * r.cover_mm;
     });
   };
-  run_from(found[0]);
+  run_from(nearest);
 
   // Global check (foot_point.h, step 3): every sample within best_d + δ of p that no run covers starts
-  // another run. The kd-tree works in float: pad its radius by the rounding.
-  const double slack = 1e-3 + 1e-6 * p.norm();
-  const double seed_limit = std::sqrt(static_cast<double>(found_d2[0])) + delta_mm;  // >= best_d + δ
+  // another run, nearest first. The nearest-sample search has usually seen all of them already (found,
+  // squared distances); samples the first run covers stay covered, so only the others are sorted.
+  const double seed_limit = nearest_d + delta_mm;  // >= best_d + δ
   auto limit = [&] { return std::isfinite(best_d) ? best_d + delta_mm : seed_limit; };
-  const bool all_found =
-      found.size() == samples.size() || std::sqrt(static_cast<double>(found_d2.back())) > limit() + slack;
-  if (!all_found) tree.radiusSearch(query, limit() + slack, found, found_d2);
-  for (std::size_t k = 1; k < found.size() && n_runs < kMaxRuns; ++k) {
-    const Vector3d& s = samples[static_cast<std::size_t>(found[k])];
-    if ((p - s).norm() > limit()) continue;
-    if (!covered(found[k])) run_from(found[k]);
+  if (limit() > complete_mm) {
+    grid.WithinRadius(p, limit(), &found);
+    for (auto& [d, index] : found) d *= d;
+  }
+  std::size_t open = 0;
+  const double limit2 = limit() * limit();
+  for (std::size_t k = 0; k < found.size(); ++k) {
+    if (found[k].second != nearest && found[k].first <= limit2 && !covered(found[k].second)) found[open++] = found[k];
+  }
+  found.resize(open);
+  std::sort(found.begin(), found.end());
+  for (std::size_t k = 0; k < found.size() && n_runs < kMaxRuns; ++k) {
+    if (std::sqrt(found[k].first) > limit()) continue;
+    if (!covered(found[k].second)) run_from(found[k].second);
   }
   if (!std::isfinite(best_d)) {
     return Status::Failed("projection of " + PointText(p) + ": Newton did not converge from any of " +
@@ -515,8 +538,6 @@ Status FootPointProjector::Impl::BuildSamples(Evaluator& eval, int spans_u, int 
   for (int i = 0; i < nu; ++i) us[i] = GridParam(domain.u_min, domain.u_max, i, nu);
   for (int j = 0; j < nv; ++j) vs[j] = GridParam(domain.v_min, domain.v_max, j, nv);
   samples.resize(static_cast<std::size_t>(nu) * nv);
-  auto cloud = std::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
-  cloud->resize(samples.size());
   for (int j = 0; j < nv; ++j) {
     for (int i = 0; i < nu; ++i) {
       const std::size_t k = static_cast<std::size_t>(j) * nu + i;
@@ -525,8 +546,6 @@ Status FootPointProjector::Impl::BuildSamples(Evaluator& eval, int spans_u, int 
         return Status::BadInput("foot-point projector: the surface is not finite at (u, v) = (" + Num(us[i]) + ", " +
                                 Num(vs[j]) + ")");
       }
-      (*cloud)[k] = pcl::PointXYZ(static_cast<float>(samples[k].x()), static_cast<float>(samples[k].y()),
-                                  static_cast<float>(samples[k].z()));
     }
   }
   // δ: a point of a cell is within 1/√3 of the cell's longer diagonal of a corner (circumradius of the
@@ -540,7 +559,7 @@ Status FootPointProjector::Impl::BuildSamples(Evaluator& eval, int spans_u, int 
     }
   }
   delta_mm = 0.75 * diagonal;
-  tree.setInputCloud(cloud);
+  grid = PointGrid(samples, kGridCellDeltas * delta_mm);
   return Status::Ok();
 }
 
@@ -582,7 +601,9 @@ Result<FootPointProjector> FootPointProjector::BuildBSpline(const BSplineSurface
     impl->domain = DomainOf(impl->bspline);
     impl->trim = q.shared_trim();
     if (span_caches && SpanCaches::EstimateBytes(impl->bspline) <= kMaxSpanCacheBytes) {
-      impl->span_caches = std::make_unique<const SpanCaches>(impl->bspline);
+      Result<SpanPolynomials> polynomials = SpanPolynomials::Of(BSplineSurface(impl->bspline));
+      if (polynomials.ok()) impl->polynomials = std::move(polynomials).value();
+      if (impl->polynomials.empty()) impl->span_caches = std::make_unique<const SpanCaches>(impl->bspline);
     }
     const int spans_u = impl->bspline->NbUKnots() - 1, spans_v = impl->bspline->NbVKnots() - 1;
     FL_RETURN_IF_ERROR(impl->Visit([&](auto& eval) { return impl->BuildSamples(eval, spans_u, spans_v, options); }));
@@ -605,9 +626,8 @@ Result<FootPointProjector> FootPointProjector::Build(const AnalyticSurface& s, c
 Result<FootPoint> FootPointProjector::Project(const Eigen::Vector3d& p) const {
   try {
     return impl_->Visit([&](auto& eval) {
-      pcl::Indices found;
-      std::vector<float> found_d2;
-      return MarkTrim(impl_->trim.get(), impl_->GlobalProject(eval, p, found, found_d2));
+      std::vector<std::pair<double, int>> found;
+      return MarkTrim(impl_->trim.get(), impl_->GlobalProject(eval, p, found));
     });
   } catch (const Standard_Failure& failure) {
     return Status::Internal("projection of " + PointText(p) + ": OpenCASCADE failed: " + occt::Message(failure));
@@ -629,11 +649,9 @@ Result<std::vector<FootPoint>> FootPointProjector::ProjectAll(const std::vector<
     return impl_->Visit([&](auto& eval) -> Result<std::vector<FootPoint>> {
       std::vector<FootPoint> out;
       out.reserve(points.size());
-      pcl::Indices found;  // reused by every point
-      std::vector<float> found_d2;
+      std::vector<std::pair<double, int>> found;  // reused by every point
       for (; index < points.size(); ++index) {
-        Result<FootPoint> foot =
-            MarkTrim(impl_->trim.get(), impl_->GlobalProject(eval, points[index], found, found_d2));
+        Result<FootPoint> foot = MarkTrim(impl_->trim.get(), impl_->GlobalProject(eval, points[index], found));
         if (!foot.ok()) {
           return Status(foot.status().code(), "points[" + std::to_string(index) + "] of " +
                                                   std::to_string(points.size()) + ": " + foot.status().message());
