@@ -22,7 +22,7 @@ struct FitArgs {
   std::string method;
   std::string grid;
   std::string poles;
-  std::string smoothing = "gcv";
+  std::string smoothing = "none";
   double tolerance_mm = 0;  // 0 = each method's default
   int face_index = -1;
   bool list_faces = false;
@@ -49,7 +49,9 @@ Status Fit(FitArgs args) {
   }
   FL_RETURN_IF_ERROR(ParseLayout(args.grid, "--grid", &r.grid_nu, &r.grid_nv));
   FL_RETURN_IF_ERROR(ParseLayout(args.poles, "--poles", &r.scattered.u_poles, &r.scattered.v_poles));
-  if (args.smoothing == "gcv") {
+  if (args.smoothing == "none") {
+    r.scattered.smoothing = recon::ScatteredFitOptions::Smoothing::kNone;
+  } else if (args.smoothing == "gcv") {
     r.scattered.smoothing = recon::ScatteredFitOptions::Smoothing::kGcv;
   } else if (args.smoothing == "tolerance") {
     r.scattered.smoothing = recon::ScatteredFitOptions::Smoothing::kTolerance;
@@ -57,7 +59,7 @@ Status Fit(FitArgs args) {
     r.scattered.smoothing = recon::ScatteredFitOptions::Smoothing::kFixed;
   } else {
     return Status::BadInput(Where{.field = "--smoothing"}, "unknown smoothing '" + args.smoothing + "'",
-                            "use gcv, tolerance or fixed");
+                            "use none, gcv, tolerance or fixed");
   }
   if (args.tolerance_mm != 0) {
     if (!(args.tolerance_mm > 0)) {
@@ -105,10 +107,11 @@ void AddFitCommand(CLI::App& root, CommandAction* action) {
                   "points (.csv .ply .xyz .pcd), CAD (.step .stp .iges .igs) or analytic:NAME "
                   "(see `formloop surfaces list`)")
       ->required();
-  fit->add_option("--method", args->method,
-                  "cad (CAD input, default there), grid (GeomAPI_PointsToBSplineSurface; default for analytic), "
-                  "scattered (least squares + thin-plate smoothing; default for points), adaptive (scattered + knot "
-                  "refinement), quadric-algebraic, quadric-geometric");
+  fit->add_option(
+      "--method", args->method,
+      "cad (CAD input, default there), grid (GeomAPI_PointsToBSplineSurface; default for analytic), "
+      "scattered (least squares, optional thin-plate smoothing; default for points), adaptive (scattered + knot "
+      "refinement), quadric-algebraic, quadric-geometric");
   fit->add_option("--out", r.out_step, "output STEP file (mm)");
   fit->add_option("--report", r.out_report, "fit report (JSON): residual RMS, max and where, method details");
   fit->add_option("--name", r.name, "name of the STEP product and face (default: the input's name)");
@@ -124,9 +127,11 @@ void AddFitCommand(CLI::App& root, CommandAction* action) {
   fit->add_option("--check", r.check_points, "analytic input: random check points against the exact surface")
       ->capture_default_str();
   fit->add_option("--degree", r.scattered.degree, "scattered: B-spline degree")->capture_default_str();
-  fit->add_option("--poles", args->poles, "scattered: control net NUxNV (default: chosen from the point count)");
+  fit->add_option("--poles", args->poles,
+                  "scattered: control net NUxNV (default: chosen from the points' density and noise by GCV)");
   fit->add_option("--smoothing", args->smoothing,
-                  "scattered: thin-plate weight by gcv, to a target tolerance, or fixed")
+                  "scattered: none (least squares on the net), or a thin-plate weight by gcv, to a target tolerance, "
+                  "or fixed")
       ->capture_default_str();
   fit->add_option("--lambda", r.scattered.lambda, "scattered, --smoothing fixed: the weight (dimensionless)");
   fit->add_option("--tolerance-mm", args->tolerance_mm,

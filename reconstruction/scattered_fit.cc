@@ -1,9 +1,10 @@
-// Why one file of ~1,300 lines: what is left here is one algorithm. The penalised least-squares system
-// (TensorLsq, ~400 lines: assembly, trend, local weights, solve, GCV trace) and the choice of λ on it are one
-// class with its state, used only by the parameter correction and FitScattered below, and the ~20 measured
-// constants at the top are shared by all of them. The layout of a fit (parameter frame, knots, coverage) is
-// in scattered_layout.cc. Moving TensorLsq out would put the class in a header of its own: the next seam
-// if this file grows (not done in issue 18).
+// Why one file of ~1,600 lines (over the 800 of issue 18): not yet split. The seams are (1) the penalised
+// least-squares system TensorLsq with BandPattern/FillThinPlate/SpanGrams and the selected inversion (~650
+// lines; it needs an internal header, scattered_lsq.h, since the λ choice and the correction use the class),
+// (2) the choice of λ and of the net (ChooseByGcv/ChooseByTolerance/ChooseLambda, ChooseNet, ~300 lines) and
+// (3) the parameter correction and FitScattered (~650 lines). The layout of a fit (parameter frame, knots,
+// coverage) is in scattered_layout.cc. Issue 26 (2026-11) grew the file by the net ladder and the cell-wise
+// assembly; the split was left for lack of time in that session (see its report).
 
 #include "reconstruction/scattered_fit.h"
 
@@ -24,6 +25,7 @@
 #include <gp_Vec.hxx>
 #include <limits>
 #include <locale>
+#include <memory>
 #include <numeric>
 #include <sstream>
 #include <string>
@@ -174,11 +176,24 @@ std::vector<std::array<Eigen::MatrixXd, 3>> SpanGrams(const KnotVector& k) {
   return out;
 }
 
+// block += b bᵀ on and above the diagonal (n × n, row-major); kN > 0 fixes n at compile time (the
+// bicubic case, n = 16, fully unrolled), 0 takes it at run time.
+template <int kN>
+inline void AddOuterUpper(int n_runtime, const double* b, double* block) {
+  const int n = kN > 0 ? kN : n_runtime;
+  for (int t1 = 0; t1 < n; ++t1) {
+    const double b1 = b[t1];
+    double* row = block + t1 * n;
+    for (int t2 = t1; t2 < n; ++t2) row[t2] += b1 * b[t2];
+  }
+}
+
 // ---------------------------------------------------------------------------------------------
 // The penalised least-squares problem for fixed knots and parameters.
 
 class TensorLsq {
  public:
+  using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   // The thin-plate energy is integrated over `region` (Q's whole domain, see DataKnots).
   TensorLsq(KnotVector ku, KnotVector kv, const ParamDomain& region) : ku_(std::move(ku)), kv_(std::move(kv)) {
     p_ = ku_.degree();
@@ -244,91 +259,163 @@ class TensorLsq {
     return out;
   }
 
-  // Basis values at every (u_i, v_i), AᵀA and AᵀX (x centred by the caller).
-  void Assemble(const std::vector<double>& u, const std::vector<double>& v, const std::vector<Vector3d>& x) {
-    const int m = static_cast<int>(x.size()), q = p_ + 1, w = 2 * p_ + 1;
+  // Basis values at every (u_i, v_i), AᵀA and AᵀX (x centred by the caller), and the trend's ΦᵀΦ, ΦᵀX
+  // and ΦᵀA. The points are taken knot cell by knot cell (a counting sort): all points of a cell touch the
+  // same (p + 1)² poles, so their products are summed in a small dense block (upper triangle, in cache)
+  // and added to the band once per cell. Measured on 100,000 points, 25 × 25 cubic: 5-8 times faster than
+  // scattering every point's (p + 1)⁴ products into the band (bench/fit_default_bench.cc).
+  // with_trend = false (least squares with the weight at its floor, kNone and the net ladder): no trend;
+  // the energy then acts on S itself, which at λ = kScatteredNoneLambda only fixes poles without data.
+  void Assemble(const std::vector<double>& u, const std::vector<double>& v, const std::vector<Vector3d>& x,
+                bool with_trend = true) {
+    const int m = static_cast<int>(x.size()), q = p_ + 1, w = 2 * p_ + 1, qq = q * q;
+    const int cells_u = nu_ - p_, cells = (nu_ - p_) * (nv_ - p_);
     span_u_.resize(static_cast<std::size_t>(m));
     span_v_.resize(static_cast<std::size_t>(m));
     basis_u_.resize(static_cast<std::size_t>(m) * q);
     basis_v_.resize(static_cast<std::size_t>(m) * q);
     x_ = &x;
-    // Dense band accumulator: band[k * w² + (db + p) w + (da + p)] = N(k, k + da + n_u db).
-    std::vector<double> band(static_cast<std::size_t>(n()) * w * w, 0.0);
-    rhs_ = Eigen::MatrixXd::Zero(n(), 3);
-    int index[64];
-    double value[64];
+    std::vector<int> start(static_cast<std::size_t>(cells) + 1, 0), order(static_cast<std::size_t>(m));
     for (int i = 0; i < m; ++i) {
       const std::size_t si = static_cast<std::size_t>(i);
       const int su = ku_.FindSpan(u[si]), sv = kv_.FindSpan(v[si]);
       span_u_[si] = su;
       span_v_[si] = sv;
-      double* bu = &basis_u_[si * q];
-      double* bv = &basis_v_[si * q];
-      ku_.BasisFunctions(su, u[si], bu);
-      kv_.BasisFunctions(sv, v[si], bv);
-      int t = 0;
-      for (int jb = 0; jb < q; ++jb) {
-        for (int ja = 0; ja < q; ++ja, ++t) {
-          index[t] = (su - p_ + ja) + nu_ * (sv - p_ + jb);
-          value[t] = bu[ja] * bv[jb];
-          rhs_.row(index[t]) += value[t] * x[si].transpose();
+      ku_.BasisFunctions(su, u[si], &basis_u_[si * q]);
+      kv_.BasisFunctions(sv, v[si], &basis_v_[si * q]);
+      ++start[static_cast<std::size_t>((su - p_) + cells_u * (sv - p_)) + 1];
+    }
+    for (int c = 0; c < cells; ++c) start[static_cast<std::size_t>(c) + 1] += start[static_cast<std::size_t>(c)];
+    // Each point's basis values, coordinates and scaled parameters copied into cell order (reading them
+    // in input order and writing out of order: the reads that feed the sums stay sequential).
+    const int stride = 2 * q + 5;
+    std::vector<double>& record = record_;
+    record.resize(static_cast<std::size_t>(m) * stride);
+    {
+      std::vector<int> fill(start.begin(), start.end() - 1);
+      for (int i = 0; i < m; ++i) {
+        const std::size_t si = static_cast<std::size_t>(i);
+        const int slot = fill[static_cast<std::size_t>((span_u_[si] - p_) + cells_u * (span_v_[si] - p_))]++;
+        order[static_cast<std::size_t>(slot)] = i;
+        double* r = &record[static_cast<std::size_t>(slot) * stride];
+        for (int j = 0; j < q; ++j) {
+          r[j] = basis_u_[si * q + j];
+          r[q + j] = basis_v_[si * q + j];
+        }
+        r[2 * q] = x[si].x();
+        r[2 * q + 1] = x[si].y();
+        r[2 * q + 2] = x[si].z();
+        r[2 * q + 3] = (u[si] - cu_) / lu_;
+        r[2 * q + 4] = (v[si] - cv_) / lv_;
+      }
+    }
+    const int nt = with_trend ? static_cast<int>(monomials_.size()) : 0;
+    // Dense band accumulator: band[k * w² + (db + p) w + (da + p)] = N(k, k + da + n_u db).
+    std::vector<double> band(static_cast<std::size_t>(n()) * w * w, 0.0);
+    rhs_ = Eigen::MatrixXd::Zero(n(), 3);
+    phi_a_ = Eigen::MatrixXd::Zero(nt, n());
+    phi_.resize(m, nt);
+    Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(nt, nt);
+    Eigen::MatrixXd phi_x = Eigen::MatrixXd::Zero(nt, 3);
+    // Per cell: block = Σ b bᵀ (upper triangle), block_x = Σ b xᵀ, block_phi = Σ φ bᵀ (b: the (p + 1)² products
+    // N_a M_b, t = jb (p + 1) + ja; φ: the trend's monomials).
+    std::vector<double> block(static_cast<std::size_t>(qq) * qq), block_x(static_cast<std::size_t>(qq) * 3),
+        block_phi(static_cast<std::size_t>(nt) * qq), b(static_cast<std::size_t>(qq)),
+        phi(static_cast<std::size_t>(nt));
+    std::vector<double> gram_acc(static_cast<std::size_t>(nt) * nt, 0.0),
+        phi_x_acc(static_cast<std::size_t>(nt) * 3, 0.0);
+    const int degree = std::min(p_, kTrendDegree);
+    for (int c = 0; c < cells; ++c) {
+      const int begin = start[static_cast<std::size_t>(c)], end = start[static_cast<std::size_t>(c) + 1];
+      if (begin == end) continue;
+      std::fill(block.begin(), block.end(), 0.0);
+      std::fill(block_x.begin(), block_x.end(), 0.0);
+      std::fill(block_phi.begin(), block_phi.end(), 0.0);
+      for (int o = begin; o < end; ++o) {
+        const int i = order[static_cast<std::size_t>(o)];
+        const double* r = &record[static_cast<std::size_t>(o) * stride];
+        const double* bu = r;
+        const double* bv = r + q;
+        for (int jb = 0; jb < q; ++jb) {
+          for (int ja = 0; ja < q; ++ja) b[static_cast<std::size_t>(jb * q + ja)] = bu[ja] * bv[jb];
+        }
+        if (q == 4) {
+          AddOuterUpper<16>(qq, b.data(), block.data());
+        } else {
+          AddOuterUpper<0>(qq, b.data(), block.data());
+        }
+        const double* xi = r + 2 * q;
+        for (int t = 0; t < qq; ++t) {
+          const double bt = b[static_cast<std::size_t>(t)];
+          block_x[static_cast<std::size_t>(t) * 3] += bt * xi[0];
+          block_x[static_cast<std::size_t>(t) * 3 + 1] += bt * xi[1];
+          block_x[static_cast<std::size_t>(t) * 3 + 2] += bt * xi[2];
+        }
+        // The trend's monomials s^a t^b in scaled parameters.
+        const double ss = r[2 * q + 3], tt = r[2 * q + 4];
+        double ps[kTrendDegree + 1], pt[kTrendDegree + 1];
+        ps[0] = pt[0] = 1;
+        for (int d = 1; d <= degree; ++d) {
+          ps[d] = ps[d - 1] * ss;
+          pt[d] = pt[d - 1] * tt;
+        }
+        for (int k = 0; k < nt; ++k) {
+          const double f =
+              ps[monomials_[static_cast<std::size_t>(k)].first] * pt[monomials_[static_cast<std::size_t>(k)].second];
+          phi[static_cast<std::size_t>(k)] = f;
+          phi_(i, k) = f;
+          double* pb = &block_phi[static_cast<std::size_t>(k) * qq];
+          for (int t = 0; t < qq; ++t) pb[t] += f * b[static_cast<std::size_t>(t)];
+        }
+        for (int k = 0; k < nt; ++k) {
+          const double f = phi[static_cast<std::size_t>(k)];
+          for (int k2 = k; k2 < nt; ++k2)
+            gram_acc[static_cast<std::size_t>(k) * nt + k2] += f * phi[static_cast<std::size_t>(k2)];
+          phi_x_acc[static_cast<std::size_t>(k) * 3] += f * xi[0];
+          phi_x_acc[static_cast<std::size_t>(k) * 3 + 1] += f * xi[1];
+          phi_x_acc[static_cast<std::size_t>(k) * 3 + 2] += f * xi[2];
         }
       }
-      for (int t1 = 0; t1 < q * q; ++t1) {
-        double* row = &band[static_cast<std::size_t>(index[t1]) * w * w];
+      // Flush the cell's block into the band, AᵀX and ΦᵀA.
+      const int cu = c % cells_u, cv = c / cells_u;  // the cell's first poles: (cu, cv)
+      for (int t1 = 0; t1 < qq; ++t1) {
         const int ja1 = t1 % q, jb1 = t1 / q;
-        for (int t2 = 0; t2 < q * q; ++t2) {
+        const int k1 = (cu + ja1) + nu_ * (cv + jb1);
+        for (int t2 = t1; t2 < qq; ++t2) {
           const int ja2 = t2 % q, jb2 = t2 / q;
-          row[(jb2 - jb1 + p_) * w + (ja2 - ja1 + p_)] += value[t1] * value[t2];
+          const int k2 = (cu + ja2) + nu_ * (cv + jb2);
+          const double g = block[static_cast<std::size_t>(t1) * qq + t2];
+          band[static_cast<std::size_t>(k1) * w * w + (jb2 - jb1 + p_) * w + (ja2 - ja1 + p_)] += g;
+          if (t2 != t1) band[static_cast<std::size_t>(k2) * w * w + (jb1 - jb2 + p_) * w + (ja1 - ja2 + p_)] += g;
         }
+        for (int d = 0; d < 3; ++d) rhs_(k1, d) += block_x[static_cast<std::size_t>(t1) * 3 + d];
+        for (int k = 0; k < nt; ++k) phi_a_(k, k1) += block_phi[static_cast<std::size_t>(k) * qq + t1];
       }
+    }
+    for (int k = 0; k < nt; ++k) {
+      for (int k2 = k; k2 < nt; ++k2) gram(k, k2) = gram(k2, k) = gram_acc[static_cast<std::size_t>(k) * nt + k2];
+      for (int d = 0; d < 3; ++d) phi_x(k, d) = phi_x_acc[static_cast<std::size_t>(k) * 3 + d];
     }
     // Least-squares polynomial trend of the points in (s, t): a = G⁻¹ Φᵀ X, G = ΦᵀΦ; also ΦᵀA
     // (T × n) for the trace of the influence matrix, and Φ (m × T) for smoothing other data.
-    const Eigen::Index nt = static_cast<Eigen::Index>(monomials_.size());
-    Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(nt, nt);
-    Eigen::MatrixXd phi_x = Eigen::MatrixXd::Zero(nt, 3);
-    phi_a_ = Eigen::MatrixXd::Zero(nt, n());
-    phi_.resize(m, nt);
-    Eigen::VectorXd phi(nt);
-    for (int i = 0; i < m; ++i) {
-      const std::size_t si = static_cast<std::size_t>(i);
-      const double ss = (u[si] - cu_) / lu_, tt = (v[si] - cv_) / lv_;
-      for (Eigen::Index k = 0; k < nt; ++k) {
-        phi(k) = std::pow(ss, monomials_[static_cast<std::size_t>(k)].first) *
-                 std::pow(tt, monomials_[static_cast<std::size_t>(k)].second);
-      }
-      phi_.row(i) = phi.transpose();
-      gram.noalias() += phi * phi.transpose();
-      phi_x.noalias() += phi * x[si].transpose();
-      const double* bu = &basis_u_[si * q];
-      const double* bv = &basis_v_[si * q];
-      for (int jb = 0; jb < q; ++jb) {
-        for (int ja = 0; ja < q; ++ja) {
-          phi_a_.col((span_u_[si] - p_ + ja) + nu_ * (span_v_[si] - p_ + jb)) += (bu[ja] * bv[jb]) * phi;
-        }
-      }
+    const Eigen::Index all = static_cast<Eigen::Index>(monomials_.size());
+    if (with_trend) {
+      const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(gram);
+      gram_inv_ = cod.pseudoInverse();
+      trend_ = cod.solve(phi_x);
+    } else {  // a zero trend: the terms below vanish
+      gram_inv_ = Eigen::MatrixXd::Zero(all, all);
+      trend_ = Eigen::MatrixXd::Zero(all, 3);
+      phi_a_ = Eigen::MatrixXd::Zero(all, n());
     }
-    // Rank-revealing: points on a few lines of (u, v) do not determine every cubic monomial; any
-    // least-squares trend then serves (minimum norm).
-    const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(gram);
-    gram_inv_ = cod.pseudoInverse();
-    trend_ = cod.solve(phi_x);
     thin_plate_trend_rhs_ = thin_plate_trend_ * trend_;  // R c₀, c₀ = C a
-    if (probes_.rows() != m) {
-      Rng rng(kNoiseProbeSeed);
-      probes_.resize(m, kNoiseProbes);
-      for (Eigen::Index c = 0; c < probes_.cols(); ++c) {
-        for (int i = 0; i < m; ++i) probes_(i, c) = (rng.NextU64() >> 63) != 0 ? 1.0 : -1.0;
-      }
-    }
 
     double trace_n = 0, trace_r = 0;
     for (int col = 0; col < normal_.outerSize(); ++col) {
       const int a1 = col % nu_, b1 = col / nu_;
       for (SparseMatrix::InnerIterator it(normal_, col); it; ++it) {
-        const int a = static_cast<int>(it.row()) % nu_, b = static_cast<int>(it.row()) / nu_;
-        it.valueRef() = band[static_cast<std::size_t>(col) * w * w + (b - b1 + p_) * w + (a - a1 + p_)];
+        const int a = static_cast<int>(it.row()) % nu_, bb = static_cast<int>(it.row()) / nu_;
+        it.valueRef() = band[static_cast<std::size_t>(col) * w * w + (bb - b1 + p_) * w + (a - a1 + p_)];
         if (it.row() == col) trace_n += it.value();
       }
     }
@@ -438,6 +525,24 @@ class TensorLsq {
     const int su_count = nu_ - p_, sv_count = nv_ - p_;
     Eigen::MatrixXd w = Eigen::MatrixXd::Ones(su_count, sv_count);
     if (!Factorize(lambda_s)) return w;  // the λ search may have left another factor
+    if (probes_.rows() != m) {           // drawn once per point count (only the GCV mode needs them)
+      Rng rng(kNoiseProbeSeed);
+      probes_.resize(m, kNoiseProbes);
+      // Every bit of each draw is one sign.
+      std::uint64_t bits = 0;
+      int left = 0;
+      for (Eigen::Index c = 0; c < probes_.cols(); ++c) {
+        for (int i = 0; i < m; ++i) {
+          if (left == 0) {
+            bits = rng.NextU64();
+            left = 64;
+          }
+          probes_(i, c) = (bits & 1) != 0 ? 1.0 : -1.0;
+          bits >>= 1;
+          --left;
+        }
+      }
+    }
     Eigen::MatrixXd residual(m, 3);
     for (int i = 0; i < m; ++i) {
       residual.row(i) = ((*x_)[static_cast<std::size_t>(i)] - Evaluate(pilot.poles, i)).transpose();
@@ -521,33 +626,37 @@ class TensorLsq {
   // Poles of the smoother applied to data columns r (m × c), with the current factor:
   // M⁻¹ (Aᵀ r + λ_s R C G⁻¹ Φᵀ r), i.e. what Solve gives for data r (their own trend included).
   Eigen::MatrixXd Smooth(const Eigen::MatrixXd& r, double lambda_s) const {
+    // Row-major copies: each point's row of r, and each pole's row of the right-hand side, contiguous.
     const int q = p_ + 1;
-    Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(n(), r.cols());
+    const RowMatrix rows = r;
+    RowMatrix rhs = RowMatrix::Zero(n(), r.cols());
     for (Eigen::Index i = 0; i < r.rows(); ++i) {
       const std::size_t si = static_cast<std::size_t>(i);
       const double* bu = &basis_u_[si * q];
       const double* bv = &basis_v_[si * q];
       for (int jb = 0; jb < q; ++jb) {
         for (int ja = 0; ja < q; ++ja) {
-          rhs.row((span_u_[si] - p_ + ja) + nu_ * (span_v_[si] - p_ + jb)) += (bu[ja] * bv[jb]) * r.row(i);
+          rhs.row((span_u_[si] - p_ + ja) + nu_ * (span_v_[si] - p_ + jb)) += (bu[ja] * bv[jb]) * rows.row(i);
         }
       }
     }
-    rhs += lambda_s * (thin_plate_trend_ * (gram_inv_ * (phi_.transpose() * r)));
-    return ldlt_.solve(rhs);
+    Eigen::MatrixXd out = rhs;
+    out += lambda_s * (thin_plate_trend_ * (gram_inv_ * (phi_.transpose() * r)));
+    return ldlt_.solve(out);
   }
 
   // A · poles (m × c): the splines with these coefficient columns at every (u_i, v_i).
   Eigen::MatrixXd AtPoints(const Eigen::MatrixXd& poles) const {
     const int q = p_ + 1, m = static_cast<int>(span_u_.size());
-    Eigen::MatrixXd out = Eigen::MatrixXd::Zero(m, poles.cols());
+    const RowMatrix pole_rows = poles;
+    RowMatrix out = RowMatrix::Zero(m, poles.cols());
     for (int i = 0; i < m; ++i) {
       const std::size_t si = static_cast<std::size_t>(i);
       const double* bu = &basis_u_[si * q];
       const double* bv = &basis_v_[si * q];
       for (int jb = 0; jb < q; ++jb) {
         for (int ja = 0; ja < q; ++ja) {
-          out.row(i) += (bu[ja] * bv[jb]) * poles.row((span_u_[si] - p_ + ja) + nu_ * (span_v_[si] - p_ + jb));
+          out.row(i) += (bu[ja] * bv[jb]) * pole_rows.row((span_u_[si] - p_ + ja) + nu_ * (span_v_[si] - p_ + jb));
         }
       }
     }
@@ -570,12 +679,13 @@ class TensorLsq {
   Eigen::MatrixXd thin_plate_trend_rhs_;        // R c₀ (n × 3)
   Eigen::MatrixXd phi_a_;                       // ΦᵀA, T × n
   Eigen::MatrixXd gram_inv_;                    // (ΦᵀΦ)⁻¹, T × T
-  Eigen::MatrixXd phi_;                         // Φ, m × T
+  RowMatrix phi_;                               // Φ, m × T
   Eigen::MatrixXd trend_;                       // trend coefficients a, T × 3
   Eigen::MatrixXd probes_;                      // m × kNoiseProbes random ±1 (LocalWeights)
   const std::vector<Vector3d>* x_ = nullptr;
   std::vector<int> span_u_, span_v_;
   std::vector<double> basis_u_, basis_v_;
+  std::vector<double> record_;  // Assemble's points in cell order (kept to reuse the allocation)
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -735,6 +845,11 @@ LambdaChoice ChooseLambda(TensorLsq& lsq, const ScatteredFitOptions& options, do
       if (choice.trial.ok) choice.trial = lsq.Solve(choice.trial.lambda, true);
       return choice;
     }
+    case ScatteredFitOptions::Smoothing::kNone: {
+      LambdaChoice choice;
+      choice.trial = lsq.Solve(kScatteredNoneLambda, true);
+      return choice;
+    }
     case ScatteredFitOptions::Smoothing::kFixed:
       break;
   }
@@ -797,9 +912,16 @@ struct CorrectedFit {
 Result<CorrectedFit> FitWithCorrection(const std::vector<Vector3d>& points, const std::vector<Vector3d>& centred,
                                        const Vector3d& origin, const KnotVector& ku, const KnotVector& kv,
                                        const ParamDomain& data_box, std::vector<double> u, std::vector<double> v,
-                                       const ScatteredFitOptions& options, double* previous_log_lambda) {
+                                       const ScatteredFitOptions& options, double* previous_log_lambda,
+                                       std::unique_ptr<TensorLsq> assembled = nullptr) {
   const int m = static_cast<int>(points.size());
-  TensorLsq lsq(ku, kv, ParamDomain{ku.lo(), ku.hi(), kv.lo(), kv.hi()});
+  // `assembled`: the same knots and parameters already assembled without the trend (the net ladder's
+  // chosen rung); used for the first round when that is what this fit needs.
+  const bool assembled_given = assembled != nullptr;
+  std::unique_ptr<TensorLsq> lsq_owner =
+      assembled != nullptr ? std::move(assembled)
+                           : std::make_unique<TensorLsq>(ku, kv, ParamDomain{ku.lo(), ku.hi(), kv.lo(), kv.hi()});
+  TensorLsq& lsq = *lsq_owner;
   CorrectedFit best;
   bool have_best = false;
   // kTolerance aims at an orthogonal RMS of tolerance_mm, but λ is chosen on the parametric RMS at
@@ -807,8 +929,12 @@ Result<CorrectedFit> FitWithCorrection(const std::vector<Vector3d>& points, cons
   // noise). Each round rescales the parametric target by tolerance / orthogonal RMS reached.
   const bool to_tolerance = options.smoothing == ScatteredFitOptions::Smoothing::kTolerance;
   double target_mm = options.tolerance_mm;
+  // The trend matters only through the energy: not for kNone (its weight is a floor) or a fixed λ = 0.
+  const bool with_trend = !(options.smoothing == ScatteredFitOptions::Smoothing::kNone ||
+                            (options.smoothing == ScatteredFitOptions::Smoothing::kFixed && options.lambda == 0));
+  const bool reuse_first = lsq_owner != nullptr && assembled_given && !with_trend;
   for (int round = 0; round <= options.max_correction_iterations; ++round) {
-    lsq.Assemble(u, v, centred);
+    if (!(round == 0 && reuse_first)) lsq.Assemble(u, v, centred, with_trend);
     LambdaChoice choice = ChooseLambda(lsq, options, *previous_log_lambda, m, target_mm);
     if (!choice.trial.ok) {
       if (have_best) break;  // keep the previous round's surface
@@ -832,9 +958,12 @@ Result<CorrectedFit> FitWithCorrection(const std::vector<Vector3d>& points, cons
     fit.v = v;
     fit.distance_mm.assign(static_cast<std::size_t>(m), 0.0);
     double sum2 = 0;
+    // Only Newton from the current parameters is used: the smallest start grid (no kd-tree searches).
+    FL_ASSIGN_OR_RETURN(const FootPointProjector projector,
+                        FootPointProjector::Build(fit.surface, ProjectorOptions{.seed_grid = 2}));
     for (int i = 0; i < m; ++i) {
       const std::size_t si = static_cast<std::size_t>(i);
-      const Result<FootPoint> foot = ProjectFrom(fit.surface, points[si], u[si], v[si]);
+      const Result<FootPoint> foot = projector.ProjectFrom(points[si], u[si], v[si]);
       if (foot.ok()) {
         fit.u[si] = foot->u;
         fit.v[si] = foot->v;
@@ -883,6 +1012,75 @@ Result<CorrectedFit> FitWithCorrection(const std::vector<Vector3d>& points, cons
     if (stalled) break;
     u = best.u;
     v = best.v;
+  }
+  return best;
+}
+
+// The automatic control net (scattered_fit.h, u_poles): rungs of (p + 1) .. nu_max poles along u, each
+// kScatteredNetLadderRatio times the last, v in proportion; each fitted by least squares (λ at the floor
+// kScatteredNoneLambda) at the initial parameters and scored by V(n) = (RSS/3m) / (1 − n/m)². Stops at the
+// first rung whose score does not fall below the best; knots(nu, nv) gives the rung's knot vectors.
+// The ladder stops at the first rung that scores worse when the best rung's score fell by less than this
+// (relative) from the rung before it; otherwise it climbs on to the finest rung. Measured: 100,000 points on
+// issue 26's recipe fall by 0.08 % at the best rung (25 × 25) and rise after it; egg_box with 10,000 points
+// scores 5 × 4 far better than 4 × 4 and then worse for several rungs (aliasing) before a fine net fits it
+// (stopping there left 0.9 mm of error).
+constexpr double kNetFlatGain = 0.05;
+// ... and only once the best score is below this share of the first (coarsest) rung's: a flat stretch above
+// it means the nets do not resolve the shape yet (egg_box, 10,000 points: 4 × 4 to 6 × 5 all score 0.31-0.32
+// mm²), not that they reached the noise. Data a coarse net already fits (a plane) so climb the whole ladder.
+constexpr double kNetResolved = 0.1;
+
+struct NetChoice {
+  int nu = 0, nv = 0;
+  nlohmann::json ladder = nlohmann::json::array();  // [u poles, v poles, V in mm²] per rung tried
+  std::unique_ptr<TensorLsq> assembled;             // the chosen rung's system (the fit's first round)
+};
+
+template <typename Knots>
+Result<NetChoice> ChooseNet(const std::vector<Vector3d>& centred, const std::vector<double>& u,
+                            const std::vector<double>& v, int p, int nu_max, int nv_max, Knots knots) {
+  const int m = static_cast<int>(centred.size());
+  std::vector<int> rungs;
+  for (int a = p + 1; a < nu_max; a = std::max(a + 1, static_cast<int>(std::lround(a * kScatteredNetLadderRatio)))) {
+    rungs.push_back(a);
+  }
+  rungs.push_back(nu_max);
+  NetChoice best;
+  double best_score = std::numeric_limits<double>::infinity();
+  double last_gain = 1;  // relative fall of the score at the best rung (the first rung: not flat)
+  double first_score = std::numeric_limits<double>::quiet_NaN();
+  for (const int a : rungs) {
+    const int b = std::clamp(static_cast<int>(std::lround(static_cast<double>(a) * nv_max / nu_max)), p + 1, nv_max);
+    const double unknowns = static_cast<double>(a) * b;
+    if (unknowns >= m) break;
+    const auto [ku, kv] = knots(a, b);
+    FL_RETURN_IF_ERROR(ku.status());
+    FL_RETURN_IF_ERROR(kv.status());
+    auto lsq = std::make_unique<TensorLsq>(*ku, *kv, ParamDomain{ku->lo(), ku->hi(), kv->lo(), kv->hi()});
+    lsq->Assemble(u, v, centred, false);
+    const TensorLsq::Trial trial = lsq->Solve(kScatteredNoneLambda, false);
+    const double dof_left = 1 - unknowns / m;
+    const double score =
+        trial.ok ? (trial.rss / (3.0 * m)) / (dof_left * dof_left) : std::numeric_limits<double>::infinity();
+    best.ladder.push_back({a, b, score});
+    if (std::isnan(first_score)) first_score = score;
+    if (score < best_score) {
+      last_gain = std::isfinite(best_score) ? (best_score - score) / best_score : 1.0;
+      best_score = score;
+      best.nu = a;
+      best.nv = b;
+      best.assembled = std::move(lsq);
+    } else if (best.nu > 0 && last_gain < kNetFlatGain && best_score < kNetResolved * first_score) {
+      // The score stopped falling where it had flattened (the noise floor). Where it was still falling
+      // steeply the ladder goes on: a coarse net can alias an oscillating surface, so the next rungs may
+      // score worse before a fine enough one fits it.
+      break;
+    }
+  }
+  if (best.nu == 0) {
+    return Status::Failed("scattered fit: no control net of the automatic ladder could be fitted (" +
+                          std::to_string(m) + " points); give --poles");
   }
   return best;
 }
@@ -1115,44 +1313,95 @@ Result<BSplineSurface> FitScattered(const std::vector<Vector3d>& points, const S
     tree.setInputCloud(cloud);
     std::vector<int> nearest(1);
     std::vector<float> d2(1);
+    FL_ASSIGN_OR_RETURN(const FootPointProjector base_projector,
+                        FootPointProjector::Build(*base, ProjectorOptions{.seed_grid = 2}));
     for (std::size_t i = 0; i < points.size(); ++i) {
       const pcl::PointXYZ query(static_cast<float>(centred[i].x()), static_cast<float>(centred[i].y()),
                                 static_cast<float>(centred[i].z()));
       tree.nearestKSearch(query, 1, nearest, d2);
       const auto [su, sv] = node_uv[static_cast<std::size_t>(nearest[0])];
-      const Result<FootPoint> foot = ProjectFrom(*base, points[i], su, sv);
+      const Result<FootPoint> foot = base_projector.ProjectFrom(points[i], su, sv);
       u[i] = foot.ok() ? foot->u : su;
       v[i] = foot.ok() ? foot->v : sv;
     }
     details["parameterisation"] = "base-surface";
   }
-  // Control net. Automatic: about m / kScatteredPointsPerPole poles, in the ratio of the data box's
-  // sides.
-  int nu = options.u_poles, nv = options.v_poles;
-  if (nu == 0) {
-    const double target = std::max(1.0, static_cast<double>(m) / kScatteredPointsPerPole);
-    const double aspect = data_box.u_span() / data_box.v_span();
-    nu = std::clamp(static_cast<int>(std::lround(std::sqrt(target * aspect))), p + 1, kScatteredMaxAutoPoles);
-    nv = std::clamp(static_cast<int>(std::lround(target / nu)), p + 1, kScatteredMaxAutoPoles);
-  }
   // Margin (PCA case): at least kMarginSpacings point spacings, the distance by which the points
   // typically miss the boundary of the sampled surface at a corner.
   const double min_margin = kMarginSpacings * std::sqrt(data_box.u_span() * data_box.v_span() / m);
   // Coverage (PCA case): the largest hole the initial parameters leave in their box (a corner, in
-  // practice), in widths of a uniform span of this net over the data. Small: dense knots (see
+  // practice), in widths of a uniform span of the net over the data. Small: dense knots (see
   // DataKnots and kDenseGapSpans); otherwise wide end spans reaching over a margin.
-  EdgePlan plan;
   const bool margin = base == nullptr;
-  if (margin) {
-    const Gap initial_gap = LargestGap(u, v, data_box, min_margin / kMarginSpacings);
-    const double span = std::min(data_box.u_span() / std::max(1, nu - p), data_box.v_span() / std::max(1, nv - p));
-    const double gap_spans = initial_gap.radius_mm / span;
-    details["initial_gap_spans"] = gap_spans;
-    if (gap_spans <= kDenseGapSpans) {
-      plan = EdgePlan{false, 1, min_margin};
+  const Gap initial_gap = margin ? LargestGap(u, v, data_box, min_margin / kMarginSpacings) : Gap{};
+  auto plan_for = [&](int nu_net, int nv_net, double* gap_spans) {
+    EdgePlan net_plan;
+    if (!margin) return net_plan;
+    const double span =
+        std::min(data_box.u_span() / std::max(1, nu_net - p), data_box.v_span() / std::max(1, nv_net - p));
+    *gap_spans = initial_gap.radius_mm / span;
+    if (*gap_spans <= kDenseGapSpans) {
+      net_plan = EdgePlan{false, 1, min_margin};
     } else {
-      plan.margin_span = true;
+      net_plan.margin_span = true;
     }
+    return net_plan;
+  };
+  // Control net: given, or the best of a ladder of nets by GCV (scattered_fit.h, u_poles).
+  int nu = options.u_poles, nv = options.v_poles;
+  std::unique_ptr<TensorLsq> ladder_system;
+  bool sparse_fallback = false;
+  if (nu == 0 && options.smoothing != ScatteredFitOptions::Smoothing::kNone) {
+    // The thin-plate modes keep the point-count net: their energy, not the net, does the smoothing, and
+    // their local weights need the finer net at the edges (measured with the ladder's coarser nets: band
+    // ratios 2.2-3.2 against ≤ 1.93, ScatteredFitNoise).
+    const double target = std::max(1.0, static_cast<double>(m) / kScatteredPointsPerPole);
+    const double aspect = data_box.u_span() / data_box.v_span();
+    nu = std::clamp(static_cast<int>(std::lround(std::sqrt(target * aspect))), p + 1, kScatteredMaxAutoPoles);
+    nv = std::clamp(static_cast<int>(std::lround(target / nu)), p + 1, kScatteredMaxAutoPoles);
+    details["net"] = "points-per-pole";
+  } else if (nu == 0) {
+    // The finest rung: about m / kScatteredPointsPerPole poles, in the ratio of the data box's sides.
+    const double target = std::max(1.0, static_cast<double>(m) / kScatteredPointsPerPole);
+    const double aspect = data_box.u_span() / data_box.v_span();
+    const int nu_max =
+        std::clamp(static_cast<int>(std::lround(std::sqrt(target * aspect))), p + 1, kScatteredMaxAutoPoles);
+    const int nv_max = std::clamp(static_cast<int>(std::lround(target / nu_max)), p + 1, kScatteredMaxAutoPoles);
+    FL_ASSIGN_OR_RETURN(NetChoice net, ChooseNet(centred, u, v, p, nu_max, nv_max, [&](int a, int b) {
+                          double gap_spans = 0;
+                          const EdgePlan net_plan = plan_for(a, b, &gap_spans);
+                          return std::make_pair(DataKnots(p, a, data_box.u_min, data_box.u_max, net_plan, min_margin),
+                                                DataKnots(p, b, data_box.v_min, data_box.v_max, net_plan, min_margin));
+                        }));
+    details["net_ladder"] = net.ladder;
+    double net_gap_spans = 0;
+    if (plan_for(net.nu, net.nv, &net_gap_spans).margin_span) {
+      // Sparse coverage at the chosen net (a hole wider than kDenseGapSpans of its spans): least squares
+      // would extrapolate the holes and corners freely, so the thin-plate energy with GCV's weight takes
+      // over on the point-count net, as before the ladder (measured with 10,000 points and 5 µm noise on
+      // the reference surfaces: least squares on the ladder's net left 0.4-0.9 mm of error in corner
+      // holes, ScatteredFitNoise).
+      nu = nu_max;
+      nv = nv_max;
+      sparse_fallback = true;
+      details["net"] = "points-per-pole";
+    } else {
+      nu = net.nu;
+      nv = net.nv;
+      ladder_system = std::move(net.assembled);
+      details["net"] = "gcv-ladder";
+    }
+  } else {
+    details["net"] = "given";
+  }
+  ScatteredFitOptions effective = options;  // kNone becomes kGcv on sparse coverage (see above)
+  if (sparse_fallback && options.smoothing == ScatteredFitOptions::Smoothing::kNone) {
+    effective.smoothing = ScatteredFitOptions::Smoothing::kGcv;
+  }
+  double gap_spans = 0;
+  const EdgePlan plan = plan_for(nu, nv, &gap_spans);
+  if (margin) {
+    details["initial_gap_spans"] = gap_spans;
     details["edge_spans"] = plan.margin_span ? "margin" : "uniform";
   }
   const double end_width = plan.end_width;
@@ -1168,8 +1417,8 @@ Result<BSplineSurface> FitScattered(const std::vector<Vector3d>& points, const S
   std::vector<std::string> notes;
   int refinements = 0;
   nlohmann::json rounds_per_fit = nlohmann::json::array();
-  FL_ASSIGN_OR_RETURN(CorrectedFit fit,
-                      FitWithCorrection(points, centred, mean, ku, kv, data_box, u, v, options, &previous_log_lambda));
+  FL_ASSIGN_OR_RETURN(CorrectedFit fit, FitWithCorrection(points, centred, mean, ku, kv, data_box, u, v, effective,
+                                                          &previous_log_lambda, std::move(ladder_system)));
   rounds_per_fit.push_back(fit.rounds);
   // Dense coverage: every span is well filled whatever its width, so the knots can follow the shape
   // rather than the data box. One redistribution (RedistributedKnots) from the uniform fit, then a
@@ -1180,7 +1429,7 @@ Result<BSplineSurface> FitScattered(const std::vector<Vector3d>& points, const S
     FL_ASSIGN_OR_RETURN(ku, RedistributedKnots(fit.surface, ku, kv, true));
     FL_ASSIGN_OR_RETURN(kv, RedistributedKnots(fit.surface, kv, ku, false));
     FL_ASSIGN_OR_RETURN(CorrectedFit refit, FitWithCorrection(points, centred, mean, ku, kv, data_box, fit.u, fit.v,
-                                                              options, &previous_log_lambda));
+                                                              effective, &previous_log_lambda));
     rounds_per_fit.push_back(refit.rounds);
     fit = std::move(refit);
   }
@@ -1246,7 +1495,7 @@ Result<BSplineSurface> FitScattered(const std::vector<Vector3d>& points, const S
     inserted_v.insert(inserted_v.end(), add_v.begin(), add_v.end());
     ++refinements;
     FL_ASSIGN_OR_RETURN(CorrectedFit refined, FitWithCorrection(points, centred, mean, ku, kv, data_box, fit.u, fit.v,
-                                                                options, &previous_log_lambda));
+                                                                effective, &previous_log_lambda));
     rounds_per_fit.push_back(refined.rounds);
     fit = std::move(refined);
   }
@@ -1268,9 +1517,10 @@ Result<BSplineSurface> FitScattered(const std::vector<Vector3d>& points, const S
   }
   local.max_mm = fit.distance_mm[worst];
   local.max_at = points[worst];
-  const char* smoothing_name = options.smoothing == ScatteredFitOptions::Smoothing::kGcv         ? "gcv"
-                               : options.smoothing == ScatteredFitOptions::Smoothing::kTolerance ? "tolerance"
-                                                                                                 : "fixed";
+  const char* smoothing_name = effective.smoothing == ScatteredFitOptions::Smoothing::kNone        ? "none"
+                               : effective.smoothing == ScatteredFitOptions::Smoothing::kGcv       ? "gcv"
+                               : effective.smoothing == ScatteredFitOptions::Smoothing::kTolerance ? "tolerance"
+                                                                                                   : "fixed";
   details["degree"] = p;
   details["u_poles"] = ku.n_poles();
   details["v_poles"] = kv.n_poles();

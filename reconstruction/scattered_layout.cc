@@ -2,10 +2,6 @@
 
 #include "reconstruction/scattered_layout.h"
 
-#include <pcl/kdtree/kdtree_flann.h>
-#include <pcl/point_cloud.h>
-#include <pcl/point_types.h>
-
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
@@ -13,6 +9,8 @@
 #include <gp_Vec.hxx>
 #include <limits>
 #include <utility>
+
+#include "reconstruction/point_grid.h"
 
 namespace formloop::recon::scattered_internal {
 namespace {
@@ -187,27 +185,20 @@ Result<KnotVector> RedistributedKnots(const BSplineSurface& q, const KnotVector&
 }
 
 Gap LargestGap(const std::vector<double>& u, const std::vector<double>& v, const ParamDomain& box, double spacing) {
-  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
-  cloud->reserve(u.size());
-  const double cu = 0.5 * (box.u_min + box.u_max), cv = 0.5 * (box.v_min + box.v_max);  // float precision
-  for (std::size_t i = 0; i < u.size(); ++i) {
-    cloud->push_back(pcl::PointXYZ(static_cast<float>(u[i] - cu), static_cast<float>(v[i] - cv), 0.0f));
-  }
-  pcl::KdTreeFLANN<pcl::PointXYZ> tree;
-  tree.setInputCloud(cloud);
+  // The points in a cell grid (PointGrid; z = 0) with cells 1.5 spacings wide: a node's nearest point is
+  // then usually found in the 3 × 3 cells around it.
+  std::vector<Eigen::Vector3d> flat(u.size());
+  for (std::size_t i = 0; i < u.size(); ++i) flat[i] = Eigen::Vector3d(u[i], v[i], 0);
+  const PointGrid grid(flat, 1.5 * spacing);
   constexpr int kMaxNodes = 400;  // per direction
   const int nu = std::clamp(static_cast<int>(std::ceil(box.u_span() / spacing)) + 1, 2, kMaxNodes);
   const int nv = std::clamp(static_cast<int>(std::ceil(box.v_span() / spacing)) + 1, 2, kMaxNodes);
-  std::vector<int> nearest(1);
-  std::vector<float> d2(1);
   Gap gap;
   for (int j = 0; j < nv; ++j) {
     for (int i = 0; i < nu; ++i) {
       const double gu = box.u_min + box.u_span() * i / (nu - 1), gv = box.v_min + box.v_span() * j / (nv - 1);
-      tree.nearestKSearch(pcl::PointXYZ(static_cast<float>(gu - cu), static_cast<float>(gv - cv), 0.0f), 1, nearest,
-                          d2);
-      const std::size_t k = static_cast<std::size_t>(nearest[0]);
-      const double r = std::hypot(u[k] - gu, v[k] - gv);
+      double r = 0;
+      if (grid.Nearest(Eigen::Vector3d(gu, gv, 0), &r) < 0) continue;
       if (r > gap.radius_mm) gap = Gap{r, gu, gv};
     }
   }
