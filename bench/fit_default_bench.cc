@@ -1,6 +1,6 @@
-// The scattered fit's modes (FitScattered: the default, GCV thin-plate, adaptive, a given 24 × 24 net by plain
-// least squares) beside SciPy's LSQBivariateSpline (FITPACK, cubic, uniform knots; bench/scipy_fit_peer.py
-// through /usr/bin/python3 on the same points, skipped when absent), issue 26.
+// The scattered fit's modes (FitScattered: the default, GCV thin-plate on its own and on the default's net,
+// adaptive, a given 24 × 24 net by plain least squares) beside SciPy's LSQBivariateSpline (FITPACK, cubic, uniform
+// knots; bench/scipy_fit_peer.py through /usr/bin/python3 on the same points, skipped when absent), issue 26.
 //
 // Data (issue 26's recipe): f(x, y) = 10 + 4 sin(2πx/60) cos(2πy/80) + 0.002 (x − 50)(y − 50) on [0, 100]²,
 // 100,000 seeded uniform (x, y), z = f + 5 µm Gaussian noise (seed 26). Truth RMS: the fitted surface's
@@ -202,6 +202,12 @@ int main(int argc, char** argv) {
   ScatteredFitOptions gcv;
   gcv.smoothing = ScatteredFitOptions::Smoothing::kGcv;
   rows.push_back(RunOurs("formloop --smoothing gcv (thin-plate, GCV lambda)", points, gcv, repeats));
+  // GCV on the net the default's ladder chose (the thin-plate modes' own automatic net is the point-count
+  // one, 112 x 112 here).
+  ScatteredFitOptions gcv_net = gcv;
+  gcv_net.u_poles = rows.front().u_poles;
+  gcv_net.v_poles = rows.front().v_poles;
+  rows.push_back(RunOurs("formloop --smoothing gcv --poles (the default's net)", points, gcv_net, repeats));
   ScatteredFitOptions adaptive;
   adaptive.adaptive = true;
   adaptive.tolerance_mm = 5 * kNoiseMm;  // 5 sigma: beyond the noise's largest excursion among 1e5 points
