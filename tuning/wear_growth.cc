@@ -4,6 +4,8 @@
 #include <cmath>
 #include <numbers>
 
+#include "core/golden_section.h"
+
 namespace formloop::tuning {
 namespace {
 
@@ -120,27 +122,9 @@ Result<double> FitGrowthShape(const std::vector<WearSeries>& training, const Wea
     }
   }
   // Golden section on the bracket around the best grid point.
-  double lo = options.gamma_min + std::max(0, best - 1) * step,
-         hi = options.gamma_min + std::min(options.grid - 1, best + 1) * step;
-  const double phi = (std::sqrt(5.0) - 1) / 2;
-  double a = hi - phi * (hi - lo), b = lo + phi * (hi - lo);
-  double fa = cost(a), fb = cost(b);
-  for (int it = 0; it < 60 && hi - lo > 1e-7; ++it) {
-    if (fa < fb) {
-      hi = b;
-      b = a;
-      fb = fa;
-      a = hi - phi * (hi - lo);
-      fa = cost(a);
-    } else {
-      lo = a;
-      a = b;
-      fa = fb;
-      b = lo + phi * (hi - lo);
-      fb = cost(b);
-    }
-  }
-  const double gamma = 0.5 * (lo + hi);
+  const double lo = options.gamma_min + std::max(0, best - 1) * step,
+               hi = options.gamma_min + std::min(options.grid - 1, best + 1) * step;
+  const double gamma = GoldenSectionMinimise(cost, lo, hi, {.tolerance = 1e-7, .max_iterations = 60}).Mid();
   return cost(gamma) <= best_cost ? gamma : options.gamma_min + best * step;
 }
 
