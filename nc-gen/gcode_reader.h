@@ -166,6 +166,9 @@ struct ArcGeometry {
   Eigen::Vector3d TangentAt(double lambda) const;
 };
 
+// A G number in tenths, the form G-codes are compared in: G90.1 -> 901, G1 -> 10.
+int GTenths(double g);
+
 // One block as read, with the modal state after it.
 struct Block {
   long line = 0;               // 1-based line number

@@ -1,3 +1,12 @@
+// The raster planner (nc-gen/toolpath.h): the options check, the step-over and concave-region helpers,
+// the section tracing (plane crossings, sections, clipping to the trim and the neighbours' clearance,
+// leads, contour thinning), PlanRaster itself and the path summaries.
+//
+// Why one file of ~950 lines: PlanRaster (about 300 lines) is one algorithm that uses nearly every helper
+// above it, and the helpers are internal to it; splitting the section tracing into its own file would
+// publish a dozen internals (RasterFrame, Section, Domain, TraceSection, ClipSection, LeadArc, ...) in a
+// header for no other reader. The sections follow the order of the planner's steps.
+
 #include "nc-gen/toolpath.h"
 
 #include <algorithm>
