@@ -27,14 +27,15 @@
 #include <iostream>
 #include <memory>
 #include <nlohmann/json.hpp>
-#include <sstream>
 
 #include "app/command.h"
 #include "cnc/linuxcnc_config.h"
 #include "cnc/linuxcnc_link.h"
 #include "cnc/linuxcnc_probing.h"
 #include "cnc/linuxcnc_run.h"
+#include "core/csv.h"
 #include "core/log.h"
+#include "core/number_text.h"
 #include "metrology/deviations.h"
 #include "metrology/probe.h"
 #include "reconstruction/cad_io.h"
@@ -44,25 +45,15 @@ namespace {
 
 using nlohmann::json;
 
-// "X,Y,Z" into a vector; `option` names the option in the message.
+// "X,Y,Z" into a vector (cells split and numbers read as every CSV cell is: core/csv.h, no locale);
+// `option` names the option in the message.
 Result<Eigen::Vector3d> ParseTriple(const std::string& text, const std::string& option) {
+  std::vector<std::string_view> cells;
+  SplitCsvCells(text, &cells);
   Eigen::Vector3d v;
-  std::stringstream in(text);
-  std::string item;
-  int k = 0;
-  while (std::getline(in, item, ',')) {
-    std::size_t used = 0;
-    double x = 0;
-    try {
-      x = std::stod(item, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (k >= 3 || used == 0 || used != item.size() || !std::isfinite(x)) k = 4;
-    if (k < 3) v[k] = x;
-    ++k;
-  }
-  if (k != 3) return Status::BadInput(Where{.field = option}, "'" + text + "' is not three numbers X,Y,Z");
+  bool ok = cells.size() == 3;
+  for (int k = 0; ok && k < 3; ++k) ok = ParseDouble(cells[k], &v[k]) && std::isfinite(v[k]);
+  if (!ok) return Status::BadInput(Where{.field = option}, "'" + text + "' is not three numbers X,Y,Z");
   return v;
 }
 

@@ -15,19 +15,12 @@ namespace {
 
 constexpr double kMaxTravelMm = 100000;  // 100 m: no 3-axis machine travels further
 
+// An optional [x, y, z] in mm within the travel any machine has (+-100 m).
 Status ReadVec3(const JsonFields& f, const std::string& key, Eigen::Vector3d* out) {
   if (!f.Has(key)) return Status::Ok();
-  const Json& v = f.json().at(key);
-  if (!v.is_array() || v.size() != 3 || !v[0].is_number() || !v[1].is_number() || !v[2].is_number()) {
-    return Status::BadInput(Where{.file = f.source(), .field = f.Path(key)}, "expected [x, y, z] in mm",
-                            "write three numbers, e.g. [-300, -300, -200]");
-  }
-  *out = Eigen::Vector3d(v[0].get<double>(), v[1].get<double>(), v[2].get<double>());
-  if (!(out->cwiseAbs().maxCoeff() <= kMaxTravelMm)) {
-    return Status::BadInput(Where{.file = f.source(), .field = f.Path(key)},
-                            "a travel beyond +-100 m (" + FormatSignificant(out->cwiseAbs().maxCoeff(), 6) + " mm)",
-                            "give the machine's travel in mm");
-  }
+  std::vector<double> v;
+  FL_RETURN_IF_ERROR(f.NumberArray(key, &v, 3, {.min = -kMaxTravelMm, .max = kMaxTravelMm}));
+  *out = Eigen::Vector3d(v[0], v[1], v[2]);
   return Status::Ok();
 }
 
@@ -278,14 +271,14 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
                               "give the control's last R parameter (MD28050 - 1, 99 by default)");
     }
     if (f->Has("grid")) {
-      const Json& g = f->json().at("grid");
-      if (!g.is_array() || g.size() != 2 || !g[0].is_number_integer() || !g[1].is_number_integer() ||
-          g[0].get<int>() < 5 || g[1].get<int>() < 5 || g[0].get<int>() > 1000 || g[1].get<int>() > 1000) {
+      std::vector<long long> g;
+      FL_RETURN_IF_ERROR(f->IntegerArray("grid", &g, 5, 1000));
+      if (g.size() != 2) {
         return Status::BadInput(Where{.file = source, .field = "probing.grid"}, "expected [nu, nv]",
                                 "write two integers from 5 to 1000, e.g. [20, 20]");
       }
-      part.probe_nu = g[0].get<int>();
-      part.probe_nv = g[1].get<int>();
+      part.probe_nu = static_cast<int>(g[0]);
+      part.probe_nv = static_cast<int>(g[1]);
     }
     FL_RETURN_IF_ERROR(f->OptionalNumber("inset_fraction", &part.probe_inset_fraction, {.min = 0, .max = 0.45}));
     FL_RETURN_IF_ERROR(f->OptionalNumber("ball_radius_mm", &part.probe.ball_radius_mm, kBallRadius));

@@ -1,7 +1,6 @@
 #include "app/pipeline_stages.h"
 
 #include <cmath>
-#include <cstdlib>
 #include <memory>
 #include <set>
 
@@ -10,6 +9,7 @@
 #include "cnc/linuxcnc_probing.h"
 #include "core/atomic_file.h"
 #include "core/log.h"
+#include "core/number_text.h"
 #include "core/point_io.h"
 #include "core/random.h"
 #include "core/version.h"
@@ -72,9 +72,8 @@ Result<Machine> ResolveMachine(const PartSpec& part, const RunOptions& options, 
                               "set machine.dialect to linuxcnc");
     }
     const std::string radius = config.Get("FORMLOOP", "PROBE_BALL_RADIUS_MM");
-    char* end = nullptr;
-    const double radius_mm = std::strtod(radius.c_str(), &end);
-    if (radius.empty() || *end != '\0' || std::abs(radius_mm - part.probe.ball_radius_mm) > 1e-9) {
+    double radius_mm = 0;
+    if (!ParseDouble(radius, &radius_mm) || std::abs(radius_mm - part.probe.ball_radius_mm) > 1e-9) {
       return Status::BadInput(
           Where{.field = "probing.ball_radius_mm"},
           FormatExact(part.probe.ball_radius_mm) + " mm, but the probe surface of " + config.ini.string() +

@@ -185,12 +185,12 @@ Result<Eigen::VectorXd> InputWeightsFromRules(const std::vector<kb::Rule>& rules
       w(k) = 0;
     }
     const json weights = r.choice.value("weights", json::object());
+    const JsonFields weight_fields(weights, "rules", "retrieval.descriptors.weights.");
     for (const auto& [name, v] : weights.items()) {
       const int k = index_of(name);
-      if (k < 0 || !v.is_number() || !(v.get<double>() >= 0)) {
-        return Status::BadInput(where, "weight of " + name + ": unknown descriptor or not a number >= 0");
-      }
-      w(k) = v.get<double>();
+      if (k < 0)
+        return Status::BadInput(where, "weight of unknown descriptor " + name, "use retrieval::DescriptorNames()");
+      FL_RETURN_IF_ERROR(weight_fields.Number(name, &w(k), {.min = 0}));
     }
   }
   if (!(w.sum() > 0))
@@ -250,15 +250,12 @@ Result<RetrievalModel> RetrievalModel::Assemble(const std::vector<kb::CaseRecord
   for (const kb::Rule& r : rules) {
     if (r.name == "facet.weights") weights_rule = r.choice;
     if (r.name == "retrieval.refinement") {
-      if (r.choice.contains("radius_scale") && r.choice["radius_scale"].is_number()) {
-        m.radius_scale_ = r.choice["radius_scale"].get<double>();
-      }
-      if (r.choice.contains("radius")) {
-        const json& v = r.choice["radius"];
-        if (!v.is_number() || !(v.get<double>() > 0) || !std::isfinite(v.get<double>())) {
-          return Status::BadInput(Where{.field = "rules.retrieval.refinement.radius"}, "must be a number > 0");
-        }
-        m.fixed_radius_ = v.get<double>();
+      const JsonFields f(r.choice, "rules", "retrieval.refinement.");
+      FL_RETURN_IF_ERROR(f.OptionalNumber("radius_scale", &m.radius_scale_, {.min = 0, .exclusive_min = true}));
+      if (f.Has("radius")) {
+        double radius = 0;
+        FL_RETURN_IF_ERROR(f.Number("radius", &radius, {.min = 0, .exclusive_min = true}));
+        m.fixed_radius_ = radius;
       }
     }
     if (r.name == "route.direct") m.route_rules_["direct"] = r.choice;
@@ -268,13 +265,13 @@ Result<RetrievalModel> RetrievalModel::Assemble(const std::vector<kb::CaseRecord
   if (!(m.radius_scale_ > 0) || !std::isfinite(m.radius_scale_)) {
     return Status::BadInput(Where{.field = "rules.retrieval.refinement.radius_scale"}, "must be a number > 0");
   }
+  const JsonFields weights(weights_rule, "rules", "facet.weights.");
   for (const auto& [facet, tax] : by_facet) {
-    m.weights_[facet] =
-        weights_rule.contains(facet) && weights_rule[facet].is_number() ? weights_rule[facet].get<double>() : 1.0;
+    m.weights_[facet] = 1.0;
+    FL_RETURN_IF_ERROR(weights.OptionalNumber(facet, &m.weights_[facet], {.min = 0}));
   }
-  m.weights_[kGeometricFacet] = weights_rule.contains(kGeometricFacet) && weights_rule[kGeometricFacet].is_number()
-                                    ? weights_rule[kGeometricFacet].get<double>()
-                                    : kDefaultGeometryWeight;
+  m.weights_[kGeometricFacet] = kDefaultGeometryWeight;
+  FL_RETURN_IF_ERROR(weights.OptionalNumber(kGeometricFacet, &m.weights_[kGeometricFacet], {.min = 0}));
 
   std::unordered_map<std::string, const kb::CaseRecord*> by_uid;
   for (const auto& r : records) by_uid[r.uid] = &r;
