@@ -30,6 +30,7 @@
 #include <sstream>
 #include <string>
 
+#include "core/golden_section.h"
 #include "core/random.h"
 #include "reconstruction/point_checks.h"
 #include "reconstruction/scattered_layout.h"
@@ -754,24 +755,10 @@ LambdaChoice ChooseByGcv(TensorLsq& lsq, double previous_log) {
   }
   const double centre = grid[best_index()].first;
   double a = std::max(kLogLambdaMin, centre - step), b = std::min(kLogLambdaMax, centre + step);
-  const double ratio = (std::sqrt(5.0) - 1) / 2;
-  double c = b - ratio * (b - a), d = a + ratio * (b - a);
-  double fc = eval(c), fd = eval(d);
-  while (b - a > 0.1) {
-    if (fc <= fd) {
-      b = d;
-      d = c;
-      fd = fc;
-      c = b - ratio * (b - a);
-      fc = eval(c);
-    } else {
-      a = c;
-      c = d;
-      fc = fd;
-      d = a + ratio * (b - a);
-      fd = eval(d);
-    }
-  }
+  GoldenSectionOptions golden;  // every evaluation lands in the grid; the best one is chosen below
+  golden.tolerance = 0.1;
+  golden.ties_keep_left = true;
+  GoldenSectionMinimise(eval, a, b, golden);
   LambdaChoice choice;
   choice.trial = grid[best_index()].second;
   return choice;

@@ -13,6 +13,7 @@
 #include <Eigen/QR>
 #include <Eigen/SVD>
 
+#include "core/golden_section.h"
 #include "metrology/morans_i.h"
 #include "metrology/spatial_cv.h"
 
@@ -177,17 +178,11 @@ TermFit FitTerm(const Problem& prob, const Term& term, const Eigen::MatrixXd& x,
     if (rss[g] < rss[best]) best = g;
   }
   double a = grid[std::max(0, best - 1)], b = grid[std::min(kGrid - 1, best + 1)];
-  const double phi = 0.5 * (std::sqrt(5.0) - 1.0);
-  double c = b - phi * (b - a), d = a + phi * (b - a);
-  double fc = rss_at(c), fd = rss_at(d);
-  for (int it = 0; it < 40 && b - a > 1e-6; ++it) {
-    if (fc < fd) {
-      b = d, d = c, fd = fc, c = b - phi * (b - a), fc = rss_at(c);
-    } else {
-      a = c, c = d, fc = fd, d = a + phi * (b - a), fd = rss_at(d);
-    }
-  }
-  double log_q = 0.5 * (a + b);
+  GoldenSectionOptions golden;
+  golden.tolerance = 1e-6;
+  golden.max_iterations = 40;
+  const GoldenSectionResult refined = GoldenSectionMinimise(rss_at, a, b, golden);
+  double log_q = refined.Mid();
   // The grid's end points are candidates too (the golden section never reaches a bound exactly).
   if (rss[best] < rss_at(log_q)) log_q = grid[best];
   const double q = std::exp(log_q);

@@ -130,9 +130,9 @@ TEST_F(TuneLinkTest, ConfirmedPlanIsWrittenToTheControllerAndReadBack) {
     *report = text.ok() && !text->empty() ? Json::parse(*text) : Json();
     return code;
   };
-  const auto item = [](const Json& report, const std::string& address) {
+  const auto item = [](const Json& report, const std::string& offset_address) {
     for (const auto& o : report["offsets"]) {
-      if (o["address"] == address) return o;
+      if (o["address"] == offset_address) return o;
     }
     return Json();
   };
