@@ -4,8 +4,9 @@
 #include <cmath>
 #include <fstream>
 #include <map>
-#include <sstream>
 
+#include "core/csv.h"
+#include "core/number_text.h"
 #include "simulation/diagnose.h"
 #include "simulation/diagnose_engine.h"
 
@@ -18,16 +19,10 @@ Result<std::vector<FeaturePosition>> ReadFeatures(const std::string& path) {
   long line_no = 0;
   std::vector<std::string> header;
   std::vector<FeaturePosition> out;
-  auto split = [](const std::string& s) {
-    std::vector<std::string> cells;
-    std::stringstream ss(s);
-    std::string cell;
-    while (std::getline(ss, cell, ',')) {
-      cell.erase(0, cell.find_first_not_of(" \t\r"));
-      cell.erase(cell.find_last_not_of(" \t\r") + 1);
-      cells.push_back(cell);
-    }
-    return cells;
+  auto split = [](const std::string& s) {  // core's CSV cell rules, as owned strings
+    std::vector<std::string_view> views;
+    SplitCsvCells(s, &views);
+    return std::vector<std::string>(views.begin(), views.end());
   };
   std::map<std::string, int> col;
   while (std::getline(in, line)) {
@@ -57,9 +52,7 @@ Result<std::vector<FeaturePosition>> ReadFeatures(const std::string& path) {
     f.has_z = col.count("z") > 0;
     auto number = [&](const char* name, double* value) -> Status {
       const std::string& s = cells[col[name]];
-      char* end = nullptr;
-      *value = std::strtod(s.c_str(), &end);
-      if (s.empty() || end != s.c_str() + s.size() || !std::isfinite(*value)) {
+      if (!ParseDouble(s, value) || !std::isfinite(*value)) {
         return Status::BadInput(Where{.file = path, .line = line_no, .field = name},
                                 "'" + s + "' is not a finite number");
       }
