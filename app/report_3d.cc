@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <iterator>
 #include <sstream>
@@ -18,6 +19,7 @@
 
 #include "app/report_sections.h"
 #include "app/report_svg.h"
+#include "core/log.h"
 #include "core/number_text.h"
 
 #ifndef FORMLOOP_THREE_JS_DIR
@@ -33,14 +35,17 @@ constexpr int kMeshCells = 64;
 constexpr std::size_t kMaxPoints = 5000;
 constexpr std::size_t kMaxPathPoints = 8000;
 
-// three.min.js and its OrbitControls from the libjs-three package (path fixed at build time).
+// three.min.js and its OrbitControls from the libjs-three package: the folder found at build time, or
+// $FORMLOOP_THREE_JS_DIR where a system keeps three.js elsewhere.
 Result<std::string> ReadPackageScript(const std::string& relative) {
-  const fs::path path = fs::path(FORMLOOP_THREE_JS_DIR) / relative;
+  const char* override_dir = std::getenv("FORMLOOP_THREE_JS_DIR");
+  const fs::path dir = override_dir && *override_dir ? fs::path(override_dir) : fs::path(FORMLOOP_THREE_JS_DIR);
+  const fs::path path = dir / relative;
   std::ifstream in(path, std::ios::binary);
   if (!in) {
     return Status::NotFound("the report's 3-D view needs " + path.string() +
                             " from the Debian package libjs-three; install it (scripts/setup.sh deps, or apt-get "
-                            "install libjs-three) or write the run with --no-report");
+                            "install libjs-three)");
   }
   std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
   if (text.find("</script") != std::string::npos) {
@@ -418,11 +423,23 @@ Status View3dSection(std::string& html, const RunData& run, double max_abs_um) {
     CloseSection(html);
     return Status::Ok();
   }
-  FL_ASSIGN_OR_RETURN(const std::string three, ReadPackageScript("three.min.js"));
-  FL_ASSIGN_OR_RETURN(const std::string orbit, ReadPackageScript("examples/js/controls/OrbitControls.js"));
   const Mesh mesh = BuildMesh(run);
   if (mesh.fields.empty()) {
     NotAvailable(html, "3-D view", "no loop's points cover loop 0's area");
+    CloseSection(html);
+    return Status::Ok();
+  }
+  const Result<std::string> three = ReadPackageScript("three.min.js");
+  const Result<std::string> orbit = ReadPackageScript("examples/js/controls/OrbitControls.js");
+  if (!three.ok() || !orbit.ok()) {
+    // The run's programs and analysis do not depend on a viewer: without three.js the section shows the
+    // static projection (the print view) and says why, and the log warns once.
+    const Status& missing = !three.ok() ? three.status() : orbit.status();
+    log::Warn("report: {}; the 3-D section shows the static view only", missing.message());
+    NotAvailable(html, "interactive 3-D view", missing.message());
+    html += ScaleBar(max_abs_um);
+    html += FigureHtml(ProjectionSvg(mesh, max_abs_um),
+                       "Static view of the part: " + mesh.names.front() + ", seen from the front left.");
     CloseSection(html);
     return Status::Ok();
   }
@@ -443,8 +460,8 @@ Status View3dSection(std::string& html, const RunData& run, double max_abs_um) {
                      "Static view of the part for print: " + mesh.names.front() + ", seen from the front left.") +
           "</div>\n";
   html += "<script type=\"application/json\" id=\"view3d-data\">" + DataJson(run, mesh, max_abs_um) + "</script>\n";
-  html += "<script>/* three.js r111, Debian libjs-three, MIT licence */\n" + three + "\n</script>\n";
-  html += "<script>/* OrbitControls, Debian libjs-three, MIT licence */\n" + orbit + "\n</script>\n";
+  html += "<script>/* three.js r111, Debian libjs-three, MIT licence */\n" + *three + "\n</script>\n";
+  html += "<script>/* OrbitControls, Debian libjs-three, MIT licence */\n" + *orbit + "\n</script>\n";
   html += "<script>" + std::string(kViewScript) + "</script>\n";
   CloseSection(html);
   return Status::Ok();

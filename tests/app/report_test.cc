@@ -360,6 +360,26 @@ TEST_F(ReportTest, OvercutFirstCycleSaysTheNextCutsANewBlank) {
   EXPECT_NE(html->find("can re-cut this workpiece with the material left as allowance"), std::string::npos);
 }
 
+TEST_F(ReportTest, WithoutThreeJsThe3dSectionShowsTheStaticViewAndSaysWhy) {
+  formloop::testing::WriteRunFixture(run_);
+  const fs::path empty = dir_ / "no-three-js";
+  fs::create_directories(empty);
+  ASSERT_EQ(setenv("FORMLOOP_THREE_JS_DIR", empty.c_str(), 1), 0);
+  const Result<std::string> html = RenderRunReport(run_);
+  unsetenv("FORMLOOP_THREE_JS_DIR");
+  ASSERT_TRUE(html.ok()) << html.status().message();  // the report is still written
+  const std::size_t section = html->find("The part in 3-D");
+  ASSERT_NE(section, std::string::npos);
+  EXPECT_NE(html->find("libjs-three", section), std::string::npos);  // says what is missing and the fix
+  EXPECT_NE(html->find("Static view of the part", section), std::string::npos);
+  EXPECT_EQ(html->find("<canvas", section), std::string::npos);  // no viewer without its script
+  EXPECT_EQ(html->find("three.js r111"), std::string::npos);
+  // With the package's folder the interactive view is back.
+  const Result<std::string> full = RenderRunReport(run_);
+  ASSERT_TRUE(full.ok());
+  EXPECT_NE(full->find("<canvas"), std::string::npos);
+}
+
 TEST_F(ReportTest, BatchOverviewLinksEachPartsReport) {
   const fs::path batch = dir_ / "batch";
   formloop::testing::WriteRunFixture(batch / "part-a");
