@@ -18,6 +18,7 @@
 #include "cnc/linuxcnc_probing.h"
 #include "core/atomic_file.h"
 #include "core/log.h"
+#include "core/number_text.h"
 #include "core/point_io.h"
 
 namespace formloop::cnc {
@@ -223,8 +224,8 @@ Result<LinuxCncMeasurement> MeasureOnLinuxCnc(const LinuxCncConfig& config, cons
     return Status::BadInput(Where{.field = "program"}, "the configuration's link is PACKED at LinuxCNC ports 0..3");
   }
   FL_ASSIGN_OR_RETURN(program.probe.post.limits, LimitsOf(config));
-  program.probe.ball_radius_mm = std::atof(config.Get("FORMLOOP", "PROBE_BALL_RADIUS_MM").c_str());
-  if (!(program.probe.ball_radius_mm > 0)) {
+  if (!ParseDouble(config.Get("FORMLOOP", "PROBE_BALL_RADIUS_MM"), &program.probe.ball_radius_mm) ||
+      !(program.probe.ball_radius_mm > 0)) {
     return Status::BadInput(Where{.file = config.ini.string(), .field = "[FORMLOOP] PROBE_BALL_RADIUS_MM"},
                             "the configuration has no probe surface");
   }

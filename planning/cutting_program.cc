@@ -6,6 +6,7 @@
 
 #include "core/file_hash.h"
 #include "core/json_io.h"
+#include "core/number_text.h"
 #include "core/point_io.h"
 #include "core/random.h"
 #include "planning/program_edit.h"
@@ -77,7 +78,9 @@ Status CheckOneTool(const EditableProgram& program, const std::string& source) {
   for (std::size_t i = 0; i < program.lines().size(); ++i) {
     if (!program.GetWord(i, 'T', &t)) continue;
     if (first.empty()) first = t;
-    if (std::atof(t.c_str()) != std::atof(first.c_str())) {
+    double tool = 0, first_tool = 0;
+    const bool both = ParseDouble(t, &tool) && ParseDouble(first, &first_tool);
+    if (!both || tool != first_tool) {
       return Status::BadInput(Where{.file = source, .line = static_cast<long>(i + 1)},
                               program.BlockName(i) + " selects tool T" + t + " after T" + first +
                                   ": Level 1 optimises one tool operation, and its S would reach the other tool",

@@ -65,8 +65,11 @@ install_deps() {
 build() {
   local gen=()
   command -v ninja >/dev/null && gen=(-G Ninja)
+  # FORMLOOP_CMAKE_ARGS: extra configure options (CI passes -DFORMLOOP_WERROR=ON: our code builds warning-clean).
+  local extra=()
+  read -r -a extra <<<"${FORMLOOP_CMAKE_ARGS:-}"
   if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
-    cmake -S "$ROOT" -B "$BUILD_DIR" "${gen[@]}" -DCMAKE_BUILD_TYPE=Release >&2
+    cmake -S "$ROOT" -B "$BUILD_DIR" "${gen[@]}" -DCMAKE_BUILD_TYPE=Release "${extra[@]}" >&2
   fi
   cmake --build "$BUILD_DIR" --parallel "$JOBS" >&2
 }
