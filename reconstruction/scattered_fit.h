@@ -33,7 +33,7 @@
 //   well filled whatever its width, so the knots follow the shape. A first fit on uniform spans
 //   over the box widened by 2 point spacings at each end, then the knots are redistributed to
 //   equidistribute the approximation error (de Boor's NEWNOT per direction, from the jumps of the
-//   fit's p-th derivative; scattered_fit.cc, RedistributedKnots) and the fit is repeated from its
+//   fit's p-th derivative; scattered_layout.cc, RedistributedKnots) and the fit is repeated from its
 //   foot points. Measured on franke at 24 × 24 with 1 µm noise (bench/scattered_fit_bench.cc):
 //   orthogonal RMS 1.231 µm with the sparse layout, 1.153 µm uniform, 1.055 µm redistributed
 //   (error against the true surface: RMS 0.571 -> 0.346 µm, max 6.6 -> 2.6 µm).
@@ -58,7 +58,7 @@
 // bias B estimated by Tukey's twicing correction (the residuals smoothed again; J. W. Tukey,
 // Exploratory Data Analysis, Addison-Wesley 1977) and the variances V of the fit and of that
 // estimate by smoothing 32 fixed random ±1 vectors (deterministic), pooled over 5 × 5 spans
-// (scattered_fit.cc, TensorLsq::LocalWeights) — a local λ in the manner of spatially adaptive
+// (scattered_lsq.cc, TensorLsq::LocalWeights) — a local λ in the manner of spatially adaptive
 // penalties (Ruppert & Carroll 2000, "Spatially-adaptive penalties for spline fitting", Aust. N. Z.
 // J. Stat. 42: 205–223), here set by a plug-in rule rather than searched. Measured on the nine
 // reference surfaces with 10,000 points and 5 µm noise (tests/reconstruction/scattered_fit_test.cc):
@@ -106,7 +106,7 @@ struct ScatteredFitOptions {
   // fitted by least squares at the initial parameters and scored by GCV, V(n) = (RSS/3m) / (1 − n/m)²
   // (n poles, m points: an estimate of the prediction error, Craven & Wahba 1979, with the influence
   // matrix's trace n for least squares); the ladder stops at the first rung that scores worse once the
-  // score has flattened below a tenth of the coarsest rung's (scattered_fit.cc, ChooseNet), and the best
+  // score has flattened below a tenth of the coarsest rung's (scattered_choice.cc, ChooseNet), and the best
   // rung is taken. Where the points leave a hole wider than 0.4 of that net's spans (sparse coverage,
   // e.g. 10,000 points), the thin-plate GCV fit on the point-count net below takes over (least squares
   // would extrapolate holes freely). The thin-plate modes (kGcv, kTolerance, kFixed): about one pole per
