@@ -32,7 +32,7 @@ LambdaChoice ChooseByGcv(TensorLsq& lsq, double previous_log) {
     for (const auto& [x, t] : grid) {
       if (x == log_lambda) return t.gcv;
     }
-    grid.emplace_back(log_lambda, lsq.Solve(std::pow(10.0, log_lambda), true));
+    grid.emplace_back(log_lambda, lsq.Solve(std::pow(10.0, log_lambda), true, true));
     return grid.back().second.gcv;
   };
   auto best_index = [&] {
@@ -157,6 +157,7 @@ LambdaChoice ChooseLambda(TensorLsq& lsq, const ScatteredFitOptions& options, do
       LambdaChoice choice = ChooseByGcv(lsq, previous_log);
       if (!choice.trial.ok) return choice;
       const Eigen::MatrixXd weights = lsq.LocalWeights(choice.trial);
+      if (weights.minCoeff() >= 1) return choice;  // no weight lowered: the pilot is the fit
       lsq.WeightEnergy(&weights);
       TensorLsq::Trial local = lsq.Solve(choice.trial.lambda, true);
       if (local.ok) {

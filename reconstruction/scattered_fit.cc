@@ -406,16 +406,23 @@ Result<BSplineSurface> FitScattered(const std::vector<Vector3d>& points, const S
   int nu = options.u_poles, nv = options.v_poles;
   std::unique_ptr<TensorLsq> ladder_system;
   bool sparse_fallback = false;
-  if (nu == 0 && options.smoothing != ScatteredFitOptions::Smoothing::kNone) {
-    // The thin-plate modes keep the point-count net: their energy, not the net, does the smoothing, and
-    // their local weights need the finer net at the edges (measured with the ladder's coarser nets: band
-    // ratios 2.2-3.2 against ≤ 1.93, ScatteredFitNoise).
+  const bool ladder_net = options.smoothing == ScatteredFitOptions::Smoothing::kNone ||
+                          options.smoothing == ScatteredFitOptions::Smoothing::kGcv;
+  if (nu == 0 && !ladder_net) {
+    // kTolerance and kFixed keep the point-count net: their energy, not the net, does the smoothing.
     const double target = std::max(1.0, static_cast<double>(m) / kScatteredPointsPerPole);
     const double aspect = data_box.u_span() / data_box.v_span();
     nu = std::clamp(static_cast<int>(std::lround(std::sqrt(target * aspect))), p + 1, kScatteredMaxAutoPoles);
     nv = std::clamp(static_cast<int>(std::lround(target / nu)), p + 1, kScatteredMaxAutoPoles);
     details["net"] = "points-per-pole";
   } else if (nu == 0) {
+    // kNone and kGcv: the ladder's net (kGcv then chooses λ by GCV on it). Until 2026-11 kGcv kept the
+    // point-count net; on the ladder's net, measured with 10,000 points and 5 µm noise (ScatteredFitNoise), the
+    // band max fell on every reference surface (sphere_cap 7.90 -> 5.39 µm, cylinder 8.57 -> 5.76, ellipsoid_cap
+    // 5.90 -> 4.22, egg_box 11.10 -> 10.60) and the truth RMS halved (1.24 -> 0.60, 1.55 -> 0.65, 0.97 -> 0.49,
+    // 1.78 -> 1.38 µm), and with 100,000 points the fit is 25 × 25 instead of 112 × 112 (0.8 s instead of 19 s;
+    // bench/fit_default_bench.cc). The interior improved more than the band, so band / interior rose above 2 there
+    // (2.2-3.2): the test bounds the band's error against the noise as well (see there).
     // The finest rung: about m / kScatteredPointsPerPole poles, in the ratio of the data box's sides.
     const double target = std::max(1.0, static_cast<double>(m) / kScatteredPointsPerPole);
     const double aspect = data_box.u_span() / data_box.v_span();

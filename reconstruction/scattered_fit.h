@@ -101,7 +101,7 @@ namespace formloop::recon {
 
 struct ScatteredFitOptions {
   int degree = 3;  // both directions; cubic (C²) is the CAM norm; 2 ≤ degree ≤ 7
-  // Control net. 0 = automatic. With kNone (the default), chosen from the data (density and noise): a
+  // Control net. 0 = automatic. With kNone (the default) and kGcv, chosen from the data (density and noise): a
   // ladder of nets from (degree + 1) poles a side upwards, each a factor kScatteredNetLadderRatio finer,
   // fitted by least squares at the initial parameters and scored by GCV, V(n) = (RSS/3m) / (1 − n/m)²
   // (n poles, m points: an estimate of the prediction error, Craven & Wahba 1979, with the influence
@@ -109,18 +109,21 @@ struct ScatteredFitOptions {
   // score has flattened below a tenth of the coarsest rung's (scattered_choice.cc, ChooseNet), and the best
   // rung is taken. Where the points leave a hole wider than 0.4 of that net's spans (sparse coverage,
   // e.g. 10,000 points), the thin-plate GCV fit on the point-count net below takes over (least squares
-  // would extrapolate holes freely). The thin-plate modes (kGcv, kTolerance, kFixed): about one pole per
-  // kScatteredPointsPerPole points, at most kScatteredMaxAutoPoles a side. Poles are split between u and v
-  // in the ratio of the points' parameter box. Measured on issue 26's recipe (100,000 points, 5 µm noise;
-  // bench/fit_default_bench.cc): 25 × 25 poles, truth RMS 0.410 µm against SciPy's 0.413 µm at 24 × 24.
+  // would extrapolate holes freely). kGcv then chooses λ by GCV on that net (until 2026-11 it kept the
+  // point-count net: with 10,000 points its band and truth errors were larger on every reference surface,
+  // scattered_fit.cc). kTolerance and kFixed: about one pole per kScatteredPointsPerPole points, at most
+  // kScatteredMaxAutoPoles a side. Poles are split between u and v in the ratio of the points' parameter box.
+  // Measured on issue 26's recipe (100,000 points, 5 µm noise; bench/fit_default_bench.cc): 25 × 25 poles, truth
+  // RMS 0.410 µm (kGcv 0.409 µm) against SciPy's 0.413 µm at 24 × 24.
   // Explicit values: degree + 1 ≤ poles ≤ 1000.
   int u_poles = 0, v_poles = 0;
   enum class Smoothing { kNone, kGcv, kTolerance, kFixed };
   // kNone (default): least squares on the net, the thin-plate weight only a floor
   // (kScatteredNoneLambda) that keeps a pole without data determined; the net (chosen as above)
   // does the smoothing. Its edges are less damped than the thin-plate modes': measured with 10,000
-  // points and 5 µm noise the worst error in the outer 5 % band is 1.7-3.9 times the interior's (GCV:
-  // ≤ 1.93), and beyond the samples' hull up to 34σ (egg_box; tests ScatteredFitNoiseDefault). Otherwise the thin-plate
+  // points and 5 µm noise the worst error in the outer 5 % band is 1.7-3.9 times the interior's (GCV on the
+  // same nets: 1.2-3.2, its band max 5-59 % lower), and beyond the samples' hull up to 34σ (egg_box, GCV 7σ;
+  // tests ScatteredFitNoiseDefault and ScatteredFitNoise). Otherwise the thin-plate
   // weight λ (dimensionless, see above): by GCV (no noise level needs to be known; the energy is then weighted locally,
   // see above), the λ whose orthogonal RMS residual equals tolerance_mm (the smoothest surface that close to the
   // points; reached within 0.5 % or a note says what was reached), or fixed.

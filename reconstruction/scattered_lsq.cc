@@ -189,6 +189,7 @@ void TensorLsq::Assemble(const std::vector<double>& u, const std::vector<double>
   basis_u_.resize(static_cast<std::size_t>(m) * q);
   basis_v_.resize(static_cast<std::size_t>(m) * q);
   x_ = &x;
+  reference_poles_.resize(0, 3);  // the RSS reference of the λ search belongs to the old system
   std::vector<int> start(static_cast<std::size_t>(cells) + 1, 0), order(static_cast<std::size_t>(m));
   for (int i = 0; i < m; ++i) {
     const std::size_t si = static_cast<std::size_t>(i);
@@ -336,18 +337,44 @@ void TensorLsq::Assemble(const std::vector<double>& u, const std::vector<double>
   lambda_scale_ = trace_r > 0 ? trace_n / trace_r : 1.0;
 }
 
-TensorLsq::Trial TensorLsq::Solve(double lambda, bool with_trace) {
+TensorLsq::Trial TensorLsq::Solve(double lambda, bool with_trace, bool rss_from_reference) {
   Trial trial;
   trial.lambda = lambda;
   const double lambda_s = lambda * lambda_scale_;
   if (!Factorize(lambda_s)) return trial;
   trial.poles = ldlt_.solve(rhs_ + lambda_s * thin_plate_trend_rhs_);
   if (!trial.poles.allFinite()) return trial;
-  trial.rss = 0;
   const int m = static_cast<int>(x_->size());
-  for (int i = 0; i < m; ++i) {
-    const Vector3d r = (*x_)[static_cast<std::size_t>(i)] - Evaluate(trial.poles, i);
-    trial.rss += r.squaredNorm();
+  if (rss_from_reference && reference_poles_.rows() == n()) {
+    // |X − A P|² = |X − A P₀|² − 2 ⟨P − P₀, Aᵀ(X − A P₀)⟩ + ⟨P − P₀, AᵀA (P − P₀)⟩: exact, and no cancellation
+    // of large terms (P − P₀ and the reference's residual are both small).
+    const Eigen::MatrixXd d = trial.poles - reference_poles_;
+    trial.rss = reference_rss_ - 2 * (d.array() * reference_gradient_.array()).sum() +
+                (d.array() * (normal_ * d).array()).sum();
+  } else {
+    trial.rss = 0;
+    const bool keep = rss_from_reference;  // this solution becomes the reference of the later ones
+    if (keep) reference_gradient_ = Eigen::MatrixXd::Zero(n(), 3);
+    const int q = p_ + 1;
+    for (int i = 0; i < m; ++i) {
+      const Vector3d r = (*x_)[static_cast<std::size_t>(i)] - Evaluate(trial.poles, i);
+      trial.rss += r.squaredNorm();
+      if (!keep) continue;
+      const std::size_t si = static_cast<std::size_t>(i);
+      const double* bu = &basis_u_[si * q];
+      const double* bv = &basis_v_[si * q];
+      for (int jb = 0; jb < q; ++jb) {
+        const int base = (span_u_[si] - p_) + nu_ * (span_v_[si] - p_ + jb);
+        for (int ja = 0; ja < q; ++ja) {
+          const double b = bu[ja] * bv[jb];
+          for (int c = 0; c < 3; ++c) reference_gradient_(base + ja, c) += b * r(c);
+        }
+      }
+    }
+    if (keep) {
+      reference_poles_ = trial.poles;
+      reference_rss_ = trial.rss;
+    }
   }
   trial.ok = true;
   if (with_trace) {
@@ -425,8 +452,8 @@ Eigen::MatrixXd TensorLsq::LocalWeights(const Trial& pilot) {
     residual.row(i) = ((*x_)[static_cast<std::size_t>(i)] - Evaluate(pilot.poles, i)).transpose();
   }
   const Eigen::MatrixXd delta = Smooth(residual, lambda_s);
-  const Eigen::MatrixXd fit_noise = Smooth(probes_, lambda_s);
-  const Eigen::MatrixXd delta_noise = Smooth(probes_ - AtPoints(fit_noise), lambda_s);
+  Eigen::MatrixXd fit_noise, delta_noise;
+  SmoothProbes(lambda_s, &fit_noise, &delta_noise);
   // Per span (i, j): Σ over its (p + 1)² poles of |δ·n|², var δ·n and var S.
   Eigen::MatrixXd bias2 = Eigen::MatrixXd::Zero(su_count, sv_count), var_delta = bias2, var_fit = bias2;
   auto pole = [&](int a, int b) -> Vector3d {
@@ -515,21 +542,59 @@ Eigen::MatrixXd TensorLsq::Smooth(const Eigen::MatrixXd& r, double lambda_s) con
   return ldlt_.solve(out);
 }
 
-Eigen::MatrixXd TensorLsq::AtPoints(const Eigen::MatrixXd& poles) const {
-  const int q = p_ + 1, m = static_cast<int>(span_u_.size());
-  const RowMatrix pole_rows = poles;
-  RowMatrix out = RowMatrix::Zero(m, poles.cols());
-  for (int i = 0; i < m; ++i) {
+void TensorLsq::SmoothProbes(double lambda_s, Eigen::MatrixXd* fit_noise, Eigen::MatrixXd* delta_noise) const {
+  // Row-major n × K and T × K accumulators; each point's K probe values are contiguous (probes_ is row-major), so
+  // the inner loops run over the probes. No m × K temporary is formed.
+  const int q = p_ + 1, m = static_cast<int>(span_u_.size()), nt = static_cast<int>(phi_.cols());
+  constexpr int kK = kNoiseProbes;
+  auto smooth = [&](const RowMatrix& aty, const RowMatrix& phity) -> Eigen::MatrixXd {
+    Eigen::MatrixXd out = aty;
+    out += lambda_s * (thin_plate_trend_ * (gram_inv_ * Eigen::MatrixXd(phity)));
+    return ldlt_.solve(out);
+  };
+  RowMatrix aty = RowMatrix::Zero(n(), kK), phity = RowMatrix::Zero(nt, kK);
+  // Point i's row y (K values) into Aᵀ Y and Φᵀ Y.
+  auto add = [&](int i, const double* y) {
     const std::size_t si = static_cast<std::size_t>(i);
     const double* bu = &basis_u_[si * q];
     const double* bv = &basis_v_[si * q];
     for (int jb = 0; jb < q; ++jb) {
-      for (int ja = 0; ja < q; ++ja) {
-        out.row(i) += (bu[ja] * bv[jb]) * pole_rows.row((span_u_[si] - p_ + ja) + nu_ * (span_v_[si] - p_ + jb));
+      double* row = aty.data() + static_cast<std::size_t>((span_u_[si] - p_) + nu_ * (span_v_[si] - p_ + jb)) * kK;
+      for (int ja = 0; ja < q; ++ja, row += kK) {
+        const double b = bu[ja] * bv[jb];
+        for (int c = 0; c < kK; ++c) row[c] += b * y[c];
       }
     }
+    for (int t = 0; t < nt; ++t) {
+      const double f = phi_(i, t);
+      double* row = phity.data() + static_cast<std::size_t>(t) * kK;
+      for (int c = 0; c < kK; ++c) row[c] += f * y[c];
+    }
+  };
+  for (int i = 0; i < m; ++i) add(i, probes_.data() + static_cast<std::size_t>(i) * kK);
+  *fit_noise = smooth(aty, phity);
+  // δ's noise: the same smoother applied to z − A · fit_noise.
+  const RowMatrix fit_rows = *fit_noise;
+  aty.setZero();
+  phity.setZero();
+  double d[kK];
+  for (int i = 0; i < m; ++i) {
+    const std::size_t si = static_cast<std::size_t>(i);
+    const double* z = probes_.data() + si * kK;
+    const double* bu = &basis_u_[si * q];
+    const double* bv = &basis_v_[si * q];
+    for (int c = 0; c < kK; ++c) d[c] = z[c];
+    for (int jb = 0; jb < q; ++jb) {
+      const double* row =
+          fit_rows.data() + static_cast<std::size_t>((span_u_[si] - p_) + nu_ * (span_v_[si] - p_ + jb)) * kK;
+      for (int ja = 0; ja < q; ++ja, row += kK) {
+        const double b = bu[ja] * bv[jb];
+        for (int c = 0; c < kK; ++c) d[c] -= b * row[c];
+      }
+    }
+    add(i, d);
   }
-  return out;
+  *delta_noise = smooth(aty, phity);
 }
 
 // ---------------------------------------------------------------------------------------------

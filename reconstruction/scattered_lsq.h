@@ -60,7 +60,10 @@ class TensorLsq {
   // against the trend they bend only the part the trend does not explain (saddle with 5 µm noise
   // at its GCV weight: 11 µm of bias in the outer 0.5 mm without the trend, none with it). For
   // λ → 0 the trend has no effect. with_trace adds tr H and the GCV score.
-  Trial Solve(double lambda, bool with_trace);
+  // rss_from_reference (the λ search): the first such solve after Assemble sums the residuals over the
+  // points and keeps its poles P₀ and Aᵀ(X − A P₀); later ones get the RSS from those in O(n) (exact up to
+  // rounding: |X − A P|² = |X − A P₀|² − 2 ⟨P − P₀, Aᵀ(X − A P₀)⟩ + ⟨P − P₀, AᵀA (P − P₀)⟩).
+  Trial Solve(double lambda, bool with_trace, bool rss_from_reference = false);
 
   // The thin-plate energy with weight w(s_u, s_v) on knot span (s_u, s_v) (w: (n_u − p) × (n_v − p),
   // see LocalWeights), or uniform (nullptr): R_w = Σ_spans w R_span, R_span the energy of S − S₀
@@ -96,8 +99,9 @@ class TensorLsq {
   // M⁻¹ (Aᵀ r + λ_s R C G⁻¹ Φᵀ r), i.e. what Solve gives for data r (their own trend included).
   Eigen::MatrixXd Smooth(const Eigen::MatrixXd& r, double lambda_s) const;
 
-  // A · poles (m × c): the splines with these coefficient columns at every (u_i, v_i).
-  Eigen::MatrixXd AtPoints(const Eigen::MatrixXd& poles) const;
+  // The smoother applied to the noise probes z (the columns of probes_): fit_noise = poles of H z, and
+  // delta_noise = poles of H (z − A fit_noise), i.e. what Smooth gives for them, in two passes over the points.
+  void SmoothProbes(double lambda_s, Eigen::MatrixXd* fit_noise, Eigen::MatrixXd* delta_noise) const;
 
   KnotVector ku_, kv_;
   int p_ = 3, nu_ = 0, nv_ = 0;
@@ -117,7 +121,10 @@ class TensorLsq {
   Eigen::MatrixXd gram_inv_;                    // (ΦᵀΦ)⁻¹, T × T
   RowMatrix phi_;                               // Φ, m × T
   Eigen::MatrixXd trend_;                       // trend coefficients a, T × 3
-  Eigen::MatrixXd probes_;                      // m × kNoiseProbes random ±1 (LocalWeights)
+  RowMatrix probes_;                            // m × kNoiseProbes random ±1 (LocalWeights)
+  Eigen::MatrixXd reference_poles_;             // P₀ of Solve's rss_from_reference (n × 3; empty: none yet)
+  Eigen::MatrixXd reference_gradient_;          // Aᵀ(X − A P₀)
+  double reference_rss_ = 0;
   const std::vector<Eigen::Vector3d>* x_ = nullptr;
   std::vector<int> span_u_, span_v_;
   std::vector<double> basis_u_, basis_v_;

@@ -423,7 +423,13 @@ TEST_P(ScatteredFitNoise, ResidualMatchesNoiseAndBoundaryDoesNotOscillate) {
   EXPECT_NEAR(report.rms_mm, kNoiseMm, 0.1 * kNoiseMm);
   EXPECT_LT(check.rms_mm, 0.5 * kNoiseMm);  // most of the noise is removed
   EXPECT_LT(check.max_outside_hull_mm, 20 * kNoiseMm);
-  EXPECT_LE(ratio, 2.0);
+  // The edge band's worst error within 2.5σ: a boundary that oscillates or is biased shows several σ there
+  // (blade before the local weights: 15.4 µm). Since 2026-11 the GCV mode fits on the ladder's net (scattered_fit.cc),
+  // which lowered the band max on every surface but the interior max more (sphere_cap band 7.90 -> 5.39 µm,
+  // interior 4.31 -> 2.49 µm), so band / interior, bounded by 2.0 on the point-count net, is now 1.05-3.20
+  // (ellipsoid_cap: band 4.22 µm, interior 1.32 µm) and bounded loosely.
+  EXPECT_LE(check.max_band_mm, 2.5 * kNoiseMm);
+  EXPECT_LE(ratio, 3.5);
 
   // OpenCASCADE's grid approximator on a noisy 100 × 100 grid (same noise), default degrees 3-5,
   // tolerance 5σ. Its boundary behaviour depends erratically on the settings; measured band max /
