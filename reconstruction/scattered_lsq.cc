@@ -378,15 +378,21 @@ TensorLsq::Trial TensorLsq::Solve(double lambda, bool with_trace, bool rss_from_
   }
   trial.ok = true;
   if (with_trace) {
-    const Result<double> trace = scattered_internal::TraceOfInverseTimes(ldlt_, normal_);
-    if (!trace.ok()) {
-      trial.ok = false;
-      return trial;
+    if (lambda_s == 0) {
+      // Plain least squares (AᵀA positive definite: factorised above): tr H = tr((AᵀA)⁻¹ AᵀA) = n exactly, no
+      // selected inversion needed.
+      trial.trace = n();
+    } else {
+      const Result<double> trace = scattered_internal::TraceOfInverseTimes(ldlt_, normal_);
+      if (!trace.ok()) {
+        trial.ok = false;
+        return trial;
+      }
+      // H = A M⁻¹ (Aᵀ + λ_s R C G⁻¹ Φᵀ): the trend adds λ_s tr(G⁻¹ ΦᵀA M⁻¹ R C), between 0 and the
+      // number of trend monomials the energy no longer penalises (10 − 3 for a cubic trend).
+      const Eigen::MatrixXd w = ldlt_.solve(thin_plate_trend_);
+      trial.trace = *trace + lambda_s * (gram_inv_ * (phi_a_ * w)).trace();
     }
-    // H = A M⁻¹ (Aᵀ + λ_s R C G⁻¹ Φᵀ): the trend adds λ_s tr(G⁻¹ ΦᵀA M⁻¹ R C), between 0 and the
-    // number of trend monomials the energy no longer penalises (10 − 3 for a cubic trend).
-    const Eigen::MatrixXd w = ldlt_.solve(thin_plate_trend_);
-    trial.trace = *trace + lambda_s * (gram_inv_ * (phi_a_ * w)).trace();
     const double dof_left = 1.0 - trial.trace / m;
     trial.gcv =
         dof_left > 0 ? (trial.rss / (3.0 * m)) / (dof_left * dof_left) : std::numeric_limits<double>::infinity();
