@@ -122,7 +122,7 @@ struct ScatteredFitOptions {
   // (kScatteredNoneLambda) that keeps a pole without data determined; the net (chosen as above)
   // does the smoothing. Its edges are less damped than the thin-plate modes': measured with 10,000
   // points and 5 µm noise the worst error in the outer 5 % band is 1.7-3.9 times the interior's (GCV on the
-  // same nets: 1.2-3.2, its band max 5-59 % lower), and beyond the samples' hull up to 34σ (egg_box, GCV 7σ;
+  // same nets: 1.2-3.2, its band max 5-59 % lower), and beyond the samples' hull up to 32σ (egg_box, GCV 7σ;
   // tests ScatteredFitNoiseDefault and ScatteredFitNoise). Otherwise the thin-plate
   // weight λ (dimensionless, see above): by GCV (no noise level needs to be known; the energy is then weighted locally,
   // see above), the λ whose orthogonal RMS residual equals tolerance_mm (the smoothest surface that close to the
