@@ -53,8 +53,15 @@ recon::CadFaceSelector FaceOf(const SurfaceFile& file) {
   return selector;
 }
 
+// A scan is fitted with the thin-plate energy, λ by GCV, on the net the GCV ladder chooses (not the fit's
+// least-squares default): Q is machined up to the points' parameter box, and least squares extrapolates a
+// corner the points miss with no energy to hold it. Measured with 10,000 points and 5 µm noise
+// (ScatteredFitNoiseDefault against ScatteredFitNoise): beyond the samples' hull egg_box 159 -> 35 µm,
+// cylinder 14.8 -> 7.7 µm, the others within 1 µm of each other; truth RMS lower on every reference surface;
+// the fit takes about twice as long (10,000 points: 0.09 -> 0.18 s CPU).
 recon::ScatteredFitOptions ScanOptions(const SurfaceFile& file) {
   recon::ScatteredFitOptions o;
+  o.smoothing = recon::ScatteredFitOptions::Smoothing::kGcv;
   o.adaptive = file.method == "adaptive";
   o.u_poles = file.u_poles;
   o.v_poles = file.v_poles;
