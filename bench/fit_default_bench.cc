@@ -202,8 +202,8 @@ int main(int argc, char** argv) {
   ScatteredFitOptions gcv;
   gcv.smoothing = ScatteredFitOptions::Smoothing::kGcv;
   rows.push_back(RunOurs("formloop --smoothing gcv (thin-plate, GCV lambda)", points, gcv, repeats));
-  // GCV on the net the default's ladder chose (the thin-plate modes' own automatic net is the point-count
-  // one, 112 x 112 here).
+  // GCV on the net the default's ladder chose, given (the GCV mode's automatic net is the same since 2026-11;
+  // this row is the GCV fit without the ladder).
   ScatteredFitOptions gcv_net = gcv;
   gcv_net.u_poles = rows.front().u_poles;
   gcv_net.v_poles = rows.front().v_poles;
