@@ -193,12 +193,62 @@ Gap LargestGap(const std::vector<double>& u, const std::vector<double>& v, const
   constexpr int kMaxNodes = 400;  // per direction
   const int nu = std::clamp(static_cast<int>(std::ceil(box.u_span() / spacing)) + 1, 2, kMaxNodes);
   const int nv = std::clamp(static_cast<int>(std::ceil(box.v_span() / spacing)) + 1, 2, kMaxNodes);
+  // A node with a point no farther than the largest gap so far cannot raise it: such a point is looked for
+  // first in the node's own and the 8 neighbouring cells of a 2-D bucket grid (as wide as PointGrid's), and
+  // only nodes without one take the exact nearest-point search. The result is the same node and radius as
+  // searching every node (PointGrid's distance is the same sqrt of the same squared norm).
+  const double cell = 1.5 * spacing;
+  double lo_u = std::numeric_limits<double>::infinity(), lo_v = lo_u, hi_u = -lo_u, hi_v = -lo_u;
+  for (const Eigen::Vector3d& q : flat) {
+    lo_u = std::min(lo_u, q.x());
+    hi_u = std::max(hi_u, q.x());
+    lo_v = std::min(lo_v, q.y());
+    hi_v = std::max(hi_v, q.y());
+  }
+  const int cells_u = std::clamp(static_cast<int>((hi_u - lo_u) / cell) + 1, 1, 4096);
+  const int cells_v = std::clamp(static_cast<int>((hi_v - lo_v) / cell) + 1, 1, 4096);
+  auto cell_of = [&](double x, double lo, int count) {
+    return std::clamp(static_cast<int>(std::floor((x - lo) / cell)), 0, count - 1);
+  };
+  std::vector<int> start(static_cast<std::size_t>(cells_u) * cells_v + 1, 0), members(flat.size());
+  for (const Eigen::Vector3d& q : flat) {
+    ++start[static_cast<std::size_t>(cell_of(q.x(), lo_u, cells_u) + cells_u * cell_of(q.y(), lo_v, cells_v)) + 1];
+  }
+  for (std::size_t c = 1; c < start.size(); ++c) start[c] += start[c - 1];
+  {
+    std::vector<int> fill(start.begin(), start.end() - 1);
+    for (std::size_t k = 0; k < flat.size(); ++k) {
+      const int c = cell_of(flat[k].x(), lo_u, cells_u) + cells_u * cell_of(flat[k].y(), lo_v, cells_v);
+      members[static_cast<std::size_t>(fill[static_cast<std::size_t>(c)]++)] = static_cast<int>(k);
+    }
+  }
+  auto covered = [&](const Eigen::Vector3d& p, double radius) {
+    const int cu = cell_of(p.x(), lo_u, cells_u), cv = cell_of(p.y(), lo_v, cells_v);
+    for (int dv = 0; dv < 3; ++dv) {  // own row of cells first
+      const int b = cv + (dv == 0 ? 0 : dv == 1 ? -1 : 1);
+      if (b < 0 || b >= cells_v) continue;
+      for (int du = 0; du < 3; ++du) {
+        const int a = cu + (du == 0 ? 0 : du == 1 ? -1 : 1);
+        if (a < 0 || a >= cells_u) continue;
+        const std::size_t c = static_cast<std::size_t>(a + cells_u * b);
+        for (int s = start[c]; s < start[c + 1]; ++s) {
+          if (std::sqrt((flat[static_cast<std::size_t>(members[static_cast<std::size_t>(s)])] - p).squaredNorm()) <=
+              radius) {
+            return true;
+          }
+        }
+      }
+    }
+    return false;
+  };
   Gap gap;
   for (int j = 0; j < nv; ++j) {
     for (int i = 0; i < nu; ++i) {
       const double gu = box.u_min + box.u_span() * i / (nu - 1), gv = box.v_min + box.v_span() * j / (nv - 1);
+      const Eigen::Vector3d node(gu, gv, 0);
+      if (gap.radius_mm > 0 && covered(node, gap.radius_mm)) continue;
       double r = 0;
-      if (grid.Nearest(Eigen::Vector3d(gu, gv, 0), &r) < 0) continue;
+      if (grid.Nearest(node, &r) < 0) continue;
       if (r > gap.radius_mm) gap = Gap{r, gu, gv};
     }
   }
