@@ -275,14 +275,18 @@ Status CompensateProgram(const CompensateArgs& args) {
   FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::ReadToolpathFile(args.toolpath));
   FL_ASSIGN_OR_RETURN(nc::DeviationField field, nc::ReadDeviationField(args.field, {.smoothing = args.lambda}));
   const nc::PostOptions post = args.machine.Post("formloop nc compensate " + args.toolpath);
-  std::string nominal;
+  std::vector<nc::ProgramMove> nominal;
   if (args.nominal.empty()) {  // the nominal program is the path posted with the same options
-    FL_ASSIGN_OR_RETURN(const nc::MoveList moves, nc::BuildMoveList(path));
-    FL_ASSIGN_OR_RETURN(nominal, nc::Post(moves, args.machine.dialect, post));
+    std::string text;
+    {
+      FL_ASSIGN_OR_RETURN(const nc::MoveList moves, nc::BuildMoveList(path));
+      FL_ASSIGN_OR_RETURN(text, nc::Post(moves, args.machine.dialect, post));
+    }
+    FL_ASSIGN_OR_RETURN(nominal, nc::ReadProgram(text, args.machine.dialect, "the nominal program"));
   } else {
-    FL_ASSIGN_OR_RETURN(nominal, ReadFile(args.nominal));
-    // Read once here so that a program that is not the path's names its file.
-    FL_RETURN_IF_ERROR(nc::ReadProgram(nominal, args.machine.dialect, args.nominal).status());
+    // Read once, here, so that a program that is not the path's names its file.
+    FL_ASSIGN_OR_RETURN(const std::string text, ReadFile(args.nominal));
+    FL_ASSIGN_OR_RETURN(nominal, nc::ReadProgram(text, args.machine.dialect, args.nominal));
   }
   nc::CompensationOptions options;
   options.max_offset_um = args.max_offset_um;
@@ -300,11 +304,11 @@ Status CompensateProgram(const CompensateArgs& args) {
   nlohmann::json summary = {{"program", args.out},
                             {"side_file", args.side},
                             {"dialect", args.machine.dialect},
-                            {"blocks", compensation.entries.size()},
+                            {"blocks", compensation.blocks},
                             {"max_offset_um", compensation.max_offset_um},
                             {"source", source}};
   std::cout << summary.dump(2) << "\n";
-  log::Info("nc compensate: {} blocks, largest offset {:.3f} um -> {} and {}", compensation.entries.size(),
+  log::Info("nc compensate: {} blocks, largest offset {:.3f} um -> {} and {}", compensation.blocks,
             compensation.max_offset_um, args.out, args.side);
   return Status::Ok();
 }
@@ -500,7 +504,9 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
       ->capture_default_str();
   AddMachineOptions(comp, &comp_args->machine);
   comp->add_option("--out", comp_args->out, "the compensated program")->required();
-  comp->add_option("--side", comp_args->side, "the side file (CSV)")->required();
+  comp->add_option("--side", comp_args->side,
+                   "the side file: CSV for a .csv name, else compact binary (docs/formats.md)")
+      ->required();
   comp->callback([action, comp_args] { *action = [comp_args] { return CompensateProgram(*comp_args); }; });
 
   auto probe_args = std::make_shared<ProbeArgs>();
@@ -554,7 +560,8 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
       "side file and, given the field, with -d_s*n; JSON report on stdout, exit 1 if any block disagrees.");
   check->add_option("--nominal", check_args->nominal, "the nominal program")->required();
   check->add_option("--compensated", check_args->compensated, "the compensated program")->required();
-  check->add_option("--side", check_args->side, "the side file (CSV) written with the compensated program")->required();
+  check->add_option("--side", check_args->side, "the side file (CSV or compact) written with the compensated program")
+      ->required();
   check->add_option("--field", check_args->field, "the systematic field as CSV u,v,ds_um (thin-plate interpolated)");
   check->add_option("--lambda", check_args->lambda, "smoothing of the field (0 = interpolate)")->capture_default_str();
   check->add_option("--dialect", check_args->dialect, "dialect of both programs")->capture_default_str();

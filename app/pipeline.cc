@@ -71,12 +71,14 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
                                                        : static_cast<int>(in.machine.measured.size());
   std::optional<sim::Diagnosis> diagnosis;
   stages::CompensatedField& field = cut.field;
-  stages::Program current = std::move(cut.program);
+  // The program each cycle cuts: the pre-compensated or the nominal one, then the compensated one (no copies).
+  stages::Program compensated;
+  const stages::Program* current = cut.program ? &*cut.program : &programs.program;
   for (int loop = 0; loop < max_loops; ++loop) {
     const std::string cycle = "7/9: loop " + std::to_string(loop);
     FL_RETURN_IF_ERROR(folder.Begin(cycle + " machine"));
-    FL_ASSIGN_OR_RETURN(const stages::Machined machined,
-                        stages::MachineCycle(in, current, plan.tool.radius_mm, programs.probing_plan, loop, folder));
+    FL_ASSIGN_OR_RETURN(stages::Machined machined,
+                        stages::MachineCycle(in, *current, plan.tool.radius_mm, programs.probing_plan, loop, folder));
 
     FL_RETURN_IF_ERROR(folder.Begin(cycle + " analysis"));
     const bool another = loop + 1 < max_loops || !in.machine.virtual_machine;
@@ -101,10 +103,12 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
       for (const auto& c : d.causes) summary->causes.push_back(c.effect);
       diagnosis = std::move(d);
     }
+    machined.cutter_locations = {};  // a million locations, not needed by the compensation
     if (analysed.systematic) {
       FL_RETURN_IF_ERROR(folder.Begin(cycle + " compensation"));
       field.terms.push_back([fm = *analysed.systematic](double u, double v) { return fm.Evaluate(u, v); });
-      FL_ASSIGN_OR_RETURN(current, stages::CompensateCycle(part, programs, field, loop, folder));
+      FL_ASSIGN_OR_RETURN(compensated, stages::CompensateCycle(part, programs, field, loop, folder));
+      current = &compensated;
       analysed.summary.compensated = true;
     }
     summary->loops.push_back(analysed.summary);

@@ -257,11 +257,12 @@ Result<Programs> WritePrograms(const PartSpec& part, const recon::BSplineSurface
   FL_ASSIGN_OR_RETURN(p.nominal, nc::PlanRaster(q, plan));
   p.post.limits = part.limits;
   p.post.title = "formloop " + std::string(kVersion) + " part " + part.name + " loop 0, nominal";
-  FL_ASSIGN_OR_RETURN(const nc::MoveList moves, nc::BuildMoveList(p.nominal));
-  FL_ASSIGN_OR_RETURN(p.program.text, nc::Post(moves, part.dialect, p.post));
+  FL_ASSIGN_OR_RETURN(nc::MoveList moves, nc::BuildMoveList(p.nominal));
+  FL_ASSIGN_OR_RETURN(std::string text, nc::Post(moves, part.dialect, p.post));
   p.extension = std::string(nc::FindPost(part.dialect)->FileExtension());
   p.program.path = fs::path("toolpath") / ("program" + p.extension);
-  FL_RETURN_IF_ERROR(folder.WriteText(p.program.path, p.program.text));
+  FL_RETURN_IF_ERROR(folder.WriteText(p.program.path, text));
+  moves = {};  // a million moves: gone before the tool-path file and the read-back
   FL_RETURN_IF_ERROR(nc::WriteToolpathFile(folder.Path(fs::path("toolpath") / "toolpath.csv"), p.nominal));
   FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("toolpath") / "toolpath.json", p.nominal.ReportJson()));
   log::Info("      {} passes, {} CL points, {:.0f} s cutting", p.nominal.passes, p.nominal.points.size(),
@@ -287,8 +288,7 @@ Result<Programs> WritePrograms(const PartSpec& part, const recon::BSplineSurface
         probe_programs.size(), part.dialect, nc::FindPost(part.dialect)->ProbeResultCapacity(probe_options));
   }
   // The nominal program as written: what the first cycle cuts (unless pre-compensated).
-  FL_ASSIGN_OR_RETURN(p.program.moves,
-                      nc::ReadProgram(p.program.text, part.dialect, folder.Path(p.program.path).string()));
+  FL_ASSIGN_OR_RETURN(p.program.moves, nc::ReadProgram(text, part.dialect, folder.Path(p.program.path).string()));
   return p;
 }
 
@@ -302,7 +302,6 @@ Result<FirstCut> Precompensate(const PartSpec& part, const recon::BSplineSurface
                                const Programs& programs, const std::string& case_uid, std::uint64_t seed,
                                const RunFolderWriter& folder) {
   FirstCut cut;
-  cut.program = programs.program;
   const nc::ToolpathOptions& plan = choice.plan;
   json plan_json = choice.report;
   plan_json["toolpath"] = {{"tool_number", plan.tool.number},         {"tool_radius_mm", plan.tool.radius_mm},
@@ -319,10 +318,10 @@ Result<FirstCut> Precompensate(const PartSpec& part, const recon::BSplineSurface
     const fs::path path = fs::path("toolpath") / ("program_precompensated" + programs.extension);
     FL_ASSIGN_OR_RETURN(
         nc::Compensation pc,
-        nc::WriteCompensatedProgram(programs.nominal, programs.program.text, cut.field,
+        nc::WriteCompensatedProgram(programs.nominal, programs.program.moves, cut.field,
                                     "learned model of case " + case_uid, part.compensation, post, folder.Path(path),
-                                    folder.Path(fs::path("toolpath") / "precompensation_side.csv"), part.dialect));
-    cut.program = {std::move(pc.program), path, std::move(pc.program_moves)};
+                                    folder.Path(fs::path("toolpath") / "precompensation_side.bin"), part.dialect));
+    cut.program = Program{path, std::move(pc.program_moves)};
     cut.precompensation_scale = scale;
     pre["scale"] = scale;
     pre["max_offset_um"] = pc.max_offset_um;
@@ -510,17 +509,17 @@ Result<Program> CompensateCycle(const PartSpec& part, const Programs& programs, 
   const fs::path path = loop_dir / ("program_compensated" + programs.extension);
   FL_ASSIGN_OR_RETURN(
       nc::Compensation compensation,
-      nc::WriteCompensatedProgram(programs.nominal, programs.program.text, field, source, part.compensation, post,
-                                  folder.Path(path), folder.Path(loop_dir / "compensation_side.csv"), part.dialect));
+      nc::WriteCompensatedProgram(programs.nominal, programs.program.moves, field, source, part.compensation, post,
+                                  folder.Path(path), folder.Path(loop_dir / "compensation_side.bin"), part.dialect));
   FL_RETURN_IF_ERROR(folder.WriteJson(loop_dir / "compensation.json",
                                       {{"source", compensation.source},
-                                       {"cl_points", compensation.entries.size()},
+                                       {"cl_points", compensation.blocks},
                                        {"max_offset_um", compensation.max_offset_um},
                                        {"side_file_check_max_disagreement_um", compensation.check_max_disagreement_um},
                                        {"program", path.string()}}));
   log::Info("      compensated program written: max offset {:.2f} um; side-file check {:.3f} um",
             compensation.max_offset_um, compensation.check_max_disagreement_um);
-  return Program{std::move(compensation.program), path, std::move(compensation.program_moves)};
+  return Program{path, std::move(compensation.program_moves)};
 }
 
 Result<std::optional<kb::CaseRecord>> PrepareRetain(const PartSpec& part, const RunOptions& options,

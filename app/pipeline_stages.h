@@ -87,9 +87,9 @@ Result<Retrieved> Retrieve(const PartSpec& part, const recon::BSplineSurface& q,
 Result<planning::PlanChoice> ChoosePlan(const Inputs& in, const Retrieved& retrieved, const recon::BSplineSurface& q,
                                         bool learn, const RunFolderWriter& folder);
 
-// A program as written into the run folder, with its moves as read back from its text.
+// A program as written into the run folder, with its moves as read back from its text (the text itself is
+// not kept: a million-point program is ~30 MB).
 struct Program {
-  std::string text;
   std::filesystem::path path;  // relative to the run folder
   std::vector<nc::ProgramMove> moves;
 };
@@ -115,7 +115,7 @@ struct CompensatedField {
 // cycle cuts; plan.json.
 struct FirstCut {
   CompensatedField field;
-  Program program;  // the pre-compensated program, or the nominal one
+  std::optional<Program> program;  // the pre-compensated program (none: the first cycle cuts the nominal one)
   double precompensation_scale = 0;
 };
 Result<FirstCut> Precompensate(const PartSpec& part, const recon::BSplineSurface& q, const planning::PlanChoice& choice,
@@ -155,7 +155,7 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
                                           const sim::PlausibleRanges& plausible, const RunFolderWriter& folder);
 
 // 7d. The mirror-compensated program of the next cycle from the sum of the fields so far
-// (loop-K/program_compensated.*, compensation_side.csv, compensation.json).
+// (loop-K/program_compensated.*, compensation_side.bin, compensation.json).
 Result<Program> CompensateCycle(const PartSpec& part, const Programs& programs, const CompensatedField& field, int loop,
                                 const RunFolderWriter& folder);
 

@@ -14,6 +14,7 @@
 #include <fstream>
 #include <iterator>
 #include <sstream>
+#include <string_view>
 
 #include <fmt/format.h>
 
@@ -70,41 +71,56 @@ std::size_t Stride(std::size_t n, std::size_t limit) { return std::max<std::size
 // Cut moves of toolpath/toolpath.csv (cc_x, cc_y, cc_z, pass), thinned to at most kMaxPathPoints: flat
 // x, y, z triples and the pass of each point. Empty when the file is absent or has other columns.
 void ReadToolPath(const fs::path& path, std::vector<double>* xyz, std::vector<double>* pass) {
-  std::ifstream in(path);
-  if (!in) return;
-  std::string line;
-  std::vector<std::string> header;
-  std::vector<std::vector<std::string>> rows;
-  while (std::getline(in, line)) {
-    if (line.empty() || line[0] == '#') continue;
-    std::vector<std::string> cells;
-    std::stringstream fields(line);
-    for (std::string cell; std::getline(fields, cell, ',');) cells.push_back(cell);
-    if (header.empty()) {
-      header = std::move(cells);
-    } else if (cells.size() == header.size()) {
-      rows.push_back(std::move(cells));
+  // Two passes over the file, one row at a time (a million-point path is ~170 MB of text): the cut moves are
+  // counted, then every stride-th is kept.
+  std::vector<std::string_view> cells;
+  const auto split = [&cells](std::string_view line) {
+    cells.clear();
+    std::size_t begin = 0;
+    while (begin < line.size()) {  // as std::getline(.., ','): no empty field after a final comma
+      const std::size_t comma = std::min(line.find(',', begin), line.size());
+      cells.push_back(line.substr(begin, comma - begin));
+      begin = comma + 1;
     }
-  }
-  auto column = [&](const char* name) {
-    return static_cast<std::size_t>(std::find(header.begin(), header.end(), name) - header.begin());
   };
-  const std::size_t cx = column("cc_x"), cy = column("cc_y"), cz = column("cc_z"), cp = column("pass"),
-                    ck = column("kind");
-  if (std::max({cx, cy, cz, cp, ck}) >= header.size()) return;
+  std::vector<std::string> header;
+  std::size_t cx = 0, cy = 0, cz = 0, cp = 0, ck = 0;
+  // Calls row() on every data row with as many cells as the header; false when the file or a column is missing.
+  const auto for_each_row = [&](const auto& row) {
+    std::ifstream in(path);
+    if (!in) return false;
+    header.clear();
+    std::string line;
+    while (std::getline(in, line)) {
+      if (line.empty() || line[0] == '#') continue;
+      split(line);
+      if (header.empty()) {
+        header.assign(cells.begin(), cells.end());
+        auto column = [&](const char* name) {
+          return static_cast<std::size_t>(std::find(header.begin(), header.end(), name) - header.begin());
+        };
+        cx = column("cc_x"), cy = column("cc_y"), cz = column("cc_z"), cp = column("pass"), ck = column("kind");
+        if (std::max({cx, cy, cz, cp, ck}) >= header.size()) return false;
+      } else if (cells.size() == header.size()) {
+        row();
+      }
+    }
+    return !header.empty();
+  };
   std::size_t cuts = 0;
-  for (const auto& r : rows) cuts += r[ck] == "cut";
+  if (!for_each_row([&] { cuts += cells[ck] == "cut"; })) return;
   const std::size_t stride = Stride(cuts, kMaxPathPoints);
   std::size_t k = 0;
-  for (const auto& r : rows) {
-    if (r[ck] != "cut" || k++ % stride != 0) continue;
+  for_each_row([&] {
+    if (cells[ck] != "cut" || k++ % stride != 0) return;
     double x, y, z, p;
-    if (!ParseDouble(r[cx], &x) || !ParseDouble(r[cy], &y) || !ParseDouble(r[cz], &z) || !ParseDouble(r[cp], &p)) {
-      continue;
+    if (!ParseDouble(cells[cx], &x) || !ParseDouble(cells[cy], &y) || !ParseDouble(cells[cz], &z) ||
+        !ParseDouble(cells[cp], &p)) {
+      return;
     }
     xyz->insert(xyz->end(), {x, y, z});
     pass->push_back(p);
-  }
+  });
 }
 
 struct Mesh {

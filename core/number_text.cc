@@ -8,9 +8,20 @@ namespace formloop {
 
 std::string FormatFixed(double value, int decimals) {
   decimals = std::max(decimals, 0);
-  std::string out(static_cast<std::size_t>(decimals) + 330, '\0');
-  const auto result = std::to_chars(out.data(), out.data() + out.size(), value, std::chars_format::fixed, decimals);
-  out.resize(static_cast<std::size_t>(result.ptr - out.data()));
+  // On the stack for the usual widths (a heap buffer per number costs more than the conversion); the result
+  // then fits the string's own small buffer.
+  constexpr int kStackDecimals = 40;
+  char stack[kStackDecimals + 330];
+  std::string heap;
+  char* first = stack;
+  char* last = stack + sizeof(stack);
+  if (decimals > kStackDecimals) {
+    heap.resize(static_cast<std::size_t>(decimals) + 330);
+    first = heap.data();
+    last = first + heap.size();
+  }
+  const auto result = std::to_chars(first, last, value, std::chars_format::fixed, decimals);
+  std::string out(first, result.ptr);
   // "-0.000" (a tiny negative or -0) reads as a sign error in a report or an NC block: drop the sign.
   if (!out.empty() && out.front() == '-' && out.find_first_not_of("0.", 1) == std::string::npos) {
     out.erase(0, 1);

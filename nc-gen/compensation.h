@@ -4,8 +4,10 @@
 // as usual. Every moved CL point is recorded in a side file (nominal tip, applied offset vector,
 // source) so a checker can recompute it from the two programs.
 
+#include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -13,6 +15,7 @@
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
+#include "core/atomic_file.h"
 #include "core/status.h"
 #include "nc-gen/post.h"
 #include "nc-gen/toolpath.h"
@@ -45,7 +48,8 @@ struct CompensationEntry {
 
 struct Compensation {
   Toolpath path;                           // the compensated tool path
-  std::vector<CompensationEntry> entries;  // one per CL point
+  std::vector<CompensationEntry> entries;  // one per CL point (CompensateToolpath; not WriteCompensatedProgram)
+  std::size_t blocks = 0;                  // CL points = feed blocks = side-file rows
   double max_offset_um = 0;
   std::string source;  // e.g. "systematic field (Legendre degree 2) from loop 0"
   // Filled by WriteCompensatedProgram: the program as written, its moves as read back for the check,
@@ -69,7 +73,12 @@ Result<Compensation> CompensateToolpath(const Toolpath& nominal, const Systemati
 Status AssignProgramLines(const std::vector<ProgramMove>& nominal, const std::vector<ProgramMove>& compensated,
                           Compensation* compensation);
 
-// CSV side file, one row per CL point (= feed block) in cutting order:
+// The side file, one row per CL point (= feed block) in cutting order, in one of two forms chosen by the
+// path: a name ending in ".csv" gets CSV text, any other the compact binary form (`formloop run` writes
+// loop-K/compensation_side.bin). ReadSideFile tells them apart by the first bytes and reads both (and the
+// older CSV files without u, v, n or kind).
+//
+// CSV:
 //   # formloop compensation side file: ...
 //   # source: <Compensation::source>          (the offsets' source, for every row)
 //   cl_index,pass,nominal_line,compensated_line,nominal_x,nominal_y,nominal_z,offset_x,offset_y,offset_z,ds_um,u,v,nx,ny,nz,kind
@@ -79,6 +88,40 @@ Status AssignProgramLines(const std::vector<ProgramMove>& nominal, const std::ve
 // program where the tool does not touch Q keep their nominal place: offset 0, not checked against the
 // field). The applied offset is −ds·n. A program formloop did not write adds a last column lambda (the
 // point's fraction along its nominal block).
+//
+// Compact binary, version 1 (docs/formats.md; about a quarter of the CSV's size), little-endian:
+//   8 bytes magic 0x89 "FLSIDE" '\n'; uint32 version = 1; uint32 flags (bit 0: a lambda per row); uint64 rows;
+//   uint32 n + n bytes of UTF-8: the source; then per row, in cutting order (cl_index = the row's number):
+//   uint8 kind (0 cut, 1 lead-in, 2 lead-out, 3 off); then pass, nominal_line, compensated_line, nominal
+//   x, y, z (integer nm, 10^-6 mm), offset x, y, z (integer pm, 10^-9 mm), ds (integer 10^-6 µm), each a
+//   zig-zag LEB128 varint of the change from the row before (from 0 for the first row); u, v as IEEE-754
+//   doubles (exact); nx, ny, nz (integer 10^-9) as changes likewise; lambda as a double when flagged.
+// Every stored quantity is at least as fine as the CSV's; the values read back are the decimals divided
+// by their scale, as the CSV's text would give them.
+struct SideState;  // compensation.cc: the last value of each delta-coded column
+class SideFileWriter {
+ public:
+  // Opens the temporary file beside `path` (core/atomic_file.h); nothing is at `path` before Commit.
+  SideFileWriter(const std::filesystem::path& path, const std::string& source, bool program_mapped);
+  ~SideFileWriter();
+  SideFileWriter(const SideFileWriter&) = delete;
+  SideFileWriter& operator=(const SideFileWriter&) = delete;
+  // The next row: entries must come in cutting order, cl_index 0, 1, 2, ...
+  void Add(const CompensationEntry& entry);
+  // Renames the file into place; the first failure otherwise (then nothing is written).
+  Status Commit();
+
+ private:
+  void Flush();
+  AtomicFile file_;
+  bool binary_;
+  bool program_mapped_;
+  std::unique_ptr<SideState> state_;
+  std::string buffer_;
+  std::uint64_t rows_ = 0;
+  Status status_;
+};
+
 Status WriteSideFile(const std::filesystem::path& path, const Compensation& compensation);
 
 struct SideFile {
@@ -148,13 +191,23 @@ Result<CheckReport> CheckCompensation(const std::vector<ProgramMove>& nominal,
                                       const std::vector<ProgramMove>& compensated, const SideFile& side,
                                       const SystematicField& field, const CheckOptions& options = {});
 
-// The whole mirror step with nothing written unless everything passed: CompensateToolpath (refuses
-// an offset above options.max_offset_um with SafetyLimit), the post of `dialect` (the nominal program
-// must be in the same dialect), read back both programs,
-// AssignProgramLines, CheckCompensation against the field; then the program and the side file are
-// written atomically (the result carries the program, its moves and the check's largest disagreement) (side file first;
-// should the program then fail to write, the side file is removed). On any refusal or failed check neither file is
-// written.
+// The whole mirror step with nothing written unless everything passed: d_s once per CL point on Q (an
+// offset above options.max_offset_um is refused with SafetyLimit), the compensated tips, the move list and
+// the post of `dialect`, the compensated program read back, and then row by row the side-file entry checked
+// against both programs and the field's value (CheckCompensation's test) and streamed into the side file's
+// temporary file; the side file and then the program are renamed into place (should the program fail to
+// write, the side file is removed). `nominal_moves` are the nominal program's moves as read from it (the
+// same dialect; its i-th feed move is CL point i). `systematic` is called from several threads at once (each
+// call a pure function of (u, v), as every field of formloop is; core/parallel.h). The result carries the program, its
+// moves, the check's largest disagreement and the number of rows (`entries` and `path` stay empty: a million rows are
+// not held). On any refusal or failed check neither file is written.
+Result<Compensation> WriteCompensatedProgram(const Toolpath& nominal, const std::vector<ProgramMove>& nominal_moves,
+                                             const SystematicField& systematic, const std::string& source,
+                                             const CompensationOptions& options, const PostOptions& post,
+                                             const std::filesystem::path& program_path,
+                                             const std::filesystem::path& side_path,
+                                             std::string_view dialect = "linuxcnc");
+// The same from the nominal program's text (read here).
 Result<Compensation> WriteCompensatedProgram(const Toolpath& nominal, const std::string& nominal_program,
                                              const SystematicField& systematic, const std::string& source,
                                              const CompensationOptions& options, const PostOptions& post,

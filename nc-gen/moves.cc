@@ -15,18 +15,28 @@ std::string Move::Describe(std::size_t index) const {
 }
 
 Result<MoveList> BuildMoveList(const Toolpath& path) {
+  std::vector<Eigen::Vector3d> tips(path.points.size());
+  for (std::size_t k = 0; k < tips.size(); ++k) tips[k] = path.points[k].tip;
+  return BuildMoveList(path, tips, path.safe_z_mm);
+}
+
+Result<MoveList> BuildMoveList(const Toolpath& path, const std::vector<Eigen::Vector3d>& tips, double safe_z_mm) {
   if (path.points.empty()) return Status::BadInput("the tool path has no points; nothing to post");
+  if (tips.size() != path.points.size()) {
+    return Status::Internal(std::to_string(tips.size()) + " tips for " + std::to_string(path.points.size()) +
+                            " CL points");
+  }
   const ToolpathOptions& tp = path.options;
   MoveList list;
   list.header.tool_number = tp.tool.number;
   list.header.tool_radius_mm = tp.tool.radius_mm;
   list.header.spindle_rpm = tp.spindle_rpm;
   list.header.passes = path.passes;
-  list.safe_z_mm = path.safe_z_mm;
+  list.safe_z_mm = safe_z_mm;
 
   Eigen::Vector3d at = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
   const auto retract = [&](int pass, const std::string& source) {
-    at.z() = path.safe_z_mm;
+    at.z() = safe_z_mm;
     list.moves.push_back({.type = MoveType::kRapid, .tip = at, .axes = kAxisZ, .pass = pass, .source = source});
   };
   retract(-1, "start: retract to safe Z");
@@ -42,14 +52,14 @@ Result<MoveList> BuildMoveList(const Toolpath& path) {
                             .text = "pass " + std::to_string(cl.pass),
                             .pass = cl.pass,
                             .source = "pass start"});
-      at = Eigen::Vector3d(cl.tip.x(), cl.tip.y(), path.safe_z_mm);
+      at = Eigen::Vector3d(tips[k].x(), tips[k].y(), safe_z_mm);
       list.moves.push_back({.type = MoveType::kRapid,
                             .tip = at,
                             .axes = kAxisXY,
                             .pass = cl.pass,
                             .cl_index = index,
                             .source = "rapid above the first point"});
-      at = cl.tip;
+      at = tips[k];
       list.moves.push_back({.type = MoveType::kFeed,
                             .tip = at,
                             .feed_mm_per_min = tp.plunge_feed_mm_per_min,
@@ -62,7 +72,7 @@ Result<MoveList> BuildMoveList(const Toolpath& path) {
                             .source = "cutting feed"});
       continue;
     }
-    at = cl.tip;
+    at = tips[k];
     list.moves.push_back({.type = MoveType::kFeed,
                           .tip = at,
                           .feed_mm_per_min = tp.feed_mm_per_min,
@@ -108,7 +118,8 @@ Status CheckMoveList(const MoveList& list, const MachineLimits& limits) {
     for (int a = 0; a < 3; ++a) {
       if (!std::isfinite(known[a])) known[a] = 0.5 * (limits.travel_min_mm[a] + limits.travel_max_mm[a]);
     }
-    FL_RETURN_IF_ERROR(CheckTravel(limits, known, m.Describe(i)));
+    // The move's description only for a refusal (a million-point program has a million moves).
+    if (!WithinTravel(limits, known)) FL_RETURN_IF_ERROR(CheckTravel(limits, known, m.Describe(i)));
   }
   return Status::Ok();
 }

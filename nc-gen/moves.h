@@ -67,6 +67,9 @@ struct MoveList {
 // leads), plunge feed to it, set the cutting feed, feed through the pass (lead-in, cut, lead-out); then
 // a final retract. The i-th kFeed move is CL point i.
 Result<MoveList> BuildMoveList(const Toolpath& path);
+// The same with the tips `tips` (one per CL point, e.g. compensated) in place of the points' own and safe Z
+// `safe_z_mm` in place of the path's.
+Result<MoveList> BuildMoveList(const Toolpath& path, const std::vector<Eigen::Vector3d>& tips, double safe_z_mm);
 
 // The safety check (ARCHITECTURE.md "Safety"), done once on the list before any post writes text:
 // limits valid; spindle > 0 and ≤ the maximum; every feed > 0 and ≤ the maximum; every programmed axis

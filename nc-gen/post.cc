@@ -27,6 +27,13 @@ nlohmann::json MachineLimits::ToJson() const {
           {"max_spindle_rpm", max_spindle_rpm}};
 }
 
+bool WithinTravel(const MachineLimits& limits, const Eigen::Vector3d& tip) {
+  for (int a = 0; a < 3; ++a) {
+    if (tip[a] < limits.travel_min_mm[a] || tip[a] > limits.travel_max_mm[a]) return false;
+  }
+  return true;
+}
+
 Status CheckTravel(const MachineLimits& limits, const Eigen::Vector3d& tip, const std::string& what) {
   static const char* kAxis[] = {"X", "Y", "Z"};
   for (int a = 0; a < 3; ++a) {

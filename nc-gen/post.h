@@ -45,6 +45,8 @@ struct MachineLimits {
   nlohmann::json ToJson() const;
 };
 
+// True when the tip lies inside the travel on every axis (CheckTravel's test, without a message).
+bool WithinTravel(const MachineLimits& limits, const Eigen::Vector3d& tip);
 // Checks one tip position; `what` names it in the message ("block N120", "probe point 17").
 Status CheckTravel(const MachineLimits& limits, const Eigen::Vector3d& tip, const std::string& what);
 

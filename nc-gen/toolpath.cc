@@ -888,8 +888,8 @@ void UpdateCutterLocations(Toolpath* path) {
   double length = 0, max_tip_z = -1e300;
   for (std::size_t k = 0; k < path->points.size(); ++k) {
     ClPoint& cl = path->points[k];
-    cl.centre = cl.cc + r * cl.normal + cl.lift_mm * Eigen::Vector3d::UnitZ();
-    cl.tip = cl.centre - r * Eigen::Vector3d::UnitZ();
+    cl.centre = BallCentre(cl.cc, cl.normal, cl.lift_mm, r);
+    cl.tip = TipOf(cl.centre, r);
     if (k > 0 && path->points[k - 1].pass == cl.pass) length += (cl.tip - path->points[k - 1].tip).norm();
     cl.path_length_mm = length;
     cl.time_s = length / feed_mm_per_s;

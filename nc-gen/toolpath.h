@@ -132,6 +132,15 @@ inline constexpr double kNeighbourClearanceToleranceMm = 1e-4;
 
 Result<Toolpath> PlanRaster(const recon::BSplineSurface& surface, const ToolpathOptions& options);
 
+// The cutter location of a CC point: ball centre B = i + r·n + lift·ẑ and programmed tip T = B − r·ẑ.
+inline Eigen::Vector3d BallCentre(const Eigen::Vector3d& cc, const Eigen::Vector3d& normal, double lift_mm,
+                                  double radius_mm) {
+  return cc + radius_mm * normal + lift_mm * Eigen::Vector3d::UnitZ();
+}
+inline Eigen::Vector3d TipOf(const Eigen::Vector3d& centre, double radius_mm) {
+  return centre - radius_mm * Eigen::Vector3d::UnitZ();
+}
+
 // Recomputes centre, tip, path length and time after the CC points moved (compensation).
 void UpdateCutterLocations(Toolpath* path);
 

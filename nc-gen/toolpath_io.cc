@@ -1,5 +1,6 @@
 #include "nc-gen/toolpath_io.h"
 
+#include <charconv>
 #include <cmath>
 #include <map>
 #include <vector>
@@ -88,13 +89,32 @@ Status WriteToolpathFile(const std::filesystem::path& path, const Toolpath& t) {
   if (std::isfinite(t.min_safe_z_mm)) summary["min_safe_z_mm"] = t.min_safe_z_mm;
   text += kSummaryPrefix + summary.dump() + "\n";
   text += "pass,kind,u,v,cc_x,cc_y,cc_z,nx,ny,nz,lift_mm\n";
+  // Streamed in blocks into the temporary file: a million-point path is ~170 MB of text, never held whole.
+  AtomicFile file(path);
+  FL_RETURN_IF_ERROR(file.open_status());
+  const auto number = [&text](double value) {
+    char buffer[32];
+    const auto result = std::to_chars(buffer, buffer + sizeof(buffer), value);
+    text += ',';
+    text.append(buffer, result.ptr);
+  };
   for (const ClPoint& cl : t.points) {
-    text += std::to_string(cl.pass) + "," + ClKindName(cl.kind) + "," + FormatExact(cl.u) + "," + FormatExact(cl.v);
-    for (int a = 0; a < 3; ++a) text += "," + FormatExact(cl.cc[a]);
-    for (int a = 0; a < 3; ++a) text += "," + FormatExact(cl.normal[a]);
-    text += "," + FormatExact(cl.lift_mm) + "\n";
+    if (text.size() > (1 << 16)) {
+      file.stream() << text;
+      text.clear();
+    }
+    text += std::to_string(cl.pass);
+    text += ',';
+    text += ClKindName(cl.kind);
+    number(cl.u);
+    number(cl.v);
+    for (int a = 0; a < 3; ++a) number(cl.cc[a]);
+    for (int a = 0; a < 3; ++a) number(cl.normal[a]);
+    number(cl.lift_mm);
+    text += '\n';
   }
-  return WriteFileAtomic(path, text);
+  file.stream() << text;
+  return file.Commit();
 }
 
 Result<Toolpath> ParseToolpath(const std::string& text, const std::string& source) {

@@ -177,9 +177,11 @@ Result<CheckResult> FullCheck(const SimCorrectionInput& in, const Problem& pb, c
                                FormatFixed(pb.rho_cc_min_mm, 2) + " mm = " + FormatFixed(bound_mm, 2) + " mm",
                            r, bound_mm});
   }
-  FL_ASSIGN_OR_RETURN(const nc::MoveList moves, nc::BuildMoveList(path));
-  if (const Status s = nc::CheckMoveList(moves, in.limits); !s.ok()) {
-    out.defects.push_back({"axis_limit", s.message(), 0, 0});
+  {  // the move list (a million moves on a large part) only for the limit check, gone before the simulation
+    FL_ASSIGN_OR_RETURN(const nc::MoveList moves, nc::BuildMoveList(path));
+    if (const Status s = nc::CheckMoveList(moves, in.limits); !s.ok()) {
+      out.defects.push_back({"axis_limit", s.message(), 0, 0});
+    }
   }
   FL_RETURN_IF_ERROR(PredictFormError(in, pb, path, c_pc, &out));
   // Scallop: the planner's target, and what the virtual machine left at the probe points. A lifted

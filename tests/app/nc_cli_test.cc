@@ -109,7 +109,7 @@ TEST_F(NcCliTest, CheckFindsACorruptedCompensatedBlock) {
   ASSERT_EQ(Run("run " + std::string(FORMLOOP_SOURCE_DIR) + "/data/parts/demo-saddle.json --out " + run.string()), 0)
       << err_;
   const std::string nominal = (run / "toolpath" / "program.ngc").string();
-  const std::string side = (run / "loop-0" / "compensation_side.csv").string();
+  const std::string side = (run / "loop-0" / "compensation_side.bin").string();
   std::string compensated = (run / "loop-0" / "program_compensated.ngc").string();
   const std::string check = "nc check --nominal " + nominal + " --side " + side + " --compensated ";
   ASSERT_EQ(Run(check + compensated), 0) << err_;
@@ -213,7 +213,7 @@ TEST_F(NcCliTest, RunPostsInThePartsDialectAndRasterAngle) {
   ASSERT_TRUE(fs::exists(run / "loop-0" / "program_compensated.h")) << "the demo compensates after loop 0";
   EXPECT_EQ(Run("nc check --dialect heidenhain --nominal " + (run / "toolpath" / "program.h").string() +
                 " --compensated " + (run / "loop-0" / "program_compensated.h").string() + " --side " +
-                (run / "loop-0" / "compensation_side.csv").string()),
+                (run / "loop-0" / "compensation_side.bin").string()),
             0)
       << err_;
 

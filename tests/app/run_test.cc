@@ -52,7 +52,7 @@ TEST_F(RunTest, DemoRunsEveryStageAndCompensatesIntoTolerance) {
         "surface/samples.csv", "toolpath/program.ngc", "toolpath/probe.ngc", "toolpath/probing_plan.json",
         "toolpath/toolpath.json", "loop-0/probe_log.csv", "loop-0/machine.json", "loop-0/deviations.csv",
         "loop-0/deviations.ply", "loop-0/analysis.json", "loop-0/program_compensated.ngc",
-        "loop-0/compensation_side.csv", "loop-0/compensation.json", "loop-1/analysis.json"}) {
+        "loop-0/compensation_side.bin", "loop-0/compensation.json", "loop-1/analysis.json"}) {
     EXPECT_TRUE(fs::exists(options.out / file)) << file;
   }
   EXPECT_FALSE(fs::exists(dir_ / "demo.partial"));

@@ -486,11 +486,11 @@ inline std::vector<Case> AllCases() {
       C("nc_check_nominal_garbage", "G-code", kCheck, 2, {"n.ngc"})
           .File("n.ngc", "this is not a program\nG1 X\n")
           .File("c.ngc", [](const Fixtures& f) { return f.Read("comp.ngc"); })
-          .File("s.csv", [](const Fixtures& f) { return f.Read("side.csv"); }),
+          .File("s.csv", [](const Fixtures& f) { return f.Read("side.bin"); }),
       C("nc_check_compensated_truncated", "G-code", kCheck, 2, {"c.ngc"})
           .File("n.ngc", [](const Fixtures& f) { return f.Read("prog.ngc"); })
           .File("c.ngc", Head("comp.ngc", 700))
-          .File("s.csv", [](const Fixtures& f) { return f.Read("side.csv"); }),
+          .File("s.csv", [](const Fixtures& f) { return f.Read("side.bin"); }),
       C("nc_check_side_bad_columns", "side file", kCheck, 2, {"s.csv"})
           .File("n.ngc", [](const Fixtures& f) { return f.Read("prog.ngc"); })
           .File("c.ngc", [](const Fixtures& f) { return f.Read("comp.ngc"); })
@@ -498,11 +498,18 @@ inline std::vector<Case> AllCases() {
       C("nc_check_side_bad_number", "side file", kCheck, 2, {"s.csv:4"})
           .File("n.ngc", [](const Fixtures& f) { return f.Read("prog.ngc"); })
           .File("c.ngc", [](const Fixtures& f) { return f.Read("comp.ngc"); })
-          .File("s.csv", LineOf("side.csv", 3, "0,0,12,12,x,y,z,0,0,0,0,0,0,0,0,1,lead-in")),
+          .File("s.csv",
+                "# formloop compensation side file\n# source: x\ncl_index,pass,nominal_line,compensated_line,"
+                "nominal_x,nominal_y,nominal_z,offset_x,offset_y,offset_z,ds_um,u,v,nx,ny,nz,kind\n"
+                "0,0,12,12,x,y,z,0,0,0,0,0,0,0,0,1,lead-in\n"),
+      C("nc_check_side_compact_cut_short", "side file", kCheck, 2, {"s.csv", "cut short"})
+          .File("n.ngc", [](const Fixtures& f) { return f.Read("prog.ngc"); })
+          .File("c.ngc", [](const Fixtures& f) { return f.Read("comp.ngc"); })
+          .File("s.csv", Head("side.bin", 400)),
       C("nc_check_wrong_dialect", "G-code", kCheck + " --dialect heidenhain", 2, {"n.ngc"})
           .File("n.ngc", [](const Fixtures& f) { return f.Read("prog.ngc"); })
           .File("c.ngc", [](const Fixtures& f) { return f.Read("comp.ngc"); })
-          .File("s.csv", [](const Fixtures& f) { return f.Read("side.csv"); }),
+          .File("s.csv", [](const Fixtures& f) { return f.Read("side.bin"); }),
       C("nc_check_huge_coordinate", "G-code", kCheck, 2, {"c.ngc:"})
           .File("n.ngc", [](const Fixtures& f) { return f.Read("prog.ngc"); })
           .File("c.ngc",
@@ -511,7 +518,7 @@ inline std::vector<Case> AllCases() {
                   const auto at = text.find("\nG1 X");
                   return at == std::string::npos ? text : text.replace(at + 5, 0, "1e300");
                 })
-          .File("s.csv", [](const Fixtures& f) { return f.Read("side.csv"); }),
+          .File("s.csv", [](const Fixtures& f) { return f.Read("side.bin"); }),
       C("nc_compensate_nominal_garbage", "G-code", kCompensate + "--nominal n.ngc --out p.ngc --side s.csv", 2,
         {"n.ngc"})
           .Copy("tp.csv")

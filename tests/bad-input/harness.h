@@ -309,7 +309,7 @@ inline fs::path EnsureFixtures(const std::string& binary, const fs::path& root, 
         "cp run/surface/Q.step Q.step && cp run/toolpath/toolpath.csv tp.csv && "
         "cp run/loop-0/probe_log.csv log.csv && cp run/toolpath/probing_plan.json plan.json && "
         "cp run/toolpath/program.ngc prog.ngc && cp run/loop-0/program_compensated.ngc comp.ngc && "
-        "cp run/loop-0/compensation_side.csv side.csv",
+        "cp run/loop-0/compensation_side.bin side.bin",
     };
     for (const std::string& step : steps) {
       const Exit e = RunShell(step, dir, dir / "step.out", dir / "step.err", 600, false);

@@ -233,14 +233,18 @@ std::string CorruptZ(const std::string& text, long line_number, double delta_mm)
   return out;
 }
 
-TEST(CompensationCheckTest, EveryBlockMovesByMinusDsNToOutputPrecisionAndTheSideFileMatches) {
+// Both side-file forms: CSV text (".csv") and the compact binary one (any other name, as `formloop run` writes).
+class SideFileFormTest : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(SideFileFormTest, EveryBlockMovesByMinusDsNToOutputPrecisionAndTheSideFileMatches) {
   const Fixture f = MakeFixture();
   const fs::path dir = TempDir("roundtrip");
+  const fs::path side_path = dir / ("side" + GetParam());
   PostOptions post;  // 4 decimals: 0.1 µm
   const auto nominal_text = PostLinuxCnc(f.path, post);
   ASSERT_TRUE(nominal_text.ok());
   const auto comp = WriteCompensatedProgram(f.path, *nominal_text, f.ds, "TPS field, 144 samples", {}, post,
-                                            dir / "compensated.ngc", dir / "side.csv");
+                                            dir / "compensated.ngc", side_path);
   ASSERT_TRUE(comp.ok()) << comp.status().message();
   EXPECT_GT(comp->max_offset_um, 4.0);
   EXPECT_LE(comp->max_offset_um, 5.05);
@@ -264,21 +268,36 @@ TEST(CompensationCheckTest, EveryBlockMovesByMinusDsNToOutputPrecisionAndTheSide
     for (int axis = 0; axis < 3; ++axis) ASSERT_LE(std::abs(got[axis] - expected[axis]), 1e-4 + 1e-9) << k;
   }
   // Side file round trip.
-  const auto side = ReadSideFile(dir / "side.csv");
+  const auto side = ReadSideFile(side_path);
   ASSERT_TRUE(side.ok()) << side.status().message();
   EXPECT_EQ(side->source, "TPS field, 144 samples");
   EXPECT_TRUE(side->has_field_points);
-  ASSERT_EQ(side->entries.size(), comp->entries.size());
+  EXPECT_EQ(side->has_lambda, false);
+  ASSERT_EQ(comp->blocks, f.path.points.size());
+  ASSERT_EQ(side->entries.size(), f.path.points.size());
+  // The CSV keeps 6 decimals of mm and 4 of um; the compact form 1 nm, 1 pm and 1e-6 um.
+  const bool csv = GetParam() == ".csv";
+  const double tip_step = 1e-6, offset_step = csv ? 1e-6 : 1e-9, ds_step = csv ? 1e-4 : 1e-6;
   for (std::size_t k = 0; k < side->entries.size(); ++k) {
     const auto& r = side->entries[k];
-    const auto& e = comp->entries[k];
+    const ClPoint& cl = f.path.points[k];
+    const double ds_mm = cl.kind == ClKind::kCut ? f.ds(cl.u, cl.v) : 0.0;
+    CompensationEntry e;
+    e.nominal_tip = cl.tip;
+    e.offset_mm = -ds_mm * cl.normal;  // to rounding of the tips (1e-14 mm)
+    e.systematic_um = 1e3 * ds_mm;
+    e.u = cl.u;
+    e.v = cl.v;
+    e.normal = cl.normal;
+    EXPECT_EQ(r.kind, cl.kind);
+    EXPECT_EQ(r.has_field_point, cl.kind == ClKind::kCut);
     EXPECT_EQ(r.cl_index, k);
     EXPECT_EQ(r.pass, f.path.points[k].pass);
     EXPECT_EQ(r.nominal_line, fa[k]->line);
     EXPECT_EQ(r.compensated_line, fb[k]->line);
-    EXPECT_LE((r.nominal_tip - e.nominal_tip).cwiseAbs().maxCoeff(), 0.5e-6 + 1e-12);
-    EXPECT_LE((r.offset_mm - e.offset_mm).cwiseAbs().maxCoeff(), 0.5e-6 + 1e-12);
-    EXPECT_NEAR(r.systematic_um, e.systematic_um, 0.5e-4 + 1e-12);
+    EXPECT_LE((r.nominal_tip - e.nominal_tip).cwiseAbs().maxCoeff(), 0.5 * tip_step + 1e-12);
+    EXPECT_LE((r.offset_mm - e.offset_mm).cwiseAbs().maxCoeff(), 0.5 * offset_step + 1e-12);
+    EXPECT_NEAR(r.systematic_um, e.systematic_um, 0.5 * ds_step + 1e-12);
     EXPECT_EQ(r.u, e.u);
     EXPECT_EQ(r.v, e.v);
     EXPECT_LE((r.normal - e.normal).cwiseAbs().maxCoeff(), 0.5e-9 + 1e-15);
@@ -293,6 +312,8 @@ TEST(CompensationCheckTest, EveryBlockMovesByMinusDsNToOutputPrecisionAndTheSide
   EXPECT_LE(report->max_side_difference_um, 0.1 * std::sqrt(3.0) + 0.001);
   EXPECT_LE(report->max_field_difference_um, 0.1 * std::sqrt(3.0) + 0.001);
 }
+
+INSTANTIATE_TEST_SUITE_P(CsvAndCompact, SideFileFormTest, ::testing::Values(".csv", ".bin"));
 
 TEST(CompensationCheckTest, ReportsExactlyTheCorruptedBlockWithItsLinesAndBothValues) {
   const Fixture f = MakeFixture();
@@ -394,6 +415,73 @@ TEST(CompensationCheckTest, OffsetAboveTheMaximumIsRefusedWithTheReasonAndNothin
   EXPECT_TRUE(
       WriteCompensatedProgram(path, *nominal_text, field, "ok", options, post, dir / "c.ngc", dir / "side.csv").ok());
   EXPECT_TRUE(fs::exists(dir / "c.ngc") && fs::exists(dir / "side.csv"));
+}
+
+TEST(CompensationCheckTest, CompactSideFileRoundTripsAndRefusesADamagedOne) {
+  const fs::path dir = TempDir("compact");
+  Compensation c;
+  c.source = "field f.csv";
+  for (std::size_t k = 0; k < 3; ++k) {
+    CompensationEntry e;
+    e.cl_index = k;
+    e.pass = k < 2 ? 0 : 1;
+    e.nominal_line = 12 + 2 * static_cast<long>(k);
+    e.compensated_line = 12 + 2 * static_cast<long>(k);
+    e.nominal_tip = Eigen::Vector3d(50.3012 - 0.1 * k, -40.86, 5.3074);
+    e.offset_mm = Eigen::Vector3d(0.0012345678, -0.002, k == 0 ? 0.0 : -0.0159);
+    e.systematic_um = k == 0 ? 0.0 : 15.987654;
+    e.u = 0.1 + 0.3 * k;
+    e.v = 1.0 / 3.0;
+    e.normal = Eigen::Vector3d(0.6, 0, -0.8);
+    e.kind = k == 0 ? ClKind::kLeadIn : ClKind::kCut;
+    e.has_field_point = k != 0;
+    c.entries.push_back(e);
+  }
+  ASSERT_TRUE(WriteSideFile(dir / "side.bin", c).ok());
+  const std::string bytes = *ReadFile(dir / "side.bin");
+  EXPECT_EQ(bytes.substr(0, 8), std::string("\x89"
+                                            "FLSIDE\n"));
+  const auto side = ParseSideFile(bytes, "side.bin");
+  ASSERT_TRUE(side.ok()) << side.status().message();
+  EXPECT_EQ(side->source, "field f.csv");
+  EXPECT_TRUE(side->has_field_points);
+  EXPECT_FALSE(side->has_lambda);
+  ASSERT_EQ(side->entries.size(), 3u);
+  for (std::size_t k = 0; k < 3; ++k) {
+    const CompensationEntry &r = side->entries[k], &e = c.entries[k];
+    EXPECT_EQ(r.cl_index, k);
+    EXPECT_EQ(r.pass, e.pass);
+    EXPECT_EQ(r.kind, e.kind);
+    EXPECT_EQ(r.has_field_point, e.has_field_point);
+    EXPECT_EQ(r.nominal_line, e.nominal_line);
+    EXPECT_EQ(r.compensated_line, e.compensated_line);
+    EXPECT_LE((r.nominal_tip - e.nominal_tip).cwiseAbs().maxCoeff(), 0.5e-6 + 1e-12);
+    EXPECT_LE((r.offset_mm - e.offset_mm).cwiseAbs().maxCoeff(), 0.5e-9 + 1e-15);
+    EXPECT_NEAR(r.systematic_um, e.systematic_um, 0.5e-6 + 1e-12);
+    EXPECT_EQ(r.u, e.u);  // exact
+    EXPECT_EQ(r.v, e.v);
+    EXPECT_LE((r.normal - e.normal).cwiseAbs().maxCoeff(), 0.5e-9 + 1e-15);
+  }
+  // The same values as the CSV gives for decimals the CSV can hold: 50.3012 mm reads back bit for bit.
+  EXPECT_EQ(side->entries[0].nominal_tip.x(), 50.3012);
+  // Cut short, a newer version, trailing bytes: refused with the file and the byte.
+  const auto cut = ParseSideFile(bytes.substr(0, bytes.size() - 5), "cut.bin");
+  ASSERT_FALSE(cut.ok());
+  EXPECT_NE(cut.status().message().find("cut.bin"), std::string::npos) << cut.status().message();
+  EXPECT_NE(cut.status().message().find("row 2"), std::string::npos) << cut.status().message();
+  EXPECT_NE(cut.status().message().find("cut short"), std::string::npos) << cut.status().message();
+  std::string newer = bytes;
+  newer[8] = 2;
+  const auto version = ParseSideFile(newer, "v2.bin");
+  ASSERT_FALSE(version.ok());
+  EXPECT_NE(version.status().message().find("format version 2"), std::string::npos) << version.status().message();
+  const auto trailing = ParseSideFile(bytes + "x", "t.bin");
+  ASSERT_FALSE(trailing.ok());
+  EXPECT_NE(trailing.status().message().find("after the last"), std::string::npos) << trailing.status().message();
+  // Out of order entries are refused by the writer (nothing at the path).
+  std::swap(c.entries[1], c.entries[2]);
+  EXPECT_FALSE(WriteSideFile(dir / "swapped.bin", c).ok());
+  EXPECT_FALSE(fs::exists(dir / "swapped.bin"));
 }
 
 TEST(CompensationCheckTest, SideFileReaderNamesLineAndFieldAndAcceptsTheOldColumns) {
