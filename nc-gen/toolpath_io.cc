@@ -1,8 +1,10 @@
 #include "nc-gen/toolpath_io.h"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <map>
+#include <string_view>
 #include <vector>
 
 #include "core/atomic_file.h"
@@ -125,10 +127,15 @@ Result<Toolpath> ParseToolpath(const std::string& text, const std::string& sourc
   std::map<std::string, std::size_t> column;
   std::size_t columns = 0;
   int last_pass = -1;
+  // The column of each of kColumns, looked up once (a million rows); the cells are views into the text.
+  enum Column { kPass, kKind, kU, kV, kCcX, kCcY, kCcZ, kNx, kNy, kNz, kLift, kColumnCount };
+  std::size_t at[kColumnCount] = {};
+  // At most one point a line: no regrowth of a million points (and no second copy of them at its peak).
+  t.points.reserve(static_cast<std::size_t>(std::count(text.begin(), text.end(), '\n')) + 1);
   while (rows.Next()) {
     number = rows.line_number();
-    const std::string s(rows.line());
     if (rows.is_comment()) {
+      const std::string s(rows.line());
       const auto json_after = [&](const char* prefix) -> Result<nlohmann::json> {
         return ParseJson(s.substr(std::string(prefix).size()), source + ":" + std::to_string(number));
       };
@@ -147,15 +154,16 @@ Result<Toolpath> ParseToolpath(const std::string& text, const std::string& sourc
       }
       continue;
     }
-    const std::vector<std::string> cells(rows.cells().begin(), rows.cells().end());
+    const std::vector<std::string_view>& cells = rows.cells();
     if (columns == 0) {
-      for (std::size_t c = 0; c < cells.size(); ++c) column[cells[c]] = c;
+      for (std::size_t c = 0; c < cells.size(); ++c) column[std::string(cells[c])] = c;
       for (const char* name : kColumns) {
         if (!column.count(name)) {
           return Status::BadInput(Where{.file = source, .line = number, .field = name}, "the header lacks this column",
                                   "use a tool-path file written by `formloop nc path --toolpath`");
         }
       }
+      for (int c = 0; c < kColumnCount; ++c) at[c] = column.at(kColumns[c]);  // Column follows kColumns
       columns = cells.size();
       continue;
     }
@@ -163,41 +171,40 @@ Result<Toolpath> ParseToolpath(const std::string& text, const std::string& sourc
       return Status::BadInput(Where{.file = source, .line = number},
                               "has " + std::to_string(cells.size()) + " fields, the header " + std::to_string(columns));
     }
-    const auto cell = [&](const char* name) { return cells[column[name]]; };
-    const auto num = [&](const char* name, double* out) -> Status {
-      if (!ParseDouble(cell(name), out) || !std::isfinite(*out)) {
+    const auto num = [&](Column c, const char* name, double* out) -> Status {
+      if (!ParseDouble(cells[at[c]], out) || !std::isfinite(*out)) {
         return Status::BadInput(Where{.file = source, .line = number, .field = name},
-                                "value '" + cell(name) + "' is not a finite number");
+                                "value '" + std::string(cells[at[c]]) + "' is not a finite number");
       }
       return Status::Ok();
     };
     ClPoint cl;
     double pass = 0;
-    FL_RETURN_IF_ERROR(num("pass", &pass));
+    FL_RETURN_IF_ERROR(num(kPass, "pass", &pass));
     if (pass != std::floor(pass) || pass < 0 || pass < last_pass || pass > last_pass + 1) {
       return Status::BadInput(Where{.file = source, .line = number, .field = "pass"},
-                              "value '" + cell("pass") + "' breaks the order of passes",
+                              "value '" + std::string(cells[at[kPass]]) + "' breaks the order of passes",
                               "passes are numbered from 0 and appear in order");
     }
     cl.pass = static_cast<int>(pass);
-    const std::string kind = cell("kind");
+    const std::string_view kind = cells[at[kKind]];
     if (kind == "lead-in") {
       cl.kind = ClKind::kLeadIn;
     } else if (kind == "lead-out") {
       cl.kind = ClKind::kLeadOut;
     } else if (kind != "cut") {
       return Status::BadInput(Where{.file = source, .line = number, .field = "kind"},
-                              "value '" + kind + "' is not cut, lead-in or lead-out");
+                              "value '" + std::string(kind) + "' is not cut, lead-in or lead-out");
     }
-    FL_RETURN_IF_ERROR(num("u", &cl.u));
-    FL_RETURN_IF_ERROR(num("v", &cl.v));
-    FL_RETURN_IF_ERROR(num("cc_x", &cl.cc.x()));
-    FL_RETURN_IF_ERROR(num("cc_y", &cl.cc.y()));
-    FL_RETURN_IF_ERROR(num("cc_z", &cl.cc.z()));
-    FL_RETURN_IF_ERROR(num("nx", &cl.normal.x()));
-    FL_RETURN_IF_ERROR(num("ny", &cl.normal.y()));
-    FL_RETURN_IF_ERROR(num("nz", &cl.normal.z()));
-    FL_RETURN_IF_ERROR(num("lift_mm", &cl.lift_mm));
+    FL_RETURN_IF_ERROR(num(kU, "u", &cl.u));
+    FL_RETURN_IF_ERROR(num(kV, "v", &cl.v));
+    FL_RETURN_IF_ERROR(num(kCcX, "cc_x", &cl.cc.x()));
+    FL_RETURN_IF_ERROR(num(kCcY, "cc_y", &cl.cc.y()));
+    FL_RETURN_IF_ERROR(num(kCcZ, "cc_z", &cl.cc.z()));
+    FL_RETURN_IF_ERROR(num(kNx, "nx", &cl.normal.x()));
+    FL_RETURN_IF_ERROR(num(kNy, "ny", &cl.normal.y()));
+    FL_RETURN_IF_ERROR(num(kNz, "nz", &cl.normal.z()));
+    FL_RETURN_IF_ERROR(num(kLift, "lift_mm", &cl.lift_mm));
     if (std::abs(cl.normal.norm() - 1) > 1e-9) {
       return Status::BadInput(Where{.file = source, .line = number, .field = "nx"},
                               "the normal (nx, ny, nz) is not a unit vector");
