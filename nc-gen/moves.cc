@@ -33,6 +33,12 @@ Result<MoveList> BuildMoveList(const Toolpath& path, const std::vector<Eigen::Ve
   list.header.spindle_rpm = tp.spindle_rpm;
   list.header.passes = path.passes;
   list.safe_z_mm = safe_z_mm;
+  // One move per CL point, four more per pass (retract, comment, rapid, set feed) and three at the ends: the
+  // list is allocated once (a million moves grown by doubling would hold half as many again at its peak).
+  std::size_t passes = 0;
+  for (std::size_t k = 0; k < path.points.size(); ++k)
+    passes += k == 0 || path.points[k].pass != path.points[k - 1].pass;
+  list.moves.reserve(path.points.size() + 4 * passes + 3);
 
   Eigen::Vector3d at = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
   const auto retract = [&](int pass, const std::string& source) {

@@ -211,9 +211,9 @@ void ProgramText::Comment(const std::string& text) {
 
 std::string ProgramText::Num(double value) const { return FormatFixed(value, options_.decimals); }
 
-Result<std::string> ProgramText::Finish() const {
+Result<std::string> ProgramText::Finish() {
   if (!error_.ok()) return error_;
-  return out_;
+  return std::move(out_);
 }
 
 std::string PlainComment(const std::string& text) {
@@ -227,6 +227,7 @@ std::string PlainComment(const std::string& text) {
 void WriteWordAddressBody(const MoveList& list, const std::string& rapid, const std::string& feed,
                           std::string (*comment)(const std::string&), ProgramText* w,
                           const std::string& length_offset) {
+  w->Reserve(32 * list.moves.size());  // "G1 X-123.4567 Y-123.4567 Z-12.3456" and a newline is about 32
   double modal_feed = -1;
   bool offset_written = length_offset.empty();
   for (const Move& m : list.moves) {

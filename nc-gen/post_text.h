@@ -29,10 +29,12 @@ class ProgramText {
   // A continuation line of the block before, never numbered, indented by four spaces (Heidenhain's
   // multi-line cycle blocks).
   void Continuation(const std::string& text);
+  // Room for `bytes` more characters, allocated once (a million-line program).
+  void Reserve(std::size_t bytes) { out_.reserve(out_.size() + bytes); }
   // The coordinate value with PostOptions::decimals; never "-0.000".
   std::string Num(double value) const;
-  // The program, or the first line-length refusal.
-  Result<std::string> Finish() const;
+  // The program (moved out: call once, last), or the first line-length refusal.
+  Result<std::string> Finish();
 
  private:
   std::string NumberPrefix(bool numbered);
