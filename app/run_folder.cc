@@ -241,6 +241,8 @@ Result<RunFolder> ReadRunFolder(const fs::path& dir) {
   run.q = face.surface;
   FL_ASSIGN_OR_RETURN(run.toolpath, nc::ReadToolpathFile(dir / "toolpath" / "toolpath.csv"));
   run.cutter_locations = nc::CutterLocationsOf(run.toolpath);
+  // The tool that cut the part is the tool path's (the planner may choose another than the part's).
+  run.part.toolpath.tool = run.toolpath.options.tool;
   FL_ASSIGN_OR_RETURN(const PlanWithApproaches plan, ReadPlanJson(dir / "toolpath" / "probing_plan.json"));
   run.plan = plan.plan;
   return run;

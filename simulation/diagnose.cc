@@ -150,6 +150,10 @@ Status DiagnoseOptions::Validate() const {
   if (!(alias_alpha > 0 && alias_alpha < 1)) {
     return Status::BadInput(Where{.field = "alias_alpha"}, "must be in (0, 1)");
   }
+  if (!(alias_bic >= 0)) return Status::BadInput(Where{.field = "alias_bic"}, "must be >= 0");
+  if (!(pair_alias_share >= 0 && pair_alias_share <= 1)) {
+    return Status::BadInput(Where{.field = "pair_alias_share"}, "must be in [0, 1]");
+  }
   if (max_causes < 1) return Status::BadInput(Where{.field = "max_causes"}, "must be >= 1");
   if (!(min_share >= 0 && min_share < 1)) return Status::BadInput(Where{.field = "min_share"}, "must be in [0, 1)");
   if (knn < 1) return Status::BadInput(Where{.field = "knn"}, "must be >= 1");

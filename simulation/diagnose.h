@@ -20,7 +20,12 @@
 //      fits a sliver of it.
 //   4. Identifiability: a selected term s and a candidate c are aliases when, in the model with both,
 //      s is not significant at `alias_alpha` given c and the rest (c can do s's work on this design:
-//      this path, this plan, these times). Alias edges joined into connected groups: a group of two
+//      this path, this plan, these times). A minor selected term (removing < `pair_alias_share` of
+//      the variance given the others) is also aliased with two candidates that together, in its place,
+//      fit with plausible values and a BIC less than `alias_bic` worse (Kass & Raftery 1995: not very
+//      strong evidence): a z scale on a dome standing in for a tool radius and a deflection. The term
+//      that carries the signal is not so tested: one effect against a pair in just the right
+//      proportion is parsimony's case. Alias edges joined into connected groups: a group of two
 //      or more is reported as one finding — "one or more of: ...; these data cannot tell them apart"
 //      — with its combined prediction and gain, and no parameter of its members is printed. A single
 //      parameter of a selected effect joins a group when it is significant without a candidate and
@@ -65,8 +70,12 @@ namespace formloop::sim {
 struct DiagnoseOptions {
   double alpha = 0.01;        // family-wise level of the F test per step (spec: 0.01)
   double alias_alpha = 0.01;  // a selected term not significant at this level given a candidate is its alias
-  double z_critical = 2.326;  // residual Moran's z above which the residual is "systematic" (α = 0.01)
-  double min_share = 0.3;     // of the systematic variance an effect must explain to be named (see above)
+  // ... and aliased with two candidates whose model in its place is worse by less than this BIC (0: no
+  // pair test).
+  double alias_bic = 10.0;
+  double pair_alias_share = 0.1;  // ... for a selected term that removes less than this share of the variance
+  double z_critical = 2.326;      // residual Moran's z above which the residual is "systematic" (α = 0.01)
+  double min_share = 0.3;         // of the systematic variance an effect must explain to be named (see above)
   double confounded_correlation = 0.95;
   int knn = 8;                          // Moran's I weights
   int max_causes = 8;                   // selected terms (a pooled set-up counts once per part)

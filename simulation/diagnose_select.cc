@@ -252,6 +252,20 @@ JointValues Joint(const Problem& prob, const std::vector<TermFit>& s) {
   return j;
 }
 
+// How closely candidate columns `c` can stand in for s[k]: the multiple correlation of s[k]'s fitted
+// contribution with c, both taken orthogonal to the other selected terms (1 = c does all its work).
+double PartialCorrelation(const std::vector<TermFit>& s, int k, const Eigen::MatrixXd& c, const Fit& joint) {
+  int offset = 0;
+  for (int j = 0; j < k; ++j) offset += static_cast<int>(s[static_cast<std::size_t>(j)].columns.cols());
+  const Eigen::MatrixXd& own = s[static_cast<std::size_t>(k)].columns;
+  const Eigen::VectorXd contribution = own * joint.beta.segment(offset, own.cols());
+  const Eigen::MatrixXd others = DesignOf(s, k);
+  const double alone = LeastSquares(others, contribution).rss;
+  if (!(alone > 0)) return 0.0;
+  const double with_c = LeastSquares(Concat(others, c), contribution).rss;
+  return std::sqrt(std::clamp(1.0 - with_c / alone, 0.0, 1.0));
+}
+
 }  // namespace
 
 Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const DiagnoseOptions& options) {
@@ -420,6 +434,54 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
         if (column_p(base, col, n - p_s) < options.alias_alpha && column_p(with.fit, col, dof) >= options.alias_alpha &&
             sel.PlausibleFit(with)) {
           uf.Join(ns + np + static_cast<int>(m), ns + c);
+        }
+      }
+    }
+    // Two candidates together can do a selected term's work that neither does alone (a z scale on a
+    // dome standing in for a tool radius and a deflection): s[k] is aliased with the pair when the
+    // model with the pair in its place is plausible and not very strongly worse by BIC (ΔBIC <
+    // alias_bic; Kass & Raftery 1995). The extra parameters of the pair count against it, so a single
+    // effect is not grouped with a pair of look-alikes that needs more parameters to fit as well.
+    // Only a minor term is tested so (one that removes less than `pair_alias_share` of the residual
+    // variance given the others): for the term that carries the signal, one effect against a pair that
+    // must come in the right proportion is parsimony's case (a scale in x on a saddle is exactly a
+    // scale in y and z together; named, the single effect is right far more often than not), while a
+    // minor term is of the size of its neighbours' model error. Linear candidates that each reproduce
+    // part of s[k]'s contribution (partial correlation ≥ 0.3) are paired.
+    if (options.alias_bic > 0) {
+      const double bic_s = sel.Bic(base.rss, p_s);
+      for (int k = 0; k < ns; ++k) {
+        if (!(rss0 > 0) || sel.FitOf(s, k).rss - base.rss >= options.pair_alias_share * rss0) continue;
+        std::vector<int> near;
+        std::vector<Eigen::MatrixXd> near_columns;
+        for (int c = 0; c < np; ++c) {
+          const Term& term = pool[static_cast<std::size_t>(c)];
+          if (!term.effect->linear()) continue;
+          Eigen::MatrixXd cols = sel.With(s, term).columns;
+          if (PartialCorrelation(s, k, cols, base) < 0.3) continue;
+          near.push_back(c);
+          near_columns.push_back(std::move(cols));
+        }
+        const Eigen::MatrixXd others = DesignOf(s, k);
+        const int q = static_cast<int>(s[static_cast<std::size_t>(k)].columns.cols());
+        for (std::size_t a = 0; a < near.size(); ++a) {
+          for (std::size_t b = a + 1; b < near.size(); ++b) {
+            const Eigen::MatrixXd pair = Concat(near_columns[a], near_columns[b]);
+            const Fit swapped = LeastSquares(Concat(others, pair), prob.r);
+            const double delta_bic = sel.Bic(swapped.rss, p_s - q + static_cast<int>(pair.cols())) - bic_s;
+            if (!(delta_bic < options.alias_bic)) continue;
+            const Eigen::Index at = others.cols();
+            const Eigen::Index wa = near_columns[a].cols(), wb = near_columns[b].cols();
+            const Eigen::VectorXd va = swapped.beta.segment(at, wa), vb = swapped.beta.segment(at + wa, wb);
+            const Term& ta = pool[static_cast<std::size_t>(near[a])];
+            const Term& tb = pool[static_cast<std::size_t>(near[b])];
+            if (!sel.Plausible(ta, std::vector<double>(va.data(), va.data() + wa)) ||
+                !sel.Plausible(tb, std::vector<double>(vb.data(), vb.data() + wb))) {
+              continue;
+            }
+            uf.Join(k, ns + near[a]);
+            uf.Join(k, ns + near[b]);
+          }
         }
       }
     }

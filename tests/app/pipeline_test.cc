@@ -317,6 +317,11 @@ TEST_F(PipelineTest, RegressFailsOnAPerturbedGoldenAndPassesAfterUpdate) {
   std::string out, err;
   ASSERT_EQ(testing::RunFormloop(args + " --update", &out, &err), 0) << err;  // goldens of this subset
   ASSERT_EQ(testing::RunFormloop(args, &out, &err), 0) << err;
+  // The truth line (issue 20): on this dome a z scale fits the 8 µm ball and the deflection of vm-mill-a
+  // with one parameter; it is reported in an alias group with them, never named.
+  const Json table = Json::parse(out);
+  EXPECT_EQ(table["truth"]["named_not_in_profile"], 0) << table["parts"][0]["truth"].dump();
+  EXPECT_EQ(table["truth"]["true_missed"], 0) << table["parts"][0]["truth"].dump();
   Json golden = ReadJsonFile(goldens / "reg-dome-a.json").value();
   golden["figures"]["form_error_um"][0] = golden["figures"]["form_error_um"][0].get<double>() * 1.5;
   ASSERT_TRUE(WriteJsonFile(goldens / "reg-dome-a.json", golden).ok());
