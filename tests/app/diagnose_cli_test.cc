@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "app/part.h"
+#include "app/run_folder.h"
 #include "core/json_io.h"
 #include "metrology/probe.h"
 #include "nc-gen/toolpath.h"
@@ -33,7 +34,9 @@ class DiagnoseCliTest : public ::testing::Test {
 
   // A run folder as `formloop run` leaves it (part, Q, tool path, probing plan), built directly and
   // lighter (8 µm scallop, 18 × 18 probes) so the test stays quick.
-  fs::path MakeRun(const std::string& name, const std::string& surface) {
+  // `planned_radius_mm` > 0: the tool path is cut with that ball instead of the part file's (as when the
+  // case's plan chooses another tool).
+  fs::path MakeRun(const std::string& name, const std::string& surface, double planned_radius_mm = 0) {
     const fs::path run = dir_ / name;
     fs::create_directories(run / "inputs");
     fs::create_directories(run / "surface");
@@ -47,8 +50,9 @@ class DiagnoseCliTest : public ::testing::Test {
     auto analytic = recon::MakeReferenceSurface(surface);
     const recon::BSplineSurface q = recon::FitAnalytic(*analytic.value(), 30, 30, {}, 0, 1, nullptr).value();
     EXPECT_TRUE(recon::WriteStep(run / "surface" / "Q.step", q, name).ok());
-    EXPECT_TRUE(
-        nc::WriteToolpathFile(run / "toolpath" / "toolpath.csv", nc::PlanRaster(q, part->toolpath).value()).ok());
+    nc::ToolpathOptions planned = part->toolpath;
+    if (planned_radius_mm > 0) planned.tool.radius_mm = planned_radius_mm;
+    EXPECT_TRUE(nc::WriteToolpathFile(run / "toolpath" / "toolpath.csv", nc::PlanRaster(q, planned).value()).ok());
     EXPECT_TRUE(WriteJsonFile(run / "toolpath" / "probing_plan.json",
                               metrology::PlanProbingGrid(q, 18, 18, 0.05).value().ToJson())
                     .ok());
@@ -185,6 +189,20 @@ TEST_F(DiagnoseCliTest, APlanAndALogAloneScreenTheEffectsThatNeedNoToolPath) {
                         &out, &err),
             2);
   EXPECT_NE(err.find("--probe-profile"), std::string::npos) << err;
+}
+
+// The planner may cut with another tool than the part file names (the retrieved case's plan): a run
+// folder read back for simulate/diagnose carries the tool of the tool path. Reading the part file's
+// radius instead made reg-dome-a's residuals 2,017 µm instead of 18 µm and its causes nonsense.
+TEST_F(DiagnoseCliTest, ARunFolderReadBackCarriesTheToolThatCutThePart) {
+  const fs::path run = MakeRun("other_tool", "saddle", 5.0);
+  const auto part = ReadPart(run / "inputs" / "part.json");
+  ASSERT_TRUE(part.ok()) << part.status().message();
+  ASSERT_NE(part->toolpath.tool.radius_mm, 5.0);
+  const auto folder = ReadRunFolder(run);
+  ASSERT_TRUE(folder.ok()) << folder.status().message();
+  EXPECT_EQ(folder->toolpath.options.tool.radius_mm, 5.0);
+  EXPECT_EQ(folder->part.toolpath.tool.radius_mm, 5.0);
 }
 
 TEST_F(DiagnoseCliTest, BadInputIsRefusedWithTheFieldNamedAndNothingWritten) {
