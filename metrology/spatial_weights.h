@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -43,6 +44,24 @@ Result<IslandPolicy> ParseIslandPolicy(std::string_view text, const std::string&
 const char* IslandPolicyName(IslandPolicy policy);  // "refuse" / "drop" / "zero"
 
 struct SpatialWeights {
+  SpatialWeights() = default;
+  SpatialWeights(const SpatialWeights&) = default;
+  SpatialWeights& operator=(const SpatialWeights&) = default;
+  // Eigen 3.4's SparseMatrix has no move operations: moving swaps its storage instead of copying it
+  // (three copies of 10 MB for k = 8 on 1e5 points on the way out through Result otherwise).
+  SpatialWeights(SpatialWeights&& other) noexcept { *this = std::move(other); }
+  SpatialWeights& operator=(SpatialWeights&& other) noexcept {
+    if (this != &other) {
+      Eigen::SparseMatrix<double, Eigen::RowMajor> released;
+      w.swap(released);
+      w.swap(other.w);
+      style = other.style;
+      islands = other.islands;
+      island_indices = std::move(other.island_indices);
+    }
+    return *this;
+  }
+
   Eigen::SparseMatrix<double, Eigen::RowMajor> w;
   WeightStyle style = WeightStyle::kRowStandardised;
   int islands = 0;                  // rows without neighbours

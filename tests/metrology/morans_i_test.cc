@@ -316,6 +316,44 @@ TEST(MoranTest, ZeroRowsKeepNAndTheRandomisationMomentsStayExact) {
   }
 }
 
+// S0, S1, S2 straight from the compressed rows (no w + wᵀ formed) against the dense definitions, for
+// asymmetric k-NN rows, symmetric band and Delaunay rows, zero rows, unequal values and rows whose
+// columns are not in order.
+TEST(MoranTest, WeightSumsMatchTheDenseDefinitionsForAnyLayout) {
+  const int n = 300;
+  const Case c = MakeCase(n, 1, 31);
+  const Eigen::MatrixXd& uv = c.uv;
+  std::vector<std::pair<std::string, SpatialWeights>> cases;
+  for (WeightStyle style : {WeightStyle::kBinary, WeightStyle::kRowStandardised}) {
+    cases.emplace_back("knn 5", KnnWeights(uv, 5, style).value());
+    cases.emplace_back("band 6", DistanceBandWeights(uv, 6, style).value());
+    cases.emplace_back("delaunay", DelaunayWeights(uv, style).value());
+  }
+  // Unequal values and a diagonal entry, columns stored out of order within rows.
+  {
+    const std::vector<int> outer = {0, 3, 4, 4, 7};
+    const std::vector<int> inner = {3, 0, 1, 2, 2, 0, 1};
+    const std::vector<double> values = {0.5, 2.0, 1.25, 3.0, 0.75, 4.0, 1.5};
+    SpatialWeights odd;
+    odd.w = Eigen::Map<const Eigen::SparseMatrix<double, Eigen::RowMajor>>(4, 4, 7, outer.data(), inner.data(),
+                                                                           values.data());
+    odd.islands = 1;
+    odd.island_indices = {2};
+    cases.emplace_back("unsorted rows", odd);
+  }
+  for (const auto& [label, w] : cases) {
+    const Eigen::MatrixXd dense = Eigen::MatrixXd(w.w);
+    const Eigen::VectorXd both = dense.rowwise().sum() + dense.colwise().sum().transpose();
+    const double s0 = dense.sum(), s1 = 0.5 * (dense + dense.transpose()).squaredNorm(), s2 = both.squaredNorm();
+    const Eigen::VectorXd values = w.n() == n ? c.y : Eigen::VectorXd(Eigen::Vector4d(1.0, 3.0, 2.5, 0.5));
+    const auto r = MoranI(values, w, {.islands = IslandPolicy::kZero});
+    ASSERT_TRUE(r.ok()) << label << ": " << r.status().ToString();
+    EXPECT_NEAR(r->s0, s0, 1e-13 * s0) << label;
+    EXPECT_NEAR(r->s1, s1, 1e-13 * s1) << label;
+    EXPECT_NEAR(r->s2, s2, 1e-13 * s2) << label;
+  }
+}
+
 TEST(MoranTest, DropPolicyEqualsMoranOnTheKeptUnits) {
   const std::vector<std::vector<int>> nb = {{1, 2}, {0}, {3, 6}, {2, 4}, {3}, {}, {0, 2, 4}};
   const auto w = WeightsFromNeighbours(nb, WeightStyle::kRowStandardised);
