@@ -35,6 +35,7 @@
 
 #include <Eigen/Dense>
 
+#include "core/parallel.h"
 #include "reconstruction/bspline_surface.h"
 #include "reconstruction/occt_support.h"
 #include "reconstruction/point_checks.h"
@@ -67,6 +68,9 @@ constexpr double kMaxSpanCacheBytes = 64e6;
 constexpr double kGridCellDeltas = 2;
 // Start grid of the one-point Project(surface, p).
 constexpr int kOneShotGrid = 33;
+// Points per parallel chunk of ProjectAll / ProjectEachFrom (about 1 ms of work; fixed, so the chunks
+// and with them the results do not depend on the thread count).
+constexpr long kProjectChunk = 1024;
 
 std::string Num(double value) { return FormatSignificant(value, 10); }
 
@@ -644,26 +648,60 @@ Result<FootPoint> FootPointProjector::ProjectFrom(const Eigen::Vector3d& p, doub
 }
 
 Result<std::vector<FootPoint>> FootPointProjector::ProjectAll(const std::vector<Eigen::Vector3d>& points) const {
-  std::size_t index = 0;
-  try {
-    return impl_->Visit([&](auto& eval) -> Result<std::vector<FootPoint>> {
-      std::vector<FootPoint> out;
-      out.reserve(points.size());
-      std::vector<std::pair<double, int>> found;  // reused by every point
-      for (; index < points.size(); ++index) {
-        Result<FootPoint> foot = MarkTrim(impl_->trim.get(), impl_->GlobalProject(eval, points[index], found));
-        if (!foot.ok()) {
-          return Status(foot.status().code(), "points[" + std::to_string(index) + "] of " +
-                                                  std::to_string(points.size()) + ": " + foot.status().message());
+  const long n = static_cast<long>(points.size());
+  std::vector<FootPoint> out(points.size());
+  // Per chunk: the first index that failed there (-1: none) and why.
+  const long chunks = (n + kProjectChunk - 1) / kProjectChunk;
+  std::vector<long> failed(static_cast<std::size_t>(chunks), -1);
+  std::vector<Status> why(static_cast<std::size_t>(chunks));
+  ParallelFor(n, kProjectChunk, [&](long begin, long end) {
+    const auto chunk = static_cast<std::size_t>(begin / kProjectChunk);
+    long index = begin;
+    try {
+      impl_->Visit([&](auto& eval) {
+        std::vector<std::pair<double, int>> found;  // reused by every point of the chunk
+        for (; index < end; ++index) {
+          const auto i = static_cast<std::size_t>(index);
+          Result<FootPoint> foot = MarkTrim(impl_->trim.get(), impl_->GlobalProject(eval, points[i], found));
+          if (!foot.ok()) {
+            failed[chunk] = index;
+            why[chunk] = foot.status();
+            return;
+          }
+          out[i] = *foot;
         }
-        out.push_back(*foot);
-      }
-      return out;
-    });
-  } catch (const Standard_Failure& failure) {
-    return Status::Internal("projection of points[" + std::to_string(index) +
-                            "]: OpenCASCADE failed: " + occt::Message(failure));
+      });
+    } catch (const Standard_Failure& failure) {
+      failed[chunk] = index;
+      why[chunk] = Status::Internal("OpenCASCADE failed: " + occt::Message(failure));
+    }
+  });
+  for (std::size_t c = 0; c < failed.size(); ++c) {
+    if (failed[c] >= 0) {
+      return Status(why[c].code(), "points[" + std::to_string(failed[c]) + "] of " + std::to_string(points.size()) +
+                                       ": " + why[c].message());
+    }
   }
+  return out;
+}
+
+std::vector<Result<FootPoint>> FootPointProjector::ProjectEachFrom(const std::vector<Eigen::Vector3d>& points,
+                                                                   const std::vector<double>& u0,
+                                                                   const std::vector<double>& v0) const {
+  std::vector<Result<FootPoint>> out(points.size(), Status::Internal("ProjectEachFrom: not projected"));
+  if (u0.size() != points.size() || v0.size() != points.size()) {
+    for (auto& foot : out) {
+      foot = Status::Internal("ProjectEachFrom: " + std::to_string(points.size()) + " points but " +
+                              std::to_string(u0.size()) + " u and " + std::to_string(v0.size()) + " v starts");
+    }
+    return out;
+  }
+  ParallelFor(static_cast<long>(points.size()), kProjectChunk, [&](long begin, long end) {
+    for (auto i = static_cast<std::size_t>(begin); i < static_cast<std::size_t>(end); ++i) {
+      out[i] = ProjectFrom(points[i], u0[i], v0[i]);
+    }
+  });
+  return out;
 }
 
 const ParamDomain& FootPointProjector::domain() const { return impl_->domain; }

@@ -93,9 +93,14 @@ class FootPointProjector {
   // distance, the nearest one when the start is in its basin (e.g. the planned parameters of a probe
   // point). No kd-tree look-up and no global check.
   Result<FootPoint> ProjectFrom(const Eigen::Vector3d& p, double u0, double v0) const;
-  // Project for every point, in order, on the calling thread. The first point that fails stops the
-  // run, and the error names its index ("points[17]").
+  // Project for every point, on the cores --threads allows (core/parallel.h: fixed chunks of points,
+  // each point's foot independent of the others, so the same bytes for any thread count). A failing
+  // point stops its chunk; the error names the first failing index ("points[17]"), as one thread would.
   Result<std::vector<FootPoint>> ProjectAll(const std::vector<Eigen::Vector3d>& points) const;
+  // ProjectFrom(points[i], u0[i], v0[i]) for every i, in parallel like ProjectAll; each point keeps its
+  // own Result (callers such as the scattered fit's parameter correction keep a failed point's start).
+  std::vector<Result<FootPoint>> ProjectEachFrom(const std::vector<Eigen::Vector3d>& points,
+                                                 const std::vector<double>& u0, const std::vector<double>& v0) const;
 
   const ParamDomain& domain() const;
   int seed_grid_u() const;  // samples along u and v actually used

@@ -179,9 +179,11 @@ Result<CorrectedFit> FitWithCorrection(const std::vector<Vector3d>& points, cons
     // Only Newton from the current parameters is used: the smallest start grid (no kd-tree searches).
     FL_ASSIGN_OR_RETURN(const FootPointProjector projector,
                         FootPointProjector::Build(fit.surface, ProjectorOptions{.seed_grid = 2}));
+    // The projections on the cores --threads allows (fixed chunks), the sums below in point order.
+    const std::vector<Result<FootPoint>> feet = projector.ProjectEachFrom(points, u, v);
     for (int i = 0; i < m; ++i) {
       const std::size_t si = static_cast<std::size_t>(i);
-      const Result<FootPoint> foot = projector.ProjectFrom(points[si], u[si], v[si]);
+      const Result<FootPoint>& foot = feet[si];
       if (foot.ok()) {
         fit.u[si] = foot->u;
         fit.v[si] = foot->v;

@@ -17,6 +17,7 @@
 #include <gtest/gtest.h>
 #include <GeomAPI_ProjectPointOnSurf.hxx>
 
+#include "core/parallel.h"
 #include "core/random.h"
 #include "reconstruction/bspline_surface.h"
 #include "reconstruction/foot_point.h"
@@ -413,6 +414,63 @@ TEST(FootPointProjector, ThreadsShareOneProjector) {
       EXPECT_EQ(result[k].v, (*reference)[k].v);
     }
   }
+}
+
+// The bytes of a foot point's fields (for "identical on any thread count").
+std::string Bytes(const FootPoint& f) {
+  const double values[] = {f.u,          f.v,          f.foot.x(),   f.foot.y(),     f.foot.z(),
+                           f.normal.x(), f.normal.y(), f.normal.z(), f.deviation_mm, f.distance_mm};
+  return std::string(reinterpret_cast<const char*>(values), sizeof values) + (f.on_boundary ? "b" : "-") +
+         (f.outside_trim ? "t" : "-");
+}
+
+// --threads: ProjectAll and ProjectEachFrom run in fixed chunks on TBB's workers; one and two threads
+// give the same bytes, and a failure is reported at the first failing index either way.
+TEST(FootPointProjector, OneAndTwoThreadsGiveTheSameBytes) {
+  auto q = FitAnalytic(*Make("egg_box"), 41, 41, GridFitOptions{}, 0, 1, nullptr);
+  ASSERT_TRUE(q.ok());
+  const auto projector = FootPointProjector::Build(*q);
+  ASSERT_TRUE(projector.ok());
+  Rng rng(26);
+  std::vector<Vector3d> points;
+  std::vector<double> u0, v0;
+  for (int k = 0; k < 5000; ++k) {
+    points.emplace_back(rng.Uniform(-5, 105), rng.Uniform(-5, 85), rng.Uniform(-3, 3));
+    u0.push_back(rng.Uniform(0, 100));
+    v0.push_back(rng.Uniform(0, 80));
+  }
+  std::string all[2], each[2];
+  for (int threads : {1, 2}) {
+    SetThreadCount(threads);
+    const auto feet = projector->ProjectAll(points);
+    ASSERT_TRUE(feet.ok()) << feet.status().ToString();
+    for (const FootPoint& f : *feet) all[threads - 1] += Bytes(f);
+    for (const auto& f : projector->ProjectEachFrom(points, u0, v0)) {
+      each[threads - 1] += f.ok() ? Bytes(*f) : f.status().ToString();
+    }
+  }
+  EXPECT_EQ(all[0].size(), 5000 * (10 * sizeof(double) + 2));
+  EXPECT_TRUE(all[0] == all[1]);
+  EXPECT_TRUE(each[0] == each[1]);
+  // ProjectEachFrom is ProjectFrom point by point.
+  for (std::size_t k = 0; k < points.size(); k += 97) {
+    const auto one = projector->ProjectFrom(points[k], u0[k], v0[k]);
+    ASSERT_TRUE(one.ok());
+    EXPECT_EQ(Bytes(*one), each[0].substr(k * (10 * sizeof(double) + 2), 10 * sizeof(double) + 2)) << k;
+  }
+  // Two bad points in different chunks: the first is named on either thread count.
+  points[3333].x() = std::nan("");
+  points[1500].z() = std::numeric_limits<double>::infinity();
+  for (int threads : {1, 2}) {
+    SetThreadCount(threads);
+    const auto feet = projector->ProjectAll(points);
+    ASSERT_FALSE(feet.ok());
+    EXPECT_NE(feet.status().message().find("points[1500] of 5000"), std::string::npos) << feet.status().message();
+  }
+  SetThreadCount(0);
+  const auto mismatched = projector->ProjectEachFrom(points, u0, {});
+  ASSERT_EQ(mismatched.size(), points.size());
+  EXPECT_FALSE(mismatched[0].ok());
 }
 
 // The one-point conveniences agree with the projector.
