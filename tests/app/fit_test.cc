@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <string>
 
 #include <unistd.h>
@@ -250,6 +251,34 @@ TEST_F(FitTest, BadInputIsRefusedWithAClearErrorAndNoOutput) {
 
 int RunBinary(const std::string& args, std::string* out, std::string* err, const fs::path&) {
   return testing::RunFormloop(args, out, err);
+}
+
+// The global --threads: the scattered fit (its parameter correction projects in parallel) and
+// `project` write the same bytes on one and two threads.
+TEST_F(FitTest, ScatteredFitAndProjectAreTheSameBytesOnOneAndTwoThreads) {
+  ASSERT_TRUE(WritePoints(dir_ / "p.csv", Samples("egg_box", 6000, 26)).ok());
+  ASSERT_TRUE(WritePoints(dir_ / "near.csv", Samples("egg_box", 5000, 27, 0.3)).ok());
+  std::string bytes[2][2], out, err;
+  for (int threads : {1, 2}) {
+    const std::string t = std::to_string(threads);
+    const fs::path q = dir_ / ("Q" + t + ".step"), dev = dir_ / ("dev" + t + ".csv");
+    ASSERT_EQ(testing::RunFormloop("--threads " + t + " fit " + (dir_ / "p.csv").string() + " --out " + q.string(),
+                                   &out, &err),
+              0)
+        << err;
+    ASSERT_EQ(testing::RunFormloop("--threads " + t + " project --surface " + q.string() + " --points " +
+                                       (dir_ / "near.csv").string() + " --out " + dev.string(),
+                                   &out, &err),
+              0)
+        << err;
+    for (int f = 0; f < 2; ++f) {
+      std::ifstream in(f == 0 ? q : dev, std::ios::binary);
+      bytes[threads - 1][f] = std::string(std::istreambuf_iterator<char>(in), {});
+    }
+  }
+  EXPECT_GT(bytes[0][1].size(), 5000u * 20);
+  EXPECT_TRUE(bytes[0][0] == bytes[1][0]) << "the fitted STEP differs between 1 and 2 threads";
+  EXPECT_TRUE(bytes[0][1] == bytes[1][1]) << "the deviations differ between 1 and 2 threads";
 }
 
 TEST_F(FitTest, BinaryFitAndProject) {
