@@ -261,7 +261,9 @@ TEST_F(FitTest, ScatteredFitAndProjectAreTheSameBytesOnOneAndTwoThreads) {
   std::string bytes[2][2], out, err;
   for (int threads : {1, 2}) {
     const std::string t = std::to_string(threads);
-    const fs::path q = dir_ / ("Q" + t + ".step"), dev = dir_ / ("dev" + t + ".csv");
+    // The same file names in separate folders: the STEP header names the file.
+    fs::create_directories(dir_ / t);
+    const fs::path q = dir_ / t / "Q.step", dev = dir_ / t / "dev.csv";
     ASSERT_EQ(testing::RunFormloop("--threads " + t + " fit " + (dir_ / "p.csv").string() + " --out " + q.string(),
                                    &out, &err),
               0)
