@@ -3,11 +3,14 @@
 #include <algorithm>
 #include <cctype>
 #include <memory>
+#include <optional>
+#include <sstream>
 #include <system_error>
 
 #include <BRepBuilderAPI_NurbsConvert.hxx>
 #include <BRepTools.hxx>
 #include <BRep_Tool.hxx>
+#include <BinTools.hxx>
 #include <Geom_BSplineSurface.hxx>
 #include <IFSelect_ReturnStatus.hxx>
 #include <IGESControl_Reader.hxx>
@@ -27,6 +30,7 @@
 #include <XSControl_TransferReader.hxx>
 #include <XSControl_WorkSession.hxx>
 
+#include "core/child_process.h"
 #include "reconstruction/occt_support.h"
 #include "reconstruction/trim.h"
 
@@ -49,14 +53,19 @@ std::string Trimmed(const Handle(TCollection_HAsciiString) & text) {
 
 // A file read and transferred, with its faces in explorer order.
 struct LoadedCad {
-  std::unique_ptr<XSControl_Reader> reader;
   CadFormat format = CadFormat::kStep;
   std::vector<TopoDS_Face> faces;
   std::vector<CadFaceInfo> infos;
   std::string file_unit;
 };
 
-std::string FaceName(const LoadedCad& cad, const TopoDS_Face& face) {
+// The reader with the file's transferred shape, inside the child process (ReadInChild).
+struct ReaderCad {
+  std::unique_ptr<XSControl_Reader> reader;
+  CadFormat format = CadFormat::kStep;
+};
+
+std::string FaceName(const ReaderCad& cad, const TopoDS_Face& face) {
   const Handle(XSControl_TransferReader) transfer = cad.reader->WS()->TransferReader();
   if (transfer.IsNull()) return "";
   // Mode 1 finds faces transferred on their own (a solid's); faces of open shells or compounds are found
@@ -85,7 +94,7 @@ std::string UnitSymbol(const std::string& name) {
   return n;
 }
 
-std::string FileUnit(LoadedCad& cad) {
+std::string FileUnit(const ReaderCad& cad) {
   if (cad.format == CadFormat::kStep) {
     TColStd_SequenceOfAsciiString lengths, angles, solid_angles;
     static_cast<STEPControl_Reader&>(*cad.reader).FileUnits(lengths, angles, solid_angles);
@@ -125,6 +134,131 @@ Status CheckIgesUnit(const std::filesystem::path& path, XSControl_Reader& reader
   return Status::Ok();
 }
 
+// The child's answer to the parent (ReadInChild): netstrings "<length>:<bytes>", first "ok" or the error's
+// StatusCode and message; after "ok" the file's unit, the face count, each face's name and surface type, and
+// the transferred shape in OpenCASCADE's binary BRep format (BinTools: every double as its 8 bytes, so the
+// shape the parent reads back is the one the reader built, bit for bit).
+void PutField(std::string& out, const std::string& field) {
+  out += std::to_string(field.size());
+  out += ':';
+  out += field;
+}
+
+// The next field of `in` from `at` (advanced past it); nullopt when the message is cut short or malformed.
+std::optional<std::string> TakeField(const std::string& in, std::size_t& at) {
+  const std::size_t colon = in.find(':', at);
+  if (colon == std::string::npos || colon == at || colon - at > 18) return std::nullopt;
+  std::size_t length = 0;
+  for (std::size_t k = at; k < colon; ++k) {
+    if (!std::isdigit(static_cast<unsigned char>(in[k]))) return std::nullopt;
+    length = length * 10 + static_cast<std::size_t>(in[k] - '0');
+  }
+  if (length > in.size() - colon - 1) return std::nullopt;
+  at = colon + 1 + length;
+  return in.substr(colon + 1, length);
+}
+
+std::string ErrorMessage(const Status& status) {
+  std::string out;
+  PutField(out, std::to_string(static_cast<int>(status.code())));
+  PutField(out, status.message());
+  return out;
+}
+
+// Reads and transfers the file with OpenCASCADE and describes the result (the child's side).
+std::string ReadInChild(const std::filesystem::path& path, CadFormat format, const std::string& kind) {
+  occt::KeepStdoutClean();
+  ReaderCad cad;
+  cad.format = format;
+  try {
+    if (format == CadFormat::kStep) {
+      cad.reader = std::make_unique<STEPControl_Reader>();
+    } else {
+      cad.reader = std::make_unique<IGESControl_Reader>();
+    }
+    if (cad.reader->ReadFile(path.string().c_str()) != IFSelect_RetDone) {
+      return ErrorMessage(Status::BadInput(
+          Where{.file = path.string()}, "OpenCASCADE could not read this as a " + kind + " file",
+          format == CadFormat::kStep ? "export the part as STEP AP203/AP214/AP242" : "export the part as IGES 5.3"));
+    }
+    if (format == CadFormat::kIges) {
+      if (const Status unit = CheckIgesUnit(path, *cad.reader); !unit.ok()) return ErrorMessage(unit);
+    }
+    cad.reader->TransferRoots();
+    const TopoDS_Shape shape = cad.reader->OneShape();
+    std::vector<TopoDS_Face> faces;
+    for (TopExp_Explorer it(shape, TopAbs_FACE); it.More(); it.Next()) faces.push_back(TopoDS::Face(it.Current()));
+    if (faces.empty()) {
+      return ErrorMessage(Status::BadInput(Where{.file = path.string()}, "the " + kind + " file holds no face",
+                                           "export a surface, a shell or a solid, not only curves or points"));
+    }
+    std::string out;
+    PutField(out, "ok");
+    PutField(out, FileUnit(cad));
+    PutField(out, std::to_string(faces.size()));
+    for (const TopoDS_Face& face : faces) {
+      PutField(out, FaceName(cad, face));
+      TopLoc_Location location;
+      const Handle(Geom_Surface) geom = BRep_Tool::Surface(face, location);
+      PutField(out, geom.IsNull() ? "none" : geom->DynamicType()->Name());
+    }
+    std::ostringstream brep(std::ios::binary);
+    BinTools::Write(shape, brep);
+    PutField(out, brep.str());
+    return out;
+  } catch (const Standard_Failure& failure) {
+    return ErrorMessage(
+        Status::BadInput(Where{.file = path.string()}, "OpenCASCADE failed while reading: " + occt::Message(failure)));
+  }
+}
+
+// The parent's side: the child's message back into a LoadedCad (or its error).
+Result<LoadedCad> FromChild(const std::filesystem::path& path, CadFormat format, const std::string& message) {
+  const Status garbled = Status::Internal("the " + path.string() + " reader process sent an incomplete answer");
+  std::size_t at = 0;
+  const auto head = TakeField(message, at);
+  if (!head) return garbled;
+  if (*head != "ok") {
+    const auto text = TakeField(message, at);
+    int code = 0;
+    for (const char c : *head) code = std::isdigit(static_cast<unsigned char>(c)) ? code * 10 + (c - '0') : -1;
+    if (!text || code <= 0 || code > static_cast<int>(StatusCode::kInternal)) return garbled;
+    return Status(static_cast<StatusCode>(code), *text);
+  }
+  LoadedCad cad;
+  cad.format = format;
+  const auto unit = TakeField(message, at);
+  const auto count_text = TakeField(message, at);
+  if (!unit || !count_text || count_text->empty() || count_text->size() > 9) return garbled;
+  cad.file_unit = *unit;
+  std::size_t count = 0;
+  for (const char c : *count_text) {
+    if (!std::isdigit(static_cast<unsigned char>(c))) return garbled;
+    count = count * 10 + static_cast<std::size_t>(c - '0');
+  }
+  for (std::size_t k = 0; k < count; ++k) {
+    const auto name = TakeField(message, at);
+    const auto type = TakeField(message, at);
+    if (!name || !type) return garbled;
+    cad.infos.push_back(CadFaceInfo{.index = static_cast<int>(k), .name = *name, .surface_type = *type});
+  }
+  const auto brep = TakeField(message, at);
+  if (!brep || at != message.size()) return garbled;
+  try {
+    std::istringstream in(*brep, std::ios::binary);
+    TopoDS_Shape shape;
+    BinTools::Read(shape, in);
+    for (TopExp_Explorer it(shape, TopAbs_FACE); it.More(); it.Next()) cad.faces.push_back(TopoDS::Face(it.Current()));
+  } catch (const Standard_Failure& failure) {
+    return Status::Internal("the shape of " + path.string() + " could not be passed on: " + occt::Message(failure));
+  }
+  if (cad.faces.size() != count) return garbled;
+  return cad;
+}
+
+// OpenCASCADE's readers crash on some damaged files (a null dereference in the STEP translation, an
+// out-of-bounds read in the IGES parser; fuzz/corpus/fuzz_step|fuzz_iges/crash-*). They run in a child
+// process (core/child_process.h): a crash there is an error naming the file, and formloop carries on.
 Result<LoadedCad> Load(const std::filesystem::path& path) {
   FL_ASSIGN_OR_RETURN(const CadFormat format, CadFormatFromPath(path));
   const std::string kind = format == CadFormat::kStep ? "STEP" : "IGES";
@@ -135,43 +269,16 @@ Result<LoadedCad> Load(const std::filesystem::path& path) {
   if (!std::filesystem::is_regular_file(path, ec)) {
     return Status::BadInput("'" + path.string() + "' is not a regular file, expected a " + kind + " file");
   }
-  occt::KeepStdoutClean();
-  LoadedCad cad;
-  cad.format = format;
-  try {
-    if (format == CadFormat::kStep) {
-      cad.reader = std::make_unique<STEPControl_Reader>();
-    } else {
-      cad.reader = std::make_unique<IGESControl_Reader>();
-    }
-    if (cad.reader->ReadFile(path.string().c_str()) != IFSelect_RetDone) {
-      return Status::BadInput(
-          Where{.file = path.string()}, "OpenCASCADE could not read this as a " + kind + " file",
-          format == CadFormat::kStep ? "export the part as STEP AP203/AP214/AP242" : "export the part as IGES 5.3");
-    }
-    if (format == CadFormat::kIges) FL_RETURN_IF_ERROR(CheckIgesUnit(path, *cad.reader));
-    cad.reader->TransferRoots();
-    const TopoDS_Shape shape = cad.reader->OneShape();
-    for (TopExp_Explorer it(shape, TopAbs_FACE); it.More(); it.Next()) cad.faces.push_back(TopoDS::Face(it.Current()));
-    if (cad.faces.empty()) {
-      return Status::BadInput(Where{.file = path.string()}, "the " + kind + " file holds no face",
-                              "export a surface, a shell or a solid, not only curves or points");
-    }
-    for (std::size_t i = 0; i < cad.faces.size(); ++i) {
-      CadFaceInfo info;
-      info.index = static_cast<int>(i);
-      info.name = FaceName(cad, cad.faces[i]);
-      TopLoc_Location location;
-      const Handle(Geom_Surface) geom = BRep_Tool::Surface(cad.faces[i], location);
-      info.surface_type = geom.IsNull() ? "none" : geom->DynamicType()->Name();
-      cad.infos.push_back(std::move(info));
-    }
-    cad.file_unit = FileUnit(cad);
-  } catch (const Standard_Failure& failure) {
-    return Status::BadInput(Where{.file = path.string()},
-                            "OpenCASCADE failed while reading: " + occt::Message(failure));
+  ChildFailure failure;
+  auto message = RunInChildProcess([&] { return ReadInChild(path, format, kind); }, &failure);
+  if (!message.ok()) {
+    if (message.status().code() == StatusCode::kIoError) return message.status();
+    return Status::BadInput(
+        Where{.file = path.string()},
+        "could not be read: OpenCASCADE's " + kind + " reader crashed on it (" + failure.Describe() + ")",
+        "check the file in a CAD system, or export it again");
   }
-  return cad;
+  return FromChild(path, format, *message);
 }
 
 std::string FaceList(const std::vector<CadFaceInfo>& infos) {

@@ -18,6 +18,11 @@
 // face's trimming loops and the file's other faces travel with it as its Trim
 // (reconstruction/trim.h): outside the outer loop and inside holes is not part of the part.
 //
+// Crashes: the file is read and transferred in a child process (core/child_process.h), because OpenCASCADE
+// 7.6's readers crash on some damaged files; the child sends the shape back in OpenCASCADE's binary BRep
+// format (exact), so the faces are the reader's bit for bit. A child that ends by a signal is BadInput
+// naming the file ("could not be read: OpenCASCADE's STEP reader crashed on it (signal 11, ...)").
+//
 // IGES files must state their length unit: a global section whose unit flag is missing or not one
 // of IGES 5.3's codes 1..11 (the standard then assumes inches, which for a part drawn in mm is a
 // factor 25.4) is refused, naming the field.

@@ -53,6 +53,10 @@ inline std::string PartWith(const std::string& pointer, const nlohmann::json& va
   part[nlohmann::json::json_pointer(pointer)] = value;
   return part.dump(2) + "\n";
 }
+// An input kept in the fuzz corpus (fuzz/corpus/<target>/<file>), byte for byte.
+inline Content FuzzFinding(const std::string& name) {
+  return [name](const Fixtures&) { return ReadText(fs::path(FORMLOOP_SOURCE_DIR) / "fuzz/corpus" / name); };
+}
 inline std::string PartWithout(const std::string& key) {
   nlohmann::json part = nlohmann::json::parse(LeanPart());
   part.erase(key);
@@ -317,6 +321,23 @@ inline std::vector<Case> AllCases() {
       C("analyse_surface_garbage", "STEP/IGES", "analyse --surface g.step --probe-log {F}/log.csv --out an", 2,
         {"g.step"})
           .File("g.step", "ISO-10303-21;\nDATA;\n#1=FOO(;\n"),
+      // Files on which OpenCASCADE 7.6's readers crash (fuzz/corpus/fuzz_step|fuzz_iges/crash-*): the reader runs
+      // in a child process, so every command that reads CAD ends with an error naming the file, not a signal.
+      C("step_occt_crash_fit", "STEP/IGES", "fit c.step --out q.step", 2, {"c.step", "could not be read"})
+          .File("c.step", FuzzFinding("fuzz_step/crash-occt-null-cartesian-point.step")),
+      C("step_occt_crash_run_part", "STEP/IGES", "run p.json --out r", 2, {"c.step", "surface.faces"})
+          .File("c.step", FuzzFinding("fuzz_step/crash-occt-null-cartesian-point.step"))
+          .File("p.json", PartWith("/surface", {{"cad", "c.step"}, {"faces", {0}}})),
+      C("step_occt_crash_nc_compensate_program", "STEP/IGES",
+        "nc compensate --program {F}/prog.ngc --surface c.step --ball-radius-mm 3 --field {F}/field.csv --out o.ngc "
+        "--side s.csv",
+        2, {"c.step", "could not be read"})
+          .File("c.step", FuzzFinding("fuzz_step/crash-occt-null-cartesian-point.step")),
+      C("iges_occt_crash_fit", "STEP/IGES", "fit c.igs --out q.step", 2, {"c.igs"})
+          .File("c.igs", FuzzFinding("fuzz_iges/crash-occt-igesread-out-of-bounds.igs")),
+      C("iges_occt_crash_run_part", "STEP/IGES", "run p.json --out r", 2, {"c.igs", "surface.faces"})
+          .File("c.igs", FuzzFinding("fuzz_iges/crash-occt-igesread-out-of-bounds.igs"))
+          .File("p.json", PartWith("/surface", {{"cad", "c.igs"}, {"faces", {0}}})),
 
       // ---- part JSON (formloop run PART)
       C("part_syntax_error", "part JSON", "run p.json --out r", 2, {"p.json:2", "column"})
