@@ -1,6 +1,8 @@
 #include "app/run_folder.h"
 
 #include <cmath>
+#include <limits>
+#include <optional>
 #include <set>
 #include <string>
 
@@ -25,7 +27,7 @@ Status ReadVector3(const JsonFields& f, const std::string& key, Eigen::Vector3d*
 }
 
 // A probing plan as written by ProbingPlan::ToJson ({"count": n, "points": [{"id", "u", "v", "point",
-// "normal"}, ...]}), e.g. toolpath/probing_plan.json of `formloop run`.
+// "normal"}, ...], "trim": {...} on a trimmed Q}), e.g. toolpath/probing_plan.json of `formloop run`.
 Result<metrology::ProbingPlan> ReadPlanJsonFile(const std::string& path) {
   FL_ASSIGN_OR_RETURN(const Json json, ReadJsonFile(path));
   if (!json.is_object() || !json.contains("points") || !json["points"].is_array() || json["points"].empty()) {
@@ -33,10 +35,24 @@ Result<metrology::ProbingPlan> ReadPlanJsonFile(const std::string& path) {
                             "use a plan written by formloop (e.g. toolpath/probing_plan.json of `formloop run`)");
   }
   JsonFields top(json, path);
-  FL_RETURN_IF_ERROR(top.CheckKnown({"count", "points"}));
+  FL_RETURN_IF_ERROR(top.CheckKnown({"count", "points", "trim"}));
   std::vector<JsonFields> points;
   FL_RETURN_IF_ERROR(top.ObjectArray("points", &points));
   metrology::ProbingPlan plan;
+  // A plan on a trimmed Q says so (ProbingPlan::ToJson): its edge margin, the grid positions left out and
+  // the rule, which is text for the reader.
+  std::optional<JsonFields> trim;
+  FL_RETURN_IF_ERROR(top.Object("trim", &trim));
+  if (trim) {
+    FL_RETURN_IF_ERROR(trim->CheckKnown({"edge_margin_mm", "left_out", "rule"}));
+    plan.trimmed = true;
+    FL_RETURN_IF_ERROR(trim->Number("edge_margin_mm", &plan.edge_margin_mm, NumberRange{.min = 0}));
+    long long left_out = 0;
+    FL_RETURN_IF_ERROR(trim->OptionalInteger("left_out", &left_out, 0, std::numeric_limits<int>::max()));
+    plan.left_out = static_cast<int>(left_out);
+    std::string rule;
+    FL_RETURN_IF_ERROR(trim->OptionalString("rule", &rule));
+  }
   std::set<std::int64_t> ids;
   for (const JsonFields& f : points) {
     FL_RETURN_IF_ERROR(f.CheckKnown({"id", "u", "v", "point", "normal"}));

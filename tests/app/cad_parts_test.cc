@@ -20,6 +20,7 @@
 #include "app/kb_jobs.h"
 #include "app/part.h"
 #include "app/pipeline.h"
+#include "app/run_folder.h"
 #include "core/atomic_file.h"
 #include "core/json_io.h"
 #include "core/log.h"
@@ -147,6 +148,11 @@ TEST_F(CadPartsTest, TrimmedFaceWithAHoleReachesToleranceWithinOneLoop) {
   }
   std::printf("[measured] holed face: %d cutting CL points and %zu probe points, all inside the face\n", cut,
               plan["points"].size());
+  // The trimmed plan reads back (it carries "trim"), as `diagnose`/`simulate` read a run folder's plan.
+  const auto read_back = ReadPlanFile(dir_ / "holed" / "toolpath" / "probing_plan.json");
+  ASSERT_TRUE(read_back.ok()) << read_back.status().ToString();
+  EXPECT_TRUE(read_back->plan.trimmed);
+  EXPECT_EQ(read_back->plan.points.size(), plan["points"].size());
   // The run keeps the CAD file and its hash: the resolved part runs again from the folder.
   EXPECT_TRUE(fs::exists(dir_ / "holed" / "inputs" / "holed.step"));
   const auto again = ReadPart(dir_ / "holed" / "inputs" / "part.json");
