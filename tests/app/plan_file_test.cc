@@ -6,13 +6,12 @@
 #include <filesystem>
 #include <string>
 
-#include <unistd.h>
-
 #include <gtest/gtest.h>
 
 #include "app/run_folder.h"
 #include "core/json_io.h"
 #include "metrology/probe.h"
+#include "tests/support/test_dir.h"
 
 namespace formloop::app {
 namespace {
@@ -21,12 +20,7 @@ namespace fs = std::filesystem;
 
 class PlanFileTest : public ::testing::Test {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("formloop-plan-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
+  void SetUp() override { dir_ = formloop::testing::FreshTestDir("formloop-plan"); }
   void TearDown() override { fs::remove_all(dir_); }
   fs::path dir_;
 };
