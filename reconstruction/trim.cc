@@ -138,7 +138,9 @@ Status Trim::Build(const BSplineSurface& q) {
           const BRepAdaptor_Curve curve(edge);
           length = GCPnts_AbscissaPoint::Length(curve);
         }
-        const int n = std::clamp(static_cast<int>(std::ceil(length / kTrimLoopSpacingMm)), 1, kMaxSamplesPerEdge);
+        // Clamped as a double: a damaged file's edge can be longer than an int counts samples (or NaN).
+        const double wanted = std::ceil(length / kTrimLoopSpacingMm);
+        const int n = wanted >= kMaxSamplesPerEdge ? kMaxSamplesPerEdge : wanted >= 1 ? static_cast<int>(wanted) : 1;
         const bool reversed = edge.Orientation() == TopAbs_REVERSED;
         for (int k = 0; k < n; ++k) {  // the edge's end is the next edge's start
           const double s = static_cast<double>(k) / n;

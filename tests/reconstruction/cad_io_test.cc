@@ -4,6 +4,7 @@
 // The fixtures are made here with OpenCASCADE's own writers (a box for several planar faces, the
 // saddle reference surface for a B-spline face), so nothing opaque is committed.
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -31,6 +32,7 @@
 #include "reconstruction/bspline_surface.h"
 #include "reconstruction/cad_io.h"
 #include "reconstruction/occt_support.h"
+#include "reconstruction/trim.h"
 #include "tests/support/cad_fixtures.h"
 
 namespace formloop::recon {
@@ -242,6 +244,21 @@ TEST_F(CadIoTest, BadInputGivesClearErrors) {
   EXPECT_EQ(ReadCadFace(junk, {}).status().code(), StatusCode::kBadInput);
   EXPECT_EQ(ReadCadFace(dir_ / "absent.step", {}).status().code(), StatusCode::kNotFound);
   EXPECT_EQ(ReadCadFace(dir_ / "q.txt", {}).status().code(), StatusCode::kBadInput);
+}
+
+// fuzz_iges found a face whose edge is about 1.2e10 sampling steps long: the sample count was cast to int before
+// it was clamped (undefined; in practice one sample). It is clamped first: the edge gets the cap of samples.
+TEST_F(CadIoTest, AnEdgeTooLongForAnIntSampleCountIsSampledAtTheCap) {
+  const fs::path path =
+      fs::path(FORMLOOP_SOURCE_DIR) / "fuzz/corpus/fuzz_iges/crash-trim-edge-sample-count-overflow.igs";
+  const auto face = ReadCadFace(path, CadFaceSelector{.index = 0});
+  ASSERT_TRUE(face.ok()) << face.status().ToString();
+  // The face is its whole patch (no trim kept on Q): its loops built again from the face as read.
+  const auto trim = Trim::OfFace(face->face, face->surface, 0, 1, {});
+  ASSERT_TRUE(trim.ok()) << trim.status().ToString();
+  std::size_t most = 0;
+  for (const TrimLoop& loop : (*trim)->loops()) most = std::max(most, loop.uv.size());
+  EXPECT_GE(most, 200000u);
 }
 
 TEST_F(CadIoTest, IgesWithoutAUnitIsRefusedNamingTheField) {
