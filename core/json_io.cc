@@ -1,5 +1,6 @@
 #include "core/json_io.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "core/atomic_file.h"
@@ -29,6 +30,20 @@ Result<Json> ParseJson(const std::string& text, const std::string& source) {
     return Status::BadInput(Where{.file = source, .line = line},
                             "invalid JSON at column " + std::to_string(column) + ": " + what,
                             "correct the JSON syntax at that place");
+  } catch (const Json::exception& e) {
+    // Not a syntax error: a number beyond a double's range ("1e400": out_of_range 406, which gives no position).
+    // The message quotes the number; its first occurrence in the text gives the line.
+    std::string what = e.what();
+    const auto prefix = what.find("] ");
+    if (prefix != std::string::npos) what = what.substr(prefix + 2);
+    long line = 0;
+    const auto open = what.find('\''), close = what.rfind('\'');
+    if (open != std::string::npos && close > open + 1) {
+      const auto at = text.find(what.substr(open + 1, close - open - 1));
+      if (at != std::string::npos) line = 1 + static_cast<long>(std::count(text.begin(), text.begin() + at, '\n'));
+    }
+    return Status::BadInput(Where{.file = source, .line = line}, "invalid JSON: " + what,
+                            "write numbers within a double's range (magnitude below 1.8e308)");
   }
 }
 

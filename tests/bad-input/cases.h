@@ -342,6 +342,8 @@ inline std::vector<Case> AllCases() {
       // ---- part JSON (formloop run PART)
       C("part_syntax_error", "part JSON", "run p.json --out r", 2, {"p.json:2", "column"})
           .File("p.json", "{ \"name\": \n"),
+      C("part_number_beyond_double", "part JSON", "run p.json --out r", 2, {"p.json:2", "1e400"})
+          .File("p.json", "{\"name\": \"x\",\n \"tolerance_mm\": 1e400}\n"),
       C("part_unknown_field", "part JSON", "run p.json --out r", 2, {"p.json", "tolrance_mm"})
           .File("p.json", PartWith("/tolrance_mm", 0.01)),
       C("part_tolerance_negative", "part JSON", "run p.json --out r", 2, {"p.json", "tolerance_mm"})

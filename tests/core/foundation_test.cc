@@ -82,6 +82,17 @@ TEST(JsonTest, ParseErrorNamesLineAndColumn) {
   EXPECT_NE(parsed.status().message().find("column"), std::string::npos);
 }
 
+// fuzz_model_json: a number beyond a double's range is not a parse_error in nlohmann-json but an out_of_range
+// exception, which escaped ParseJson and ended the program (fuzz/corpus/fuzz_model_json/crash-*).
+TEST(JsonTest, ANumberBeyondADoublesRangeIsBadInputNamingTheLine) {
+  const auto parsed = ParseJson("{\n  \"a\": 1,\n  \"b\": 555555555555e55555\n}", "model.json");
+  ASSERT_FALSE(parsed.ok());
+  EXPECT_EQ(parsed.status().code(), StatusCode::kBadInput);
+  EXPECT_NE(parsed.status().message().find("model.json:3:"), std::string::npos) << parsed.status().message();
+  EXPECT_NE(parsed.status().message().find("555555555555e55555"), std::string::npos) << parsed.status().message();
+  EXPECT_FALSE(ParseJson("[-1e400]", "x.json").ok());
+}
+
 TEST(JsonTest, TypedFieldsReportPathAndRange) {
   const Json j = Json::parse(R"({"tool": {"radius_mm": -1, "name": 3}, "tolerance_mm": 0.01, "typo_field": 1})");
   JsonFields top(j, "part.json");

@@ -76,7 +76,8 @@ TEST_P(AnalyticSurfaceTest, NameDomainAndSize) {
 TEST_P(AnalyticSurfaceTest, FirstAndSecondDerivativesMatchFiniteDifferences) {
   const auto s = Make(GetParam());
   const double h = 1e-3;  // mm
-  for (const auto& [u, v] : Grid(s->domain(), 21, 0)) {
+  for (const auto& uv : Grid(s->domain(), 21, 0)) {
+    const double u = uv.first, v = uv.second;  // plain variables: the lambda below captures them (clang 14)
     const SurfaceDerivatives d = s->Derivatives(u, v);
     const SurfaceDerivatives du_plus = s->Derivatives(u + h, v), du_minus = s->Derivatives(u - h, v);
     const SurfaceDerivatives dv_plus = s->Derivatives(u, v + h), dv_minus = s->Derivatives(u, v - h);
