@@ -175,7 +175,8 @@ HalNet::Value HalNet::Affine(const std::vector<std::pair<double, Value>>& terms,
   for (const auto& [k, v] : terms) {
     out.constant += k * v.constant;
     for (const auto& [coefficient, node] : v.terms) {
-      auto it = std::find_if(out.terms.begin(), out.terms.end(), [&](const auto& t) { return t.second == node; });
+      const auto& wanted = node;  // clang 14 (sanitizer builds) cannot capture a structured binding
+      auto it = std::find_if(out.terms.begin(), out.terms.end(), [&](const auto& t) { return t.second == wanted; });
       if (it == out.terms.end()) {
         out.terms.emplace_back(k * coefficient, node);
       } else {

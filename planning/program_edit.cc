@@ -272,7 +272,9 @@ std::string EditableProgram::WithWords(std::size_t line_index,
   if (reading_ == ProgramReading::kShopProgram) {
     for (const auto& [letter, value] : words) {
       const std::vector<ShopWord> found = ShopWords(text);
-      auto it = std::find_if(found.begin(), found.end(), [&](const ShopWord& w) { return w.letter == letter; });
+      // A named copy: C++20 lets a lambda capture a structured binding, clang 14 (fuzzing, sanitizers) does not.
+      const char wanted = letter;
+      auto it = std::find_if(found.begin(), found.end(), [wanted](const ShopWord& w) { return w.letter == wanted; });
       if (it != found.end()) {
         text.replace(it->value_begin, it->end - it->value_begin, value);
         continue;
