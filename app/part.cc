@@ -31,7 +31,6 @@ Status ReadInt(const JsonFields& f, const std::string& key, int* out, int min, i
   return Status::Ok();
 }
 
-constexpr NumberRange kPositive{.min = 0, .exclusive_min = true};
 constexpr NumberRange kNonNegative{.min = 0};
 // Upper bounds of the fields that steer the machine or the probe: far beyond any real 3-axis job, well
 // short of the values a wrong unit or a typo gives (core/work_estimate.h bounds the job's size).
