@@ -181,7 +181,7 @@ Status PlanAndPost(const PathArgs& input) {
   FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::PlanRaster(face.surface, args.path));
   std::string program;
   if (!args.out.empty()) {
-    FL_ASSIGN_OR_RETURN(const nc::MoveList moves, nc::BuildMoveList(path));
+    FL_ASSIGN_OR_RETURN(const nc::ToolpathMoves moves, nc::ToolpathMoves::Of(path));
     FL_ASSIGN_OR_RETURN(
         program, nc::Post(moves, args.machine.dialect, args.machine.Post("formloop nc path " + args.surface.surface)));
   }
@@ -224,7 +224,7 @@ Status PostToolpath(const PostArgs& args) {
   FL_RETURN_IF_ERROR(args.machine.Validate());
   FL_RETURN_IF_ERROR(CheckOutputsNotInputs({{"--out", args.out}}, {{"--toolpath", args.toolpath}}));
   FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::ReadToolpathFile(args.toolpath));
-  FL_ASSIGN_OR_RETURN(const nc::MoveList moves, nc::BuildMoveList(path));
+  FL_ASSIGN_OR_RETURN(const nc::ToolpathMoves moves, nc::ToolpathMoves::Of(path));
   FL_ASSIGN_OR_RETURN(const std::string program,
                       nc::Post(moves, args.machine.dialect, args.machine.Post("formloop nc post " + args.toolpath)));
   FL_RETURN_IF_ERROR(WriteFileAtomic(args.out, program));
@@ -279,7 +279,7 @@ Status CompensateProgram(const CompensateArgs& args) {
   if (args.nominal.empty()) {  // the nominal program is the path posted with the same options
     std::string text;
     {
-      FL_ASSIGN_OR_RETURN(const nc::MoveList moves, nc::BuildMoveList(path));
+      FL_ASSIGN_OR_RETURN(const nc::ToolpathMoves moves, nc::ToolpathMoves::Of(path));
       FL_ASSIGN_OR_RETURN(text, nc::Post(moves, args.machine.dialect, post));
     }
     FL_ASSIGN_OR_RETURN(nominal, nc::ReadProgram(text, args.machine.dialect, "the nominal program"));

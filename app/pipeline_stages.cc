@@ -257,12 +257,14 @@ Result<Programs> WritePrograms(const PartSpec& part, const recon::BSplineSurface
   FL_ASSIGN_OR_RETURN(p.nominal, nc::PlanRaster(q, plan));
   p.post.limits = part.limits;
   p.post.title = "formloop " + std::string(kVersion) + " part " + part.name + " loop 0, nominal";
-  FL_ASSIGN_OR_RETURN(nc::MoveList moves, nc::BuildMoveList(p.nominal));
-  FL_ASSIGN_OR_RETURN(std::string text, nc::Post(moves, part.dialect, p.post));
+  std::string text;
+  {  // the moves made as they are posted: a million-point path is never held as a list of moves
+    FL_ASSIGN_OR_RETURN(const nc::ToolpathMoves moves, nc::ToolpathMoves::Of(p.nominal));
+    FL_ASSIGN_OR_RETURN(text, nc::Post(moves, part.dialect, p.post));
+  }
   p.extension = std::string(nc::FindPost(part.dialect)->FileExtension());
   p.program.path = fs::path("toolpath") / ("program" + p.extension);
   FL_RETURN_IF_ERROR(folder.WriteText(p.program.path, text));
-  moves = {};  // a million moves: gone before the tool-path file and the read-back
   FL_RETURN_IF_ERROR(nc::WriteToolpathFile(folder.Path(fs::path("toolpath") / "toolpath.csv"), p.nominal));
   FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("toolpath") / "toolpath.json", p.nominal.ReportJson()));
   log::Info("      {} passes, {} CL points, {:.0f} s cutting", p.nominal.passes, p.nominal.points.size(),

@@ -18,6 +18,11 @@
 namespace formloop::nc {
 namespace {
 
+std::size_t FeedMoveCount(const std::vector<ProgramMove>& moves) {
+  return static_cast<std::size_t>(
+      std::count_if(moves.begin(), moves.end(), [](const ProgramMove& m) { return !m.rapid; }));
+}
+
 std::vector<const ProgramMove*> FeedMoves(const std::vector<ProgramMove>& moves) {
   std::vector<const ProgramMove*> feeds;
   for (const auto& m : moves) {
@@ -662,48 +667,49 @@ Result<Compensation> WriteCompensatedProgram(const Toolpath& nominal, const std:
                                              const std::filesystem::path& side_path, std::string_view dialect) {
   FL_RETURN_IF_ERROR(options.Validate());
   const std::size_t n = nominal.points.size();
-  const auto a = FeedMoves(nominal_moves);
-  if (a.size() != n) {
-    return Status::Failed("the nominal program has " + std::to_string(a.size()) + " feed moves for the tool path's " +
+  if (const std::size_t feeds = FeedMoveCount(nominal_moves); feeds != n) {
+    return Status::Failed("the nominal program has " + std::to_string(feeds) + " feed moves for the tool path's " +
                           std::to_string(n) + " CL points: it is not this path's program");
   }
   // d_s once per CL point on Q (leads are off Q: offset 0), on every core in fixed chunks (each value is the
   // field's at its own point: the same bits for any thread count); the check below reuses the values. The
   // first offset over the limit in cutting order is the one refused.
   std::vector<double> ds_mm(n, 0.0);
-  ParallelFor(static_cast<long>(n), 1 << 14, [&](long begin, long end) {
+  ParallelFor(static_cast<long>(n), kCompensationChunk, [&](long begin, long end) {
     for (long k = begin; k < end; ++k) {
       const ClPoint& cl = nominal.points[static_cast<std::size_t>(k)];
       if (cl.kind == ClKind::kCut) ds_mm[static_cast<std::size_t>(k)] = systematic(cl.u, cl.v);
     }
   });
   for (std::size_t k = 0; k < n; ++k) FL_RETURN_IF_ERROR(CheckOffset(ds_mm[k], k, nominal.points[k].pass, options));
-  // The compensated tips (A = i − d_s·n, then the cutter location as UpdateCutterLocations places it) and the
-  // safe Z of the compensated path, never below the nominal program's (its rapids do not change).
-  std::vector<Eigen::Vector3d> tips(n);
-  double max_tip_z = -1e300;
+  // The compensated tips (A = i − d_s·n, then the cutter location as UpdateCutterLocations places it),
+  // computed where they are needed rather than held (the same expression, the same bits), and the safe Z
+  // of the compensated path, never below the nominal program's (its rapids do not change).
   const double r = nominal.options.tool.radius_mm;
-  for (std::size_t k = 0; k < n; ++k) {
+  const TipOfPoint tip_of = [&](std::size_t k) {
     const ClPoint& cl = nominal.points[k];
-    tips[k] = TipOf(BallCentre(cl.cc - ds_mm[k] * cl.normal, cl.normal, cl.lift_mm, r), r);
-    max_tip_z = std::max(max_tip_z, tips[k].z());
-  }
+    return TipOf(BallCentre(cl.cc - ds_mm[k] * cl.normal, cl.normal, cl.lift_mm, r), r);
+  };
+  double max_tip_z = -1e300;
+  for (std::size_t k = 0; k < n; ++k) max_tip_z = std::max(max_tip_z, tip_of(k).z());
   double safe_z_mm = max_tip_z + nominal.options.clearance_mm;
   if (std::isfinite(nominal.min_safe_z_mm)) safe_z_mm = std::max(safe_z_mm, nominal.min_safe_z_mm);
   safe_z_mm = std::max(safe_z_mm, nominal.safe_z_mm);
+  // The program from the moves as they are made (no list of a million moves), read back from its text: the
+  // check below compares what the text says, not what was meant.
   std::string program;
   {
-    FL_ASSIGN_OR_RETURN(const MoveList list, BuildMoveList(nominal, tips, safe_z_mm));
-    FL_ASSIGN_OR_RETURN(program, Post(list, dialect, post));
+    FL_ASSIGN_OR_RETURN(const ToolpathMoves moves, ToolpathMoves::Of(nominal, tip_of, safe_z_mm));
+    FL_ASSIGN_OR_RETURN(program, Post(moves, dialect, post));
   }
   FL_ASSIGN_OR_RETURN(std::vector<ProgramMove> moves, ReadProgram(program, dialect, "compensated program"));
-  const auto b = FeedMoves(moves);
-  if (b.size() != n) {
-    return Status::Internal("the compensated program has " + std::to_string(b.size()) + " feed moves for " +
+  if (const std::size_t feeds = FeedMoveCount(moves); feeds != n) {
+    return Status::Internal("the compensated program has " + std::to_string(feeds) + " feed moves for " +
                             std::to_string(n) + " CL points");
   }
   // Row by row: the side file's entry, checked against both programs and the field's value, then streamed
-  // into the side file's temporary file (renamed into place only when every row passed).
+  // into the side file's temporary file (renamed into place only when every row passed). The k-th feed move
+  // of each program is CL point k: two cursors step over the rapids.
   Compensation compensation;
   compensation.source = source;
   compensation.blocks = n;
@@ -717,14 +723,17 @@ Result<Compensation> WriteCompensatedProgram(const Toolpath& nominal, const std:
     const ClPoint& cl = nominal.points[row];
     return u == cl.u && v == cl.v ? ds_mm[row] : systematic(u, v);
   };
-  for (row = 0; row < n; ++row) {
+  auto a = nominal_moves.cbegin(), b = moves.cbegin();
+  for (row = 0; row < n; ++row, ++a, ++b) {
+    while (a->rapid) ++a;
+    while (b->rapid) ++b;
     const ClPoint& cl = nominal.points[row];
     CompensationEntry e;
     e.cl_index = row;
-    e.nominal_line = a[row]->line;
-    e.compensated_line = b[row]->line;
+    e.nominal_line = a->line;
+    e.compensated_line = b->line;
     e.nominal_tip = cl.tip;
-    e.offset_mm = tips[row] - cl.tip;
+    e.offset_mm = tip_of(row) - cl.tip;
     e.systematic_um = ds_mm[row] * 1e3;
     e.pass = cl.pass;
     e.u = cl.u;
@@ -733,7 +742,7 @@ Result<Compensation> WriteCompensatedProgram(const Toolpath& nominal, const std:
     e.has_field_point = cl.kind == ClKind::kCut;
     e.kind = cl.kind;
     compensation.max_offset_um = std::max(compensation.max_offset_um, 1e3 * e.offset_mm.norm());
-    CheckBlock(row, e, *a[row], *b[row], taken, &report);
+    CheckBlock(row, e, *a, *b, taken, &report);
     side.Add(e);
   }
   if (!report.ok()) {
@@ -746,21 +755,9 @@ Result<Compensation> WriteCompensatedProgram(const Toolpath& nominal, const std:
     std::filesystem::remove(side_path, ec);
     return s;
   }
-  compensation.program = std::move(program);
   compensation.program_moves = std::move(moves);
   compensation.check_max_disagreement_um = report.max_side_difference_um;
   return compensation;
-}
-
-Result<Compensation> WriteCompensatedProgram(const Toolpath& nominal, const std::string& nominal_program,
-                                             const SystematicField& systematic, const std::string& source,
-                                             const CompensationOptions& options, const PostOptions& post,
-                                             const std::filesystem::path& program_path,
-                                             const std::filesystem::path& side_path, std::string_view dialect) {
-  FL_ASSIGN_OR_RETURN(const std::vector<ProgramMove> nominal_moves,
-                      ReadProgram(nominal_program, dialect, "nominal program"));
-  return WriteCompensatedProgram(nominal, nominal_moves, systematic, source, options, post, program_path, side_path,
-                                 dialect);
 }
 
 }  // namespace formloop::nc

@@ -52,10 +52,9 @@ struct Compensation {
   std::size_t blocks = 0;                  // CL points = feed blocks = side-file rows
   double max_offset_um = 0;
   std::string source;  // e.g. "systematic field (Legendre degree 2) from loop 0"
-  // Filled by WriteCompensatedProgram: the program as written, its moves as read back for the check,
-  // and the check's largest disagreement between a side-file offset and the offset recomputed from the
-  // two programs (µm; the program resolution limits it to about 0.1 µm).
-  std::string program;
+  // Filled by WriteCompensatedProgram: the program's moves as read back from its text for the check (the
+  // text itself is in the file, not held), and the check's largest disagreement between a side-file offset
+  // and the offset recomputed from the two programs (µm; the program resolution limits it to about 0.1 µm).
   std::vector<ProgramMove> program_moves;
   double check_max_disagreement_um = 0;
   // The entries map the blocks of a program formloop did not write: the side file gets a lambda column
@@ -65,6 +64,10 @@ struct Compensation {
 
 // d_s(u, v) in mm at the CC point's parameters; loops pass the sum of every loop's field.
 using SystematicField = std::function<double(double u, double v)>;
+
+// CL points per parallel chunk of WriteCompensatedProgram's field evaluation (core/parallel.h): fixed, so the
+// work is split the same way on any number of threads.
+inline constexpr long kCompensationChunk = 1 << 14;
 
 Result<Compensation> CompensateToolpath(const Toolpath& nominal, const SystematicField& systematic,
                                         const std::string& source, const CompensationOptions& options);
@@ -202,13 +205,6 @@ Result<CheckReport> CheckCompensation(const std::vector<ProgramMove>& nominal,
 // moves, the check's largest disagreement and the number of rows (`entries` and `path` stay empty: a million rows are
 // not held). On any refusal or failed check neither file is written.
 Result<Compensation> WriteCompensatedProgram(const Toolpath& nominal, const std::vector<ProgramMove>& nominal_moves,
-                                             const SystematicField& systematic, const std::string& source,
-                                             const CompensationOptions& options, const PostOptions& post,
-                                             const std::filesystem::path& program_path,
-                                             const std::filesystem::path& side_path,
-                                             std::string_view dialect = "linuxcnc");
-// The same from the nominal program's text (read here).
-Result<Compensation> WriteCompensatedProgram(const Toolpath& nominal, const std::string& nominal_program,
                                              const SystematicField& systematic, const std::string& source,
                                              const CompensationOptions& options, const PostOptions& post,
                                              const std::filesystem::path& program_path,

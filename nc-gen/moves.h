@@ -7,6 +7,7 @@
 // Conventions the list fixes for every post: millimetres, absolute coordinates, XY plane, no cutter
 // radius compensation (the programmed point is the ball tip, toolpath.h), feed in mm/min.
 
+#include <functional>
 #include <limits>
 #include <string>
 #include <vector>
@@ -62,10 +63,60 @@ struct MoveList {
   double safe_z_mm = 0;
 };
 
-// The one function that turns a tool path into moves. Per pass: retract to safe Z (not before the
-// first), comment "pass k", rapid in XY above the first point (the lead-in start when the path has
-// leads), plunge feed to it, set the cutting feed, feed through the pass (lead-in, cut, lead-out); then
-// a final retract. The i-th kFeed move is CL point i.
+// A move list walked in order, one move at a time: a post or the safety check over a million-point path
+// needs no list of a million moves (ToolpathMoves makes each move as it is visited); a held MoveList is one
+// too (HeldMoves). Visiting twice gives the same moves.
+class MoveSequence {
+ public:
+  virtual ~MoveSequence() = default;
+  virtual const MoveListHeader& Header() const = 0;
+  virtual std::size_t Size() const = 0;  // number of moves
+  // Visits every move in order with its index (Move::Describe's); the first non-OK status stops the walk
+  // and is returned.
+  using Visitor = std::function<Status(std::size_t index, const Move& move)>;
+  virtual Status ForEach(const Visitor& visit) const = 0;
+};
+
+// A held list as a sequence (the list must outlive it).
+class HeldMoves : public MoveSequence {
+ public:
+  explicit HeldMoves(const MoveList& list) : list_(list) {}
+  const MoveListHeader& Header() const override { return list_.header; }
+  std::size_t Size() const override { return list_.moves.size(); }
+  Status ForEach(const Visitor& visit) const override;
+
+ private:
+  const MoveList& list_;
+};
+
+// The tip of CL point k, mm (e.g. compensated); called once per visit of the point, so it must be a pure
+// function of k.
+using TipOfPoint = std::function<Eigen::Vector3d(std::size_t k)>;
+
+// The one function that turns a tool path into moves. Per pass: retract to safe Z (not before the first),
+// comment "pass k", rapid in XY above the first point (the lead-in start when the path has leads), plunge
+// feed to it, set the cutting feed, feed through the pass (lead-in, cut, lead-out); then a final retract.
+// The i-th kFeed move is CL point i. Each move is made as it is visited (the path and the tip function must
+// outlive the sequence).
+class ToolpathMoves : public MoveSequence {
+ public:
+  // Tips from `tip` (nullptr: the points' own) and safe Z `safe_z_mm`. BadInput for a path without points.
+  static Result<ToolpathMoves> Of(const Toolpath& path, TipOfPoint tip, double safe_z_mm);
+  static Result<ToolpathMoves> Of(const Toolpath& path) { return Of(path, nullptr, path.safe_z_mm); }
+  const MoveListHeader& Header() const override { return header_; }
+  std::size_t Size() const override { return size_; }
+  Status ForEach(const Visitor& visit) const override;
+
+ private:
+  ToolpathMoves(const Toolpath& path, TipOfPoint tip, double safe_z_mm);
+  const Toolpath* path_;
+  TipOfPoint tip_;
+  double safe_z_mm_;
+  MoveListHeader header_;
+  std::size_t size_ = 0;
+};
+
+// ToolpathMoves' moves held in a list (small paths, tests, edits of a list).
 Result<MoveList> BuildMoveList(const Toolpath& path);
 // The same with the tips `tips` (one per CL point, e.g. compensated) in place of the points' own and safe Z
 // `safe_z_mm` in place of the path's.
@@ -73,7 +124,9 @@ Result<MoveList> BuildMoveList(const Toolpath& path, const std::vector<Eigen::Ve
 
 // The safety check (ARCHITECTURE.md "Safety"), done once on the list before any post writes text:
 // limits valid; spindle > 0 and ≤ the maximum; every feed > 0 and ≤ the maximum; every programmed axis
-// inside the travel. StatusCode::kSafetyLimit names the move (Move::Describe) and the limit.
+// inside the travel. StatusCode::kSafetyLimit names the move (Move::Describe) and the limit: the first
+// move with a feed outside the limits, else the first outside the travel (one walk over the sequence).
+Status CheckMoveList(const MoveSequence& moves, const MachineLimits& limits);
 Status CheckMoveList(const MoveList& list, const MachineLimits& limits);
 
 }  // namespace formloop::nc

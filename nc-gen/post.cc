@@ -1,5 +1,6 @@
 #include "nc-gen/post.h"
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <utility>
@@ -116,14 +117,18 @@ Status PostDialect::CheckDecimals(int decimals, const std::string& field) const 
                           "use " + std::to_string(DefaultDecimals()) + " (the dialect's default)");
 }
 
-Result<std::string> Post(const MoveList& list, std::string_view dialect, const PostOptions& options) {
+Result<std::string> Post(const MoveSequence& moves, std::string_view dialect, const PostOptions& options) {
   const PostDialect* post = FindPost(dialect);
   if (post == nullptr) return UnknownDialect(dialect);
   FL_RETURN_IF_ERROR(options.Validate());
   FL_RETURN_IF_ERROR(post->CheckDecimals(options.decimals, "post.decimals"));
   // Safety first, once for every dialect: nothing is formatted unless every position and rate is within limits.
-  FL_RETURN_IF_ERROR(CheckMoveList(list, options.limits));
-  return post->Format(list, options);
+  FL_RETURN_IF_ERROR(CheckMoveList(moves, options.limits));
+  return post->Format(moves, options);
+}
+
+Result<std::string> Post(const MoveList& list, std::string_view dialect, const PostOptions& options) {
+  return Post(HeldMoves(list), dialect, options);
 }
 
 Result<std::vector<ProgramMove>> ReadProgram(const std::string& text, std::string_view dialect,
@@ -134,8 +139,8 @@ Result<std::vector<ProgramMove>> ReadProgram(const std::string& text, std::strin
 }
 
 Result<std::string> PostLinuxCnc(const Toolpath& path, const PostOptions& options) {
-  FL_ASSIGN_OR_RETURN(MoveList list, BuildMoveList(path));
-  return Post(list, "linuxcnc", options);
+  FL_ASSIGN_OR_RETURN(const ToolpathMoves moves, ToolpathMoves::Of(path));
+  return Post(moves, "linuxcnc", options);
 }
 
 Result<std::vector<ProgramMove>> ReadLinuxCncMoves(const std::string& text, const std::string& source) {
@@ -224,13 +229,13 @@ std::string PlainComment(const std::string& text) {
   return out;
 }
 
-void WriteWordAddressBody(const MoveList& list, const std::string& rapid, const std::string& feed,
-                          std::string (*comment)(const std::string&), ProgramText* w,
-                          const std::string& length_offset) {
-  w->Reserve(32 * list.moves.size());  // "G1 X-123.4567 Y-123.4567 Z-12.3456" and a newline is about 32
+Status WriteWordAddressBody(const MoveSequence& moves, const std::string& rapid, const std::string& feed,
+                            std::string (*comment)(const std::string&), ProgramText* w,
+                            const std::string& length_offset) {
+  w->Reserve(32 * moves.Size());  // "G1 X-123.4567 Y-123.4567 Z-12.3456" and a newline is about 32
   double modal_feed = -1;
   bool offset_written = length_offset.empty();
-  for (const Move& m : list.moves) {
+  return moves.ForEach([&](std::size_t, const Move& m) {
     switch (m.type) {
       case MoveType::kComment:
         w->Comment(comment(m.text));
@@ -253,7 +258,13 @@ void WriteWordAddressBody(const MoveList& list, const std::string& rapid, const 
         break;
       }
     }
-  }
+    return Status::Ok();
+  });
+}
+
+std::size_t LineCount(const std::string& text) {
+  const auto newlines = static_cast<std::size_t>(std::count(text.begin(), text.end(), '\n'));
+  return newlines + (!text.empty() && text.back() != '\n');
 }
 
 std::string LengthOffsetWords(int tool) { return "G43 H" + std::to_string(tool); }
@@ -279,6 +290,7 @@ Result<std::vector<ProgramMove>> ReadWordAddress(const std::string& text, const 
   Block block;
   std::string_view line, eol;
   std::vector<ProgramMove> moves;
+  moves.reserve(LineCount(text));  // at most a move per line: allocated once, not grown by doubling
   int percent = 0;
   while (lines.Next(&line, &eol)) {
     FL_RETURN_IF_ERROR(reader.Read(line, &block));
@@ -297,19 +309,9 @@ Result<std::vector<ProgramMove>> ReadWordAddress(const std::string& text, const 
                               fix + " (programs with arcs: nc compensate --program, nc distribute)");
     }
     if (block.motion == Motion::kNone) continue;
-    ProgramMove m{.rapid = block.motion == Motion::kRapid,
-                  .tip = block.end,
-                  .line = block.line,
-                  .feed_mm_per_min = block.feed,
-                  .comment = ""};
-    if (!block.comments.empty()) {
-      const auto [b, e] = block.comments.front();
-      std::string_view c = block.text.substr(b, e - b);
-      c.remove_prefix(1);
-      if (!c.empty() && c.back() == ')') c.remove_suffix(1);
-      m.comment = std::string(c);
-    }
-    moves.push_back(std::move(m));
+    ProgramMove m{
+        .rapid = block.motion == Motion::kRapid, .tip = block.end, .line = block.line, .feed_mm_per_min = block.feed};
+    moves.push_back(m);
   }
   return moves;
 }

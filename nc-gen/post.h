@@ -71,7 +71,6 @@ struct ProgramMove {
   Eigen::Vector3d tip = Eigen::Vector3d::Zero();  // end point, mm (NaN for an axis not programmed yet)
   long line = 0;                                  // 1-based line in the program text
   double feed_mm_per_min = 0;                     // modal feed in effect (also reported on rapids)
-  std::string comment;                            // a comment on the same line, if any
 };
 
 // One controller dialect: spells a checked move list and reads its own spelling back.
@@ -80,8 +79,9 @@ class PostDialect {
   virtual ~PostDialect() = default;
   virtual std::string_view Name() const = 0;
   virtual std::string_view FileExtension() const = 0;  // ".ngc", ".nc", ".h", ".mpf"
-  // The list has passed CheckMoveList and the options Validate when this is called.
-  virtual Result<std::string> Format(const MoveList& list, const PostOptions& options) const = 0;
+  // The moves have passed CheckMoveList and the options Validate when this is called; they are walked in
+  // order (once or twice), never held.
+  virtual Result<std::string> Format(const MoveSequence& moves, const PostOptions& options) const = 0;
   virtual Result<std::vector<ProgramMove>> Read(const std::string& text, const std::string& source) const = 0;
   // The dialect's probing program for a plan (nc-gen/probe_program.h: the format, its conventions and
   // what is checked before any text).
@@ -103,7 +103,9 @@ std::vector<std::string> PostNames();
 // nullptr when there is no such dialect.
 const PostDialect* FindPost(std::string_view name);
 
-// Checks the options and the move list (CheckMoveList) and then formats it in `dialect`.
+// Checks the options and the moves (CheckMoveList) and then formats them in `dialect`. A ToolpathMoves
+// sequence posts a million-point path without its list of moves.
+Result<std::string> Post(const MoveSequence& moves, std::string_view dialect, const PostOptions& options);
 Result<std::string> Post(const MoveList& list, std::string_view dialect, const PostOptions& options);
 // Reads formloop's own output in `dialect` back; `source` names the text in messages.
 Result<std::vector<ProgramMove>> ReadProgram(const std::string& text, std::string_view dialect,

@@ -61,9 +61,9 @@ class FanucPost : public PostDialect {
     return top < 0 ? 0 : static_cast<std::size_t>((top - base + 1) / 3);
   }
 
-  Result<std::string> Format(const MoveList& list, const PostOptions& options) const override {
+  Result<std::string> Format(const MoveSequence& moves, const PostOptions& options) const override {
     ProgramText w(options, Numbering::kBlocks, "(", ")");
-    const MoveListHeader& h = list.header;
+    const MoveListHeader& h = moves.Header();
     w.Raw("%");
     std::string number = std::to_string(options.program_number);
     w.Raw("O" + std::string(4 - number.size(), '0') + number);  // O0001..O9999
@@ -75,7 +75,7 @@ class FanucPost : public PostDialect {
     w.Block("T" + std::to_string(h.tool_number) + " M06");
     w.Block("S" + FormatFixed(h.spindle_rpm, 0) + " M03");
     if (h.coolant) w.Block("M08");
-    WriteWordAddressBody(list, "G00", "G01", FanucComment, &w, LengthOffsetWords(h.tool_number));
+    FL_RETURN_IF_ERROR(WriteWordAddressBody(moves, "G00", "G01", FanucComment, &w, LengthOffsetWords(h.tool_number)));
     if (h.coolant) w.Block("M09");
     w.Block("M05");
     w.Block("M30");

@@ -57,17 +57,20 @@ class HeidenhainPost : public PostDialect {
   std::string_view Name() const override { return "heidenhain"; }
   std::string_view FileExtension() const override { return ".h"; }
 
-  Result<std::string> Format(const MoveList& list, const PostOptions& options) const override {
+  Result<std::string> Format(const MoveSequence& moves, const PostOptions& options) const override {
     ProgramText w(options, Numbering::kAllLines, "; ", "");
-    const MoveListHeader& h = list.header;
-    std::size_t first_motion = list.moves.size(), last_motion = 0;
-    for (std::size_t i = 0; i < list.moves.size(); ++i) {
-      if (list.moves[i].type == MoveType::kRapid || list.moves[i].type == MoveType::kFeed) {
+    const MoveListHeader& h = moves.Header();
+    const std::size_t none = moves.Size();
+    std::size_t first_motion = none, last_motion = 0;
+    FL_RETURN_IF_ERROR(moves.ForEach([&](std::size_t i, const Move& m) {
+      if (m.type == MoveType::kRapid || m.type == MoveType::kFeed) {
         first_motion = std::min(first_motion, i);
         last_motion = i;
       }
-    }
-    if (first_motion == list.moves.size()) return Status::BadInput("the move list has no motion; nothing to post");
+      return Status::Ok();
+    }));
+    if (first_motion == none) return Status::BadInput("the move list has no motion; nothing to post");
+    w.Reserve(40 * moves.Size());  // "12345 L X+123.4567 Y+123.4567 Z+12.3456 R0" and a newline is about 40
     w.Block("BEGIN PGM " + options.program_name + " MM");
     w.Comment(PlainComment(options.title));
     w.Comment("ball-end tool T" + std::to_string(h.tool_number) + " radius " + w.Num(h.tool_radius_mm) +
@@ -75,13 +78,12 @@ class HeidenhainPost : public PostDialect {
               std::to_string(h.passes) + " passes");
     w.Block("TOOL CALL " + std::to_string(h.tool_number) + " Z S" + FormatFixed(h.spindle_rpm, 0));
     double written_feed = -1;  // the last numeric F in the program (FMAX does not change it)
-    for (std::size_t i = 0; i < list.moves.size(); ++i) {
-      const Move& m = list.moves[i];
+    FL_RETURN_IF_ERROR(moves.ForEach([&](std::size_t i, const Move& m) {
       if (m.type == MoveType::kComment) {
         w.Comment(PlainComment(m.text));
-        continue;
+        return Status::Ok();
       }
-      if (m.type == MoveType::kSetFeed) continue;  // no block of its own: the next L carries the new F
+      if (m.type == MoveType::kSetFeed) return Status::Ok();  // no block of its own: the next L carries the new F
       std::string block = "L";
       static const char kAxis[] = {'X', 'Y', 'Z'};
       for (int a = 0; a < 3; ++a) {
@@ -97,7 +99,8 @@ class HeidenhainPost : public PostDialect {
       if (i == first_motion) block += h.coolant ? " M3 M8" : " M3";
       if (i == last_motion) block += " M30";
       w.Block(block);
-    }
+      return Status::Ok();
+    }));
     w.Block("END PGM " + options.program_name + " MM");
     return w.Finish();
   }
@@ -105,6 +108,7 @@ class HeidenhainPost : public PostDialect {
   Result<std::vector<ProgramMove>> Read(const std::string& text, const std::string& source) const override {
     const std::string fix = "only formloop's own Heidenhain output can be read back";
     std::vector<ProgramMove> moves;
+    moves.reserve(LineCount(text));  // at most a move per line: allocated once
     Eigen::Vector3d position = Eigen::Vector3d::Constant(std::nan(""));
     double feed = 0;
     bool begun = false, ended = false;
@@ -173,7 +177,7 @@ class HeidenhainPost : public PostDialect {
       }
       if (!r0) return Status::BadInput(where, "L block without R0", fix);
       if (has_xyz) {
-        moves.push_back({.rapid = rapid, .tip = position, .line = line_no, .feed_mm_per_min = feed, .comment = ""});
+        moves.push_back({.rapid = rapid, .tip = position, .line = line_no, .feed_mm_per_min = feed});
       }
     }
     if (!ended) return Status::BadInput(Where{.file = source, .line = line_no}, "no END PGM line", fix);

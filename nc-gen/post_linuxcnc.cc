@@ -34,9 +34,9 @@ class LinuxCncPost : public PostDialect {
   std::string_view Name() const override { return "linuxcnc"; }
   std::string_view FileExtension() const override { return ".ngc"; }
 
-  Result<std::string> Format(const MoveList& list, const PostOptions& options) const override {
+  Result<std::string> Format(const MoveSequence& moves, const PostOptions& options) const override {
     ProgramText w(options, Numbering::kBlocks, "(", ")");
-    const MoveListHeader& h = list.header;
+    const MoveListHeader& h = moves.Header();
     w.Raw("%");
     w.Comment(CommentText(options.title));
     w.Comment("ball-end tool T" + std::to_string(h.tool_number) + " radius " + w.Num(h.tool_radius_mm) +
@@ -47,7 +47,7 @@ class LinuxCncPost : public PostDialect {
     w.Block("T" + std::to_string(h.tool_number) + " M6");
     w.Block("S" + FormatFixed(h.spindle_rpm, 0) + " M3");
     if (h.coolant) w.Block("M8");
-    WriteWordAddressBody(list, "G0", "G1", CommentText, &w, LengthOffsetWords(h.tool_number));
+    FL_RETURN_IF_ERROR(WriteWordAddressBody(moves, "G0", "G1", CommentText, &w, LengthOffsetWords(h.tool_number)));
     if (h.coolant) w.Block("M9");
     w.Block("M5");
     w.Block("M30");

@@ -33,9 +33,9 @@ class SinumerikPost : public PostDialect {
     return n > 0 ? static_cast<std::size_t>(n) : 0;
   }
 
-  Result<std::string> Format(const MoveList& list, const PostOptions& options) const override {
+  Result<std::string> Format(const MoveSequence& moves, const PostOptions& options) const override {
     ProgramText w(options, Numbering::kBlocks, "; ", "");
-    const MoveListHeader& h = list.header;
+    const MoveListHeader& h = moves.Header();
     w.Comment(PlainComment(options.title));
     w.Comment("ball-end tool T" + std::to_string(h.tool_number) + " radius " + w.Num(h.tool_radius_mm) +
               " mm; programmed point = ball tip [T" + std::to_string(h.tool_number) +
@@ -45,7 +45,7 @@ class SinumerikPost : public PostDialect {
     w.Block("M6");
     w.Block("S" + FormatFixed(h.spindle_rpm, 0) + " M3");
     if (h.coolant) w.Block("M8");
-    WriteWordAddressBody(list, "G0", "G1", PlainComment, &w);
+    FL_RETURN_IF_ERROR(WriteWordAddressBody(moves, "G0", "G1", PlainComment, &w));
     if (h.coolant) w.Block("M9");
     w.Block("M5");
     w.Block("M30");

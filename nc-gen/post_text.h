@@ -48,6 +48,9 @@ class ProgramText {
   Status error_ = Status::Ok();
 };
 
+// Lines of a program text (the last without a newline counts): a bound on its moves.
+std::size_t LineCount(const std::string& text);
+
 // Axis words of a motion block: "X1.000 Y2.000" for the axes in `axes`.
 std::string AxisWords(const ProgramText& w, const Move& move, const std::string& separator = "");
 
@@ -61,9 +64,9 @@ std::string FanucComment(const std::string& text);
 // written only when it changes (modal), feed-only blocks as "F..". `length_offset` ("G43 H2"; empty for
 // none) goes into the first rapid, the retract to safe Z, so the offset takes effect with a Z move away
 // from the part, as Fanuc wants it ("G00 G43 H2 Z10.000"; LinuxCNC applies G43 before the motion of its block).
-void WriteWordAddressBody(const MoveList& list, const std::string& rapid, const std::string& feed,
-                          std::string (*comment)(const std::string&), ProgramText* w,
-                          const std::string& length_offset = "");
+Status WriteWordAddressBody(const MoveSequence& moves, const std::string& rapid, const std::string& feed,
+                            std::string (*comment)(const std::string&), ProgramText* w,
+                            const std::string& length_offset = "");
 
 // The words that activate tool length compensation for tool `tool` on LinuxCNC and Fanuc: "G43 H<tool>"
 // (the length offset register numbered like the tool, the usual shop convention).

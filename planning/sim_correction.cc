@@ -177,8 +177,8 @@ Result<CheckResult> FullCheck(const SimCorrectionInput& in, const Problem& pb, c
                                FormatFixed(pb.rho_cc_min_mm, 2) + " mm = " + FormatFixed(bound_mm, 2) + " mm",
                            r, bound_mm});
   }
-  {  // the move list (a million moves on a large part) only for the limit check, gone before the simulation
-    FL_ASSIGN_OR_RETURN(const nc::MoveList moves, nc::BuildMoveList(path));
+  {  // the limit check over the moves as they are made (a million on a large part; never held as a list)
+    FL_ASSIGN_OR_RETURN(const nc::ToolpathMoves moves, nc::ToolpathMoves::Of(path));
     if (const Status s = nc::CheckMoveList(moves, in.limits); !s.ok()) {
       out.defects.push_back({"axis_limit", s.message(), 0, 0});
     }

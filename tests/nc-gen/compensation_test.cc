@@ -39,7 +39,14 @@ void WriteText(const fs::path& path, const std::string& text) {
   out << text;
 }
 
-Toolpath SaddlePath() {
+// The moves of a program formloop wrote, as WriteCompensatedProgram takes the nominal one.
+std::vector<ProgramMove> MovesOf(const std::string& text) {
+  auto moves = ReadLinuxCncMoves(text, "nominal program");
+  EXPECT_TRUE(moves.ok()) << moves.status().message();
+  return moves.ok() ? *std::move(moves) : std::vector<ProgramMove>();
+}
+
+Toolpath SaddlePath(double max_point_spacing_mm = 2.0) {
   auto s = recon::MakeReferenceSurface("saddle");
   recon::FitReport report;
   auto q = recon::FitAnalytic(*s.value(), 30, 30, {}, 0, 1, &report);
@@ -47,7 +54,7 @@ Toolpath SaddlePath() {
   ToolpathOptions o;
   o.tool.radius_mm = 3.0;
   o.scallop_um = 5.0;
-  o.max_point_spacing_mm = 2.0;
+  o.max_point_spacing_mm = max_point_spacing_mm;
   auto path = PlanRaster(q.value(), o);
   EXPECT_TRUE(path.ok());
   return path.value();
@@ -194,9 +201,9 @@ struct Fixture {
   SystematicField ds;
 };
 
-Fixture MakeFixture() {
+Fixture MakeFixture(double max_point_spacing_mm = 2.0) {
   Fixture f;
-  f.path = SaddlePath();
+  f.path = SaddlePath(max_point_spacing_mm);
   double u0 = 1e300, u1 = -1e300, v0 = 1e300, v1 = -1e300;
   for (const auto& p : f.path.points) {
     u0 = std::min(u0, p.u), u1 = std::max(u1, p.u), v0 = std::min(v0, p.v), v1 = std::max(v1, p.v);
@@ -243,7 +250,7 @@ TEST_P(SideFileFormTest, EveryBlockMovesByMinusDsNToOutputPrecisionAndTheSideFil
   PostOptions post;  // 4 decimals: 0.1 µm
   const auto nominal_text = PostLinuxCnc(f.path, post);
   ASSERT_TRUE(nominal_text.ok());
-  const auto comp = WriteCompensatedProgram(f.path, *nominal_text, f.ds, "TPS field, 144 samples", {}, post,
+  const auto comp = WriteCompensatedProgram(f.path, MovesOf(*nominal_text), f.ds, "TPS field, 144 samples", {}, post,
                                             dir / "compensated.ngc", side_path);
   ASSERT_TRUE(comp.ok()) << comp.status().message();
   EXPECT_GT(comp->max_offset_um, 4.0);
@@ -315,6 +322,33 @@ TEST_P(SideFileFormTest, EveryBlockMovesByMinusDsNToOutputPrecisionAndTheSideFil
 
 INSTANTIATE_TEST_SUITE_P(CsvAndCompact, SideFileFormTest, ::testing::Values(".csv", ".bin"));
 
+// The field is evaluated in parallel chunks of kCompensationChunk CL points: on a path of several chunks, one
+// thread and two write the same program and side file, byte for byte.
+TEST(CompensationCheckTest, OneThreadAndTwoWriteTheSameBytesOnAPathOfSeveralChunks) {
+  const Fixture f = MakeFixture(/*max_point_spacing_mm=*/0.8);
+  ASSERT_GT(f.path.points.size(), 2 * static_cast<std::size_t>(kCompensationChunk));
+  const fs::path dir = TempDir("threads");
+  PostOptions post;
+  const auto nominal_text = PostLinuxCnc(f.path, post);
+  ASSERT_TRUE(nominal_text.ok());
+  const std::vector<ProgramMove> nominal = MovesOf(*nominal_text);
+  std::vector<std::string> programs, sides;
+  for (const int threads : {1, 2}) {
+    SetThreadCount(threads);
+    const fs::path program = dir / ("c" + std::to_string(threads) + ".ngc");
+    const fs::path side = dir / ("side" + std::to_string(threads) + ".bin");
+    const auto comp = WriteCompensatedProgram(f.path, nominal, f.ds, "field", {}, post, program, side);
+    ASSERT_TRUE(comp.ok()) << comp.status().message();
+    EXPECT_GT(comp->max_offset_um, 4.0);  // the field's 5 µm amplitude moved the points
+    programs.push_back(ReadFile(program).value());
+    sides.push_back(ReadFile(side).value());
+  }
+  SetThreadCount(0);
+  EXPECT_NE(programs[0], *nominal_text);
+  EXPECT_TRUE(programs[0] == programs[1]) << "the programs of 1 and 2 threads differ";
+  EXPECT_TRUE(sides[0] == sides[1]) << "the side files of 1 and 2 threads differ";
+}
+
 TEST(CompensationCheckTest, ReportsExactlyTheCorruptedBlockWithItsLinesAndBothValues) {
   const Fixture f = MakeFixture();
   const fs::path dir = TempDir("corrupt");
@@ -322,7 +356,7 @@ TEST(CompensationCheckTest, ReportsExactlyTheCorruptedBlockWithItsLinesAndBothVa
   const auto nominal_text = PostLinuxCnc(f.path, post);
   ASSERT_TRUE(nominal_text.ok());
   const auto comp =
-      WriteCompensatedProgram(f.path, *nominal_text, f.ds, "field", {}, post, dir / "c.ngc", dir / "side.csv");
+      WriteCompensatedProgram(f.path, MovesOf(*nominal_text), f.ds, "field", {}, post, dir / "c.ngc", dir / "side.csv");
   ASSERT_TRUE(comp.ok()) << comp.status().message();
   const auto side = ReadSideFile(dir / "side.csv");
   ASSERT_TRUE(side.ok());
@@ -399,8 +433,8 @@ TEST(CompensationCheckTest, OffsetAboveTheMaximumIsRefusedWithTheReasonAndNothin
   const SystematicField field = [&](double u, double v) {
     return 0.005 + 0.020 * std::exp(-((u - hot.u) * (u - hot.u) + (v - hot.v) * (v - hot.v)) / 1e-6);
   };
-  const auto result =
-      WriteCompensatedProgram(path, *nominal_text, field, "too big", options, post, dir / "c.ngc", dir / "side.csv");
+  const auto result = WriteCompensatedProgram(path, MovesOf(*nominal_text), field, "too big", options, post,
+                                              dir / "c.ngc", dir / "side.csv");
   ASSERT_FALSE(result.ok());
   EXPECT_EQ(result.status().code(), StatusCode::kSafetyLimit);
   const std::string& message = result.status().message();
@@ -413,7 +447,8 @@ TEST(CompensationCheckTest, OffsetAboveTheMaximumIsRefusedWithTheReasonAndNothin
   // Just under the limit it goes through.
   options.max_offset_um = 25.5;
   EXPECT_TRUE(
-      WriteCompensatedProgram(path, *nominal_text, field, "ok", options, post, dir / "c.ngc", dir / "side.csv").ok());
+      WriteCompensatedProgram(path, MovesOf(*nominal_text), field, "ok", options, post, dir / "c.ngc", dir / "side.csv")
+          .ok());
   EXPECT_TRUE(fs::exists(dir / "c.ngc") && fs::exists(dir / "side.csv"));
 }
 
