@@ -79,7 +79,7 @@ int main(int argc, char** argv) {
   Clock clock;
   auto field = nc::DeviationField::Fit(samples, {});
   if (!field.ok()) return 1;
-  Row("formloop fit (dense LU)", clock.Wall(), clock.Cpu());
+  Row("formloop fit (Cholesky on the null space)", clock.Wall(), clock.Cpu());
   clock = Clock();
   auto table = field->Tabulate();
   if (!table.ok()) {

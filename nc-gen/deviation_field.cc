@@ -20,6 +20,32 @@ namespace {
 
 double Kernel(double r2) { return r2 > 0 ? 0.5 * r2 * std::log(r2) : 0.0; }  // r² log r
 
+// [K + λI, P; Pᵀ, 0] [w; a] = [d; 0] (P of rank 3) by the null-space method (Wendland, "Scattered Data
+// Approximation", §8.5; Golub & Van Loan §12.1.4): with P = Q [R; 0] (Householder) and Z the last n − 3
+// columns of Q, Pᵀw = 0 means w = Z γ, and Zᵀ(K + λI)Z γ = Zᵀ d. φ = r² log r is conditionally positive
+// definite of order 2, so that matrix is positive definite for distinct points (λ ≥ 0 keeps it so) and a
+// Cholesky factorisation solves it in half the work of an LU of the whole system; then R a = Q₁ᵀ(d − (K + λI)w).
+// A failed factorisation (numerically not positive definite) falls back to the pivoted LU of the whole system.
+Eigen::VectorXd SolveThinPlate(const Eigen::MatrixXd& a, const Eigen::VectorXd& rhs, Eigen::Index n) {
+  const Eigen::HouseholderQR<Eigen::MatrixXd> qr(a.block(0, n, n, 3));
+  Eigen::MatrixXd b = a.topLeftCorner(n, n);
+  b.applyOnTheLeft(qr.householderQ().adjoint());
+  b.applyOnTheRight(qr.householderQ());
+  Eigen::VectorXd qd = rhs.head(n);
+  qd.applyOnTheLeft(qr.householderQ().adjoint());
+  Eigen::Ref<Eigen::MatrixXd> zkz = b.bottomRightCorner(n - 3, n - 3);
+  const Eigen::LLT<Eigen::Ref<Eigen::MatrixXd>, Eigen::Lower> llt(zkz);  // in place: no third n × n matrix
+  if (llt.info() != Eigen::Success) return a.partialPivLu().solve(rhs);
+  Eigen::VectorXd zg = Eigen::VectorXd::Zero(n);
+  zg.tail(n - 3) = llt.solve(qd.tail(n - 3));
+  Eigen::VectorXd x(n + 3);
+  x.head(n) = qr.householderQ() * zg;  // w = Z γ
+  Eigen::VectorXd r = rhs.head(n) - a.topLeftCorner(n, n).selfadjointView<Eigen::Lower>() * x.head(n);
+  r.applyOnTheLeft(qr.householderQ().adjoint());
+  x.tail(3) = qr.matrixQR().topLeftCorner(3, 3).triangularView<Eigen::Upper>().solve(r.head(3));
+  return x;
+}
+
 }  // namespace
 
 Status DeviationFieldOptions::Validate() const {
@@ -95,7 +121,7 @@ Result<DeviationField> DeviationField::Fit(const std::vector<DeviationSample>& s
     return Status::BadInput(Where{.file = source}, "the samples lie on one line in (u, v)",
                             "add samples off that line");
   }
-  const Eigen::VectorXd x = a.partialPivLu().solve(rhs);
+  const Eigen::VectorXd x = SolveThinPlate(a, rhs, ni);
   if (!x.allFinite() || (a * x - rhs).norm() > 1e-6 * (1 + rhs.norm())) {
     return Status::BadInput(Where{.file = source}, "the thin-plate-spline system is singular or ill-conditioned",
                             "remove near-duplicate samples or use a smoothing > 0");

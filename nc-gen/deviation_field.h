@@ -11,8 +11,9 @@
 //   λ > 0  smooths (in the scaled coordinates, data in µm); λ → ∞ tends to the least-squares plane.
 // Any linear field a + b u + c v is reproduced exactly for every λ (the kernel part is then zero).
 //
-// Limits: the dense LU solve costs O(n³) time and (n+3)² doubles of memory, so at most
-// kMaxDeviationSamples points are accepted (3000: about 72 MB and a few seconds); more is refused with
+// Limits: the dense solve (a Cholesky factorisation on the null space of Pᵀ, SolveThinPlate in
+// deviation_field.cc) costs O(n³) time and two n × n matrices of doubles, so at most
+// kMaxDeviationSamples points are accepted (3000: 72 MB a matrix and a few seconds); more is refused with
 // a BadInput naming the count and the fix (thin the samples or smooth them first). At least three
 // samples not on one line are needed; with λ = 0 two samples at the same (u, v) are refused (lines named).
 //
