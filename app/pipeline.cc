@@ -49,7 +49,7 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
             retrieved.best ? ", case " + retrieved.best->uid : std::string());
 
   FL_RETURN_IF_ERROR(folder.Begin("4/9: plan"));
-  FL_ASSIGN_OR_RETURN(const planning::PlanChoice choice, stages::ChoosePlan(in, retrieved, q, options.learn, folder));
+  FL_ASSIGN_OR_RETURN(planning::PlanChoice choice, stages::ChoosePlan(in, retrieved, q, options.learn, folder));
   summary->plan_source = choice.source;
   summary->flag_engineer = summary->flag_engineer || choice.flag_engineer;
   const nc::ToolpathOptions& plan = choice.plan;
@@ -57,7 +57,8 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
             plan.scallop_um, plan.feed_mm_per_min);
 
   FL_RETURN_IF_ERROR(folder.Begin("5/9: nc"));
-  FL_ASSIGN_OR_RETURN(const stages::Programs programs, stages::WritePrograms(part, q, plan, folder));
+  FL_ASSIGN_OR_RETURN(const stages::Programs programs,
+                      stages::WritePrograms(part, q, plan, std::move(choice.path), folder));
 
   FL_RETURN_IF_ERROR(folder.Begin("6/9: precompensation"));
   FL_ASSIGN_OR_RETURN(stages::FirstCut cut,

@@ -250,11 +250,16 @@ Result<planning::PlanChoice> ChoosePlan(const Inputs& in, const Retrieved& retri
 }
 
 Result<Programs> WritePrograms(const PartSpec& part, const recon::BSplineSurface& q, const nc::ToolpathOptions& plan,
-                               const RunFolderWriter& folder) {
+                               std::shared_ptr<nc::Toolpath> planned, const RunFolderWriter& folder) {
   Programs p;
   // The plan may come from a case or the simulation-correction step: its size is checked again.
   FL_RETURN_IF_ERROR(CheckPartWork(part, plan, "the chosen plan (plan.json)", &q));
-  FL_ASSIGN_OR_RETURN(p.nominal, nc::PlanRaster(q, plan));
+  if (planned && nc::ToolpathOptionsJson(planned->options) == nc::ToolpathOptionsJson(plan)) {
+    p.nominal = std::move(*planned);  // the same PlanRaster(q, plan) the simulation correction checked
+  } else {
+    FL_ASSIGN_OR_RETURN(p.nominal, nc::PlanRaster(q, plan));
+  }
+  planned.reset();
   p.post.limits = part.limits;
   p.post.title = "formloop " + std::string(kVersion) + " part " + part.name + " loop 0, nominal";
   std::string text;

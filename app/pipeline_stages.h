@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -94,7 +95,9 @@ struct Program {
   std::vector<nc::ProgramMove> moves;
 };
 
-// 5. Tool path, the nominal program, the probing plan and the probing program (toolpath/).
+// 5. Tool path, the nominal program, the probing plan and the probing program (toolpath/). `planned`: the
+// plan's tool path when the plan stage planned it already (PlanChoice::path; taken over, not copied), used
+// when its options are the plan's; else (null) the path is planned here.
 struct Programs {
   nc::Toolpath nominal;
   nc::PostOptions post;
@@ -103,7 +106,7 @@ struct Programs {
   metrology::ProbingPlan probing_plan;
 };
 Result<Programs> WritePrograms(const PartSpec& part, const recon::BSplineSurface& q, const nc::ToolpathOptions& plan,
-                               const RunFolderWriter& folder);
+                               std::shared_ptr<nc::Toolpath> planned, const RunFolderWriter& folder);
 
 // The sum of the fields compensated so far (mm): the pre-compensation and one term per loop.
 struct CompensatedField {

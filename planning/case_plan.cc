@@ -137,12 +137,14 @@ Result<PlanChoice> ChoosePlan(const PlanRequest& request) {
     // the case's plan already meets), pre-compensated as on the direct route.
     log::Info("[plan] simulation-correction: the case's plan has no predicted defect on this part; kept");
     c.source += ", simulation-checked (no predicted defect)";
+    c.path = std::move(corrected.path);  // the case's plan, as checked
   } else if (corrected.corrected) {
     // The GA may switch tools: the learned model belongs to the tool it was learned with.
     if (corrected.plan.tool.radius_mm != c.plan.tool.radius_mm) {
       c.learned = LearnedModelOf(*r.best, r.machine, ToolKey(corrected.plan.tool.radius_mm), r.material);
     }
     c.plan = corrected.plan;
+    c.path = std::move(corrected.path);  // the corrected plan, as checked
     c.precompensation_scale = c.learned && r.learn ? corrected.precompensation_scale : 0.0;
     c.source += ", simulation-corrected";
   } else {

@@ -12,6 +12,7 @@
 // route, the correction (sim_correction.json).
 
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -79,6 +80,9 @@ struct PlanChoice {
   std::string source;                 // "case X", "case X, simulation-corrected", "default plan ..."
   nlohmann::json report = nlohmann::json::object();  // plan.json before the tool path is added
   std::optional<SimCorrectionResult> correction;     // route simulate
+  // `plan`'s tool path on the request's surface when the simulation correction planned it already (its
+  // SimCorrectionResult::path, moved here); null otherwise. The run cuts it instead of planning it again.
+  std::shared_ptr<nc::Toolpath> path;
 };
 
 // The plan by route (see the top of this file). The case's learned model is the baseline of the

@@ -112,6 +112,7 @@ struct CheckResult {
   double e_pred_mm = 0;
   double peak_sys_mm = 0, peak_deflection_mm = 0, peak_scallop_mm = 0;  // what the simulation measured
   int lifted_points = 0, cutter_locations = 0;
+  std::shared_ptr<nc::Toolpath> path;  // the tool path checked
   nlohmann::json ToJson() const {
     nlohmann::json d = nlohmann::json::array();
     for (const Defect& x : defects) d.push_back(x.ToJson());
@@ -159,7 +160,9 @@ Status PredictFormError(const SimCorrectionInput& in, const Problem& pb, const n
 Result<CheckResult> FullCheck(const SimCorrectionInput& in, const Problem& pb, const nc::ToolpathOptions& options,
                               double c_pc) {
   CheckResult out;
-  FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::PlanRaster(*in.surface, options));
+  out.path = std::make_shared<nc::Toolpath>();
+  FL_ASSIGN_OR_RETURN(*out.path, nc::PlanRaster(*in.surface, options));
+  const nc::Toolpath& path = *out.path;
   out.lifted_points = path.lifted_points;
   out.cutter_locations = static_cast<int>(path.points.size());
   const double r = options.tool.radius_mm;
@@ -381,7 +384,7 @@ Result<SimCorrectionResult> RunSimulationCorrection(const SimCorrectionInput& in
   Rng rng(input.seed);
 
   // 1. The case plan on the new part, without pre-compensation (what would happen if it ran as given).
-  FL_ASSIGN_OR_RETURN(const CheckResult before, FullCheck(input, pb, input.case_plan, 0.0));
+  FL_ASSIGN_OR_RETURN(CheckResult before, FullCheck(input, pb, input.case_plan, 0.0));
   res.defects_before = before.defects;
   res.predicted_form_error_before_um = before.e_pred_mm * 1000;
   if (before.defects.empty()) {
@@ -390,8 +393,10 @@ Result<SimCorrectionResult> RunSimulationCorrection(const SimCorrectionInput& in
     // r = 6 mm, while the program used the case's tool 3, r = 2 mm).
     res.corrected = true;
     res.predicted_form_error_after_um = res.predicted_form_error_before_um;
+    res.path = std::move(before.path);
     return res;
   }
+  before.path.reset();  // not cut: gone before the candidates are planned
 
   SurrogateInputs sur = InitialSurrogate(input, pb, before);
   std::vector<Defect> remaining = before.defects;
@@ -413,7 +418,7 @@ Result<SimCorrectionResult> RunSimulationCorrection(const SimCorrectionInput& in
     res.precompensation_scale = best.c_pc;
     h["genes"] = res.chosen.ToJson();
     // 3. The full check of the GA's plan.
-    FL_ASSIGN_OR_RETURN(const CheckResult check, FullCheck(input, pb, res.plan, best.c_pc));
+    FL_ASSIGN_OR_RETURN(CheckResult check, FullCheck(input, pb, res.plan, best.c_pc));
     h["check"] = check.ToJson();
     res.history.push_back(h);
     res.defects_after = check.defects;
@@ -421,6 +426,7 @@ Result<SimCorrectionResult> RunSimulationCorrection(const SimCorrectionInput& in
     remaining = check.defects;
     if (check.defects.empty()) {
       res.corrected = true;
+      res.path = std::move(check.path);
       return res;
     }
     for (const Defect& d : check.defects) {

@@ -27,6 +27,7 @@
 // same input gives the same result and the same JSON.
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -114,6 +115,10 @@ struct SimCorrectionResult {
   int rounds = 0;
   nlohmann::json history = nlohmann::json::array();  // per round: GA best J per generation, genes, check
   std::string why_not;                               // when !corrected
+  // The tool path the full check planned for the plan the run will use when the check passed it (the case's
+  // plan when it had no defect, else the GA's corrected plan), so the caller can cut it without planning it
+  // again (a million-point path is about a second); null otherwise.
+  std::shared_ptr<nc::Toolpath> path;
   nlohmann::json ToJson() const;
 };
 
