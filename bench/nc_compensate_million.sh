@@ -14,7 +14,7 @@
 # result with `nc check` (not timed). RUNS defaults to 3.
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
-formloop="${1:-$root/build/app/formloop}"
+formloop="$(readlink -f "${1:-$root/build/app/formloop}")"
 work="${2:-/tmp/formloop_nc_compensate_million}"
 runs="${3:-3}"
 mkdir -p "$work"
