@@ -6,14 +6,18 @@
 // power-form polynomial (BSplSLib_Cache) and evaluates that (0.27 µs, EvalAdaptorD2), but rebuilds it
 // whenever a call leaves the span, which is nearly every new point, and the cache is mutable, so each
 // thread would need its own. The projector therefore converts every span once: for non-rational
-// surfaces into our own span polynomials (span_polynomials.h: 0.04 µs per bicubic D2, 0.09 µs at
+// surfaces into our own span polynomials (span_polynomials.h: 0.04 µs per bicubic D2, 0.063 µs at
 // degree 5, bench EvalSpanPolynomials), otherwise into OpenCASCADE's BSplSLib_Cache per span (SpanCaches);
 // both are read-only afterwards and shared by threads. Surfaces whose caches would exceed
 // kMaxSpanCacheBytes, and the one-point functions, use a GeomAdaptor_Surface per call.
 //
 // Where the time goes (perf, 100,000 points within 1 mm of the bench's franke fit, 2026-11): before,
 // 3.4 µs a point, a third of it in the PCL kd-tree (FLANN) searches and a quarter in OpenCASCADE's
-// evaluation; now 1.0 µs, about 40 % in the cell grid's two queries, 30 % in evaluation, 15 % in Newton.
+// evaluation; then 1.0 µs, about 30 % in the cell grid's two queries, 30 % in evaluation (3.96 D2 a
+// point), 15 % in Newton. Since 2026-11-27 0.83 µs: the span polynomials leave out the products with a
+// zero power (0.090 -> 0.063 µs per degree-5 D2) and the grid scans whole rows of cells; the same bits.
+// Tried and dropped: keeping D2 at every start sample so a run starts without an evaluation (one D2 a
+// point fewer, but the 144-byte look-up misses the cache and cost as much).
 // The foot points agree with the earlier ones to 6e-12 mm (204,000 points, far and edge points included).
 
 #include "reconstruction/foot_point.h"

@@ -70,25 +70,29 @@ int PointGrid::Nearest(const Eigen::Vector3d& p, double* distance_mm, std::vecto
   const int max_ring = std::max({cx, dims_[0] - 1 - cx, cy, dims_[1] - 1 - cy, cz, dims_[2] - 1 - cz});
   // Rings of cells at Chebyshev distance k from p's (clamped) cell: every point not yet seen is at
   // least k cells away along some axis, so farther than k · cell from p.
+  // Points s_begin .. s_end − 1 (cell order): distances, the best so far, the seen list.
+  auto visit = [&](int s_begin, int s_end) {
+    for (int s = s_begin; s < s_end; ++s) {
+      const double d2 = (sorted_[static_cast<std::size_t>(s)] - p).squaredNorm();
+      const int id = index_[static_cast<std::size_t>(s)];
+      if (seen != nullptr) seen->emplace_back(d2, id);
+      if (d2 < best_d2 || (d2 == best_d2 && id < best)) {
+        best_d2 = d2;
+        best = id;
+      }
+    }
+  };
   for (int k = 0; k <= max_ring; ++k) {
+    const int x0 = std::max(0, cx - k), x1 = std::min(dims_[0] - 1, cx + k);
     for (int iz = std::max(0, cz - k); iz <= std::min(dims_[2] - 1, cz + k); ++iz) {
       for (int iy = std::max(0, cy - k); iy <= std::min(dims_[1] - 1, cy + k); ++iy) {
-        const bool inner = std::abs(iz - cz) < k && std::abs(iy - cy) < k;
-        for (int ix = std::max(0, cx - k); ix <= std::min(dims_[0] - 1, cx + k); ++ix) {
-          if (inner && std::abs(ix - cx) < k) {
-            ix = cx + k - 1;  // skip the inside of the ring
-            continue;
-          }
-          const std::size_t c = CellIndex(ix, iy, iz);
-          for (int s = start_[c]; s < start_[c + 1]; ++s) {
-            const double d2 = (sorted_[static_cast<std::size_t>(s)] - p).squaredNorm();
-            const int id = index_[static_cast<std::size_t>(s)];
-            if (seen != nullptr) seen->emplace_back(d2, id);
-            if (d2 < best_d2 || (d2 == best_d2 && id < best)) {
-              best_d2 = d2;
-              best = id;
-            }
-          }
+        if (std::abs(iz - cz) < k && std::abs(iy - cy) < k) {
+          // A row through the inside of the ring: only its two end cells.
+          if (cx - k >= 0) visit(start_[CellIndex(cx - k, iy, iz)], start_[CellIndex(cx - k, iy, iz) + 1]);
+          if (cx + k < dims_[0]) visit(start_[CellIndex(cx + k, iy, iz)], start_[CellIndex(cx + k, iy, iz) + 1]);
+        } else {
+          // A row on the ring's surface: its cells x0 .. x1 are consecutive, one run of points.
+          visit(start_[CellIndex(x0, iy, iz)], start_[CellIndex(x1, iy, iz) + 1]);
         }
       }
     }

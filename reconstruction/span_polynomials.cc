@@ -46,23 +46,30 @@ inline SurfaceDerivatives EvaluateSpan(int pu_runtime, int pv_runtime, const dou
   Powers<kPv>(pv, t, f0, f1, f2);
   double p[3] = {0, 0, 0}, su[3] = {0, 0, 0}, sv[3] = {0, 0, 0}, suu[3] = {0, 0, 0}, suv[3] = {0, 0, 0},
          svv[3] = {0, 0, 0};
+  // The terms with e1[0] = e2[0] = e2[1] = 0 (and the same of f) are left out: adding a product with a
+  // zero factor to a sum that starts at +0 leaves it unchanged (finite coefficients), so the sums are the
+  // same numbers with a sixth fewer multiplications at degree 5 (IEEE arithmetic does not let the compiler
+  // drop c · 0 by itself).
   for (int b = 0; b <= pv; ++b) {
     double r0[3] = {0, 0, 0}, r1[3] = {0, 0, 0}, r2[3] = {0, 0, 0};
     const double* row = c + b * (pu + 1) * 3;
-    for (int a = 0; a <= pu; ++a) {
+    for (int k = 0; k < 3; ++k) r0[k] = row[k] * e0[0];
+    for (int a = 1; a <= pu; ++a) {
       for (int k = 0; k < 3; ++k) {
         r0[k] += row[a * 3 + k] * e0[a];
         r1[k] += row[a * 3 + k] * e1[a];
-        r2[k] += row[a * 3 + k] * e2[a];
+        if (a >= 2) r2[k] += row[a * 3 + k] * e2[a];
       }
     }
     for (int k = 0; k < 3; ++k) {
       p[k] += r0[k] * f0[b];
       su[k] += r1[k] * f0[b];
-      sv[k] += r0[k] * f1[b];
       suu[k] += r2[k] * f0[b];
-      suv[k] += r1[k] * f1[b];
-      svv[k] += r0[k] * f2[b];
+      if (b >= 1) {
+        sv[k] += r0[k] * f1[b];
+        suv[k] += r1[k] * f1[b];
+      }
+      if (b >= 2) svv[k] += r0[k] * f2[b];
     }
   }
   SurfaceDerivatives d;
