@@ -5,8 +5,13 @@
 //   2. The hidden-effect sweep at a larger scale than the CI suite (tests/discovery): per effect the
 //      rate of naming it first, of its parameters inside their 95 % intervals and of a held-out gain
 //      ≥ 50 % of its RMS; noise-only, two-effect and outside-the-catalogue (bump) scenarios.
+//   Diagnose's candidate fits, exchange steps and profile intervals run on the cores --threads allows
+//   (core/parallel.h, the same bytes on any count): the pooled figures are printed on one thread and on
+//   all cores, side by side; the sweep runs its scenarios on all cores (each scenario on its own seed,
+//   so the rates are the same as one at a time).
 // Usage: formloop_bench_discovery [scenarios_per_effect (default 50)]
 
+#include <array>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -15,12 +20,22 @@
 #include <string>
 #include <vector>
 
+#include "core/parallel.h"
 #include "tests/support/multi_effect.h"
 
 using namespace formloop;
 using namespace formloop::testing;
 
 namespace {
+// Counts per scenario (four outcomes), filled on all cores, each scenario in its own slot.
+using Tally = std::array<int, 4>;
+Tally Sum(const std::vector<Tally>& tallies) {
+  Tally sum{0, 0, 0, 0};
+  for (const Tally& t : tallies) {
+    for (std::size_t k = 0; k < sum.size(); ++k) sum[k] += t[k];
+  }
+  return sum;
+}
 double CpuSeconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
 double WallSeconds() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
@@ -74,56 +89,69 @@ int main(int argc, char** argv) {
       for (const auto& part : parts) inputs.push_back(InputOf(part));
       sim::DiagnoseOptions o;
       o.plausible = StarterPlausibleRanges();
-      std::vector<double> wall, cpu, wall_proposal;
-      for (int rep = 0; rep < 3; ++rep) {
-        const double w0 = WallSeconds();
-        const auto single = sim::Diagnose(inputs[0], parts[0].baseline, o);
-        const double w1 = WallSeconds(), c1 = CpuSeconds();
-        const auto d = sim::DiagnosePooled(inputs, parts[0].baseline, o);
-        const double w2 = WallSeconds(), c2 = CpuSeconds();
-        if (!single.ok() || !d.ok()) {
-          std::printf("diagnose failed\n");
-          return 1;
+      for (int threads : {1, 0}) {
+        SetThreadCount(threads);
+        std::vector<double> wall, cpu, wall_proposal;
+        for (int rep = 0; rep < 3; ++rep) {
+          const double w0 = WallSeconds();
+          const auto single = sim::Diagnose(inputs[0], parts[0].baseline, o);
+          const double w1 = WallSeconds(), c1 = CpuSeconds();
+          const auto d = sim::DiagnosePooled(inputs, parts[0].baseline, o);
+          const double w2 = WallSeconds(), c2 = CpuSeconds();
+          if (!single.ok() || !d.ok()) {
+            std::printf("diagnose failed\n");
+            return 1;
+          }
+          auto proposals = sim::ProposeExperiments(inputs, *d, parts[0].baseline, ExperimentOptionsFor(parts[0]));
+          const double w3 = WallSeconds();
+          wall.push_back(w2 - w1);
+          cpu.push_back(c2 - c1);
+          wall_proposal.push_back(w3 - w2);
+          if (rep == 0 && threads == 1) {
+            std::printf("one part of %d points: %.3f s wall\n%s", parts[0].points, w1 - w0, d->Summary().c_str());
+          }
         }
-        auto proposals = sim::ProposeExperiments(inputs, *d, parts[0].baseline, ExperimentOptionsFor(parts[0]));
-        const double w3 = WallSeconds();
-        wall.push_back(w2 - w1);
-        cpu.push_back(c2 - c1);
-        wall_proposal.push_back(w3 - w2);
-        if (rep == 0) {
-          std::printf("one part of %d points: %.3f s wall\n%s", parts[0].points, w1 - w0, d->Summary().c_str());
-        }
+        std::sort(wall.begin(), wall.end());
+        std::sort(cpu.begin(), cpu.end());
+        std::sort(wall_proposal.begin(), wall_proposal.end());
+        std::printf(
+            "diagnose pooled, 3 parts x %d points (%d in all), %d thread(s): median wall %.3f s, CPU %.3f s (min "
+            "%.3f / max %.3f s wall); the separating-experiment proposal on top: median %.3f s\n",
+            parts[0].points, 3 * parts[0].points, ThreadCount(), wall[1], cpu[1], wall.front(), wall.back(),
+            wall_proposal[1]);
       }
-      std::sort(wall.begin(), wall.end());
-      std::sort(cpu.begin(), cpu.end());
-      std::sort(wall_proposal.begin(), wall_proposal.end());
-      std::printf(
-          "diagnose pooled, 3 parts x %d points (%d in all): median wall %.3f s, CPU %.3f s (min %.3f / max "
-          "%.3f s wall); the separating-experiment proposal on top: median %.3f s\n\n",
-          parts[0].points, 3 * parts[0].points, wall[1], cpu[1], wall.front(), wall.back(), wall_proposal[1]);
+      std::printf("\n");
     }
+    SetThreadCount(0);
   }
   // 2. The sweep.
   std::printf("%-16s %9s %12s %14s %12s\n", "effect", "scenarios", "named first", "params in 95%", "gain >= 50%");
   int total_named = 0, total = 0, total_in = 0, total_params = 0;
   std::uint64_t seed = 200000;
+  // Per scenario: {named, parameters inside, parameters, gain}.
   for (const std::string& effect : InjectableEffects()) {
-    int named = 0, in = 0, params = 0, gain = 0;
-    for (int k = 0; k < per_effect; ++k) {
-      const Scenario s = DrawScenario(++seed, {effect}, false);
-      const auto d = DiagnoseScenario(s);
-      if (!d.ok()) continue;
-      const sim::EffectInstance* truth = s.truth.Find(effect);
-      params += static_cast<int>(truth->values.size());
-      if (!d->causes.empty() && d->causes.front().effect == effect) {
-        ++named;
-        for (std::size_t j = 0; j < truth->values.size(); ++j) {
-          if (std::abs(d->causes.front().parameters[j] - truth->values[j]) <= 1.96 * d->causes.front().std_errors[j])
-            ++in;
+    std::vector<Tally> tallies(static_cast<std::size_t>(std::max(0, per_effect)), Tally{0, 0, 0, 0});
+    const std::uint64_t first_seed = seed + 1;
+    seed += static_cast<std::uint64_t>(std::max(0, per_effect));
+    ParallelFor(per_effect, 1, [&](long begin, long end) {
+      for (long k = begin; k < end; ++k) {
+        const Scenario s = DrawScenario(first_seed + static_cast<std::uint64_t>(k), {effect}, false);
+        const auto d = DiagnoseScenario(s);
+        if (!d.ok()) continue;
+        Tally& t = tallies[static_cast<std::size_t>(k)];
+        const sim::EffectInstance* truth = s.truth.Find(effect);
+        t[2] = static_cast<int>(truth->values.size());
+        if (!d->causes.empty() && d->causes.front().effect == effect) {
+          t[0] = 1;
+          for (std::size_t j = 0; j < truth->values.size(); ++j) {
+            if (std::abs(d->causes.front().parameters[j] - truth->values[j]) <= 1.96 * d->causes.front().std_errors[j])
+              ++t[1];
+          }
         }
+        if (d->heldout_rms_before_um - d->heldout_rms_after_um >= 0.5 * s.effect_rms_um) t[3] = 1;
       }
-      if (d->heldout_rms_before_um - d->heldout_rms_after_um >= 0.5 * s.effect_rms_um) ++gain;
-    }
+    });
+    const auto [named, in, params, gain] = Sum(tallies);
     std::printf("%-16s %9d %11.1f%% %13.1f%% %11.1f%%\n", effect.c_str(), per_effect, 100.0 * named / per_effect,
                 100.0 * in / std::max(1, params), 100.0 * gain / per_effect);
     total_named += named;
@@ -134,26 +162,37 @@ int main(int argc, char** argv) {
   std::printf("%-16s %9d %11.1f%% %13.1f%%\n\n", "all", total, 100.0 * total_named / total,
               100.0 * total_in / total_params);
   const int others = 4 * per_effect;
-  int quiet = 0, both = 0, bump_ok = 0, broad_ok = 0;
   const auto effects = InjectableEffects();
+  // The effect pairs drawn first, in order (one generator), then the scenarios on all cores; per
+  // scenario k: {noise quiet, both named, bump set aside, broad bump set aside}.
   Rng pick(77);
+  std::vector<std::pair<std::size_t, std::size_t>> pairs;
   for (int k = 0; k < others; ++k) {
-    const auto noise = DiagnoseScenario(DrawScenario(300000 + k, {}, false));
-    if (noise.ok() && noise->causes.empty()) ++quiet;
     const std::size_t a = pick.UniformIndex(effects.size());
     std::size_t b = pick.UniformIndex(effects.size() - 1);
     if (b >= a) ++b;
-    const auto pair = DiagnoseScenario(DrawScenario(400000 + k, {effects[a], effects[b]}, false));
-    if (pair.ok()) {
-      int found = 0;
-      for (const auto& c : pair->causes) found += (c.effect == effects[a] || c.effect == effects[b]);
-      if (found == 2) ++both;
-    }
-    const auto bump = DiagnoseScenario(DrawScenario(500000 + k, {}, true, 0.06));
-    if (bump.ok() && bump->unexplained && bump->causes.empty()) ++bump_ok;
-    const auto broad = DiagnoseScenario(DrawScenario(600000 + k, {}, true, 0.12));
-    if (broad.ok() && broad->unexplained && broad->causes.empty()) ++broad_ok;
+    pairs.emplace_back(a, b);
   }
+  std::vector<Tally> outcomes(static_cast<std::size_t>(std::max(0, others)), Tally{0, 0, 0, 0});
+  ParallelFor(others, 1, [&](long begin, long end) {
+    for (long k = begin; k < end; ++k) {
+      Tally& t = outcomes[static_cast<std::size_t>(k)];
+      const auto noise = DiagnoseScenario(DrawScenario(300000 + k, {}, false));
+      t[0] = noise.ok() && noise->causes.empty();
+      const auto [a, b] = pairs[static_cast<std::size_t>(k)];
+      const auto pair = DiagnoseScenario(DrawScenario(400000 + k, {effects[a], effects[b]}, false));
+      if (pair.ok()) {
+        int found = 0;
+        for (const auto& c : pair->causes) found += (c.effect == effects[a] || c.effect == effects[b]);
+        t[1] = found == 2;
+      }
+      const auto bump = DiagnoseScenario(DrawScenario(500000 + k, {}, true, 0.06));
+      t[2] = bump.ok() && bump->unexplained && bump->causes.empty();
+      const auto broad = DiagnoseScenario(DrawScenario(600000 + k, {}, true, 0.12));
+      t[3] = broad.ok() && broad->unexplained && broad->causes.empty();
+    }
+  });
+  const auto [quiet, both, bump_ok, broad_ok] = Sum(outcomes);
   std::printf("noise only: no cause named              %5.1f%% of %d\n", 100.0 * quiet / others, others);
   std::printf("two effects: both named                 %5.1f%% of %d\n", 100.0 * both / others, others);
   std::printf("local bump (sigma 6%% of part): unexplained, nothing named  %5.1f%% of %d\n", 100.0 * bump_ok / others,

@@ -14,6 +14,7 @@
 #include <Eigen/SVD>
 
 #include "core/golden_section.h"
+#include "core/parallel.h"
 #include "metrology/morans_i.h"
 #include "metrology/spatial_cv.h"
 
@@ -91,7 +92,7 @@ Eigen::MatrixXd InverseGram(const Eigen::MatrixXd& a) {
   return d.asDiagonal() * (v * inv2.asDiagonal() * v.transpose()) * d.asDiagonal();
 }
 
-Fit LeastSquares(const Eigen::MatrixXd& a, const Eigen::VectorXd& r) {
+Fit LeastSquares(const Eigen::MatrixXd& a, const Eigen::VectorXd& r, bool covariance) {
   Fit fit;
   if (a.cols() == 0) {
     fit.residual = r;
@@ -112,6 +113,7 @@ Fit LeastSquares(const Eigen::MatrixXd& a, const Eigen::VectorXd& r) {
   fit.residual = r - a * fit.beta;
   fit.rss = fit.residual.squaredNorm();
   fit.rank = static_cast<int>(cod.rank());
+  if (!covariance) return fit;
   const double dof = std::max(1.0, static_cast<double>(r.size() - fit.rank));
   fit.cov = (fit.rss / dof) * InverseGram(a);
   return fit;
@@ -144,7 +146,7 @@ Eigen::MatrixXd LinearColumnsAt(const Problem& prob, const Term& term, double q)
 }
 
 double ProfileRss(const Problem& prob, const Term& term, const Eigen::MatrixXd& x, double tau) {
-  return LeastSquares(Concat(x, LinearColumnsAt(prob, term, tau)), prob.r).rss;
+  return LeastSquares(Concat(x, LinearColumnsAt(prob, term, tau)), prob.r, false).rss;
 }
 
 // Linear terms: one least squares. A term with one nonlinear parameter (τ): the RSS profiled over a
@@ -167,14 +169,18 @@ TermFit FitTerm(const Problem& prob, const Term& term, const Eigen::MatrixXd& x,
     return out;
   }
   auto linear_columns = [&](double q) { return LinearColumnsAt(prob, term, q); };
-  auto rss_at = [&](double log_q) { return LeastSquares(Concat(x, linear_columns(std::exp(log_q))), prob.r).rss; };
+  auto rss_at = [&](double log_q) {
+    return LeastSquares(Concat(x, linear_columns(std::exp(log_q))), prob.r, false).rss;
+  };
   const double lo = std::log(tau_lo), hi = std::log(tau_hi);
   constexpr int kGrid = 33;
   int best = 0;
   std::vector<double> grid(kGrid), rss(kGrid);
+  for (int g = 0; g < kGrid; ++g) grid[g] = lo + (hi - lo) * g / (kGrid - 1);
+  ParallelFor(kGrid, 1, [&](long begin, long end) {
+    for (long g = begin; g < end; ++g) rss[static_cast<std::size_t>(g)] = rss_at(grid[static_cast<std::size_t>(g)]);
+  });
   for (int g = 0; g < kGrid; ++g) {
-    grid[g] = lo + (hi - lo) * g / (kGrid - 1);
-    rss[g] = rss_at(grid[g]);
     if (rss[g] < rss[best]) best = g;
   }
   double a = grid[std::max(0, best - 1)], b = grid[std::min(kGrid - 1, best + 1)];
@@ -186,13 +192,13 @@ TermFit FitTerm(const Problem& prob, const Term& term, const Eigen::MatrixXd& x,
   // The grid's end points are candidates too (the golden section never reaches a bound exactly).
   if (rss[best] < rss_at(log_q)) log_q = grid[best];
   const double q = std::exp(log_q);
-  const Fit lin_fit = LeastSquares(Concat(x, linear_columns(q)), prob.r);
+  const Fit lin_fit = LeastSquares(Concat(x, linear_columns(q)), prob.r, false);
   std::vector<double> theta(p);
   for (int k = 0, col = 0; k < p; ++k) theta[k] = k == nonlinear ? q : lin_fit.beta[x.cols() + col++];
   // Full linearised Jacobian at the optimum for the standard errors (and the columns later fits use).
   out.columns = prob.Columns(term, theta);
   const Eigen::MatrixXd af = Concat(x, out.columns);
-  Fit full = LeastSquares(af, prob.r);
+  Fit full = LeastSquares(af, prob.r, false);
   full.residual = lin_fit.residual;  // the exact nonlinear residual
   full.rss = lin_fit.rss;
   const double s2 = full.rss / std::max(1.0, static_cast<double>(prob.n() - x.cols() - p));

@@ -60,7 +60,9 @@ struct Fit {
   Eigen::MatrixXd cov;  // s² (AᵀA)⁺
   int rank = 0;
 };
-Fit LeastSquares(const Eigen::MatrixXd& a, const Eigen::VectorXd& r);
+// covariance = false leaves cov empty (the rest the same numbers): for callers that use the RSS or β only,
+// since (AᵀA)⁺ costs a second decomposition as large as the fit's.
+Fit LeastSquares(const Eigen::MatrixXd& a, const Eigen::VectorXd& r, bool covariance = true);
 // (aᵀa)⁺ through a's unit-norm columns (the same rank decisions as LeastSquares).
 Eigen::MatrixXd InverseGram(const Eigen::MatrixXd& a);
 

@@ -8,6 +8,7 @@
 #include <Eigen/QR>
 #include <Eigen/SVD>
 
+#include "core/parallel.h"
 #include "simulation/diagnose_engine.h"
 
 namespace formloop::sim::detail {
@@ -74,7 +75,7 @@ std::vector<std::vector<std::pair<double, double>>> ProfileIntervals(const Probl
       a.column.push_back(cols);
       x = Concat(x, c);
     }
-    const Fit f = LeastSquares(x, prob.r);
+    const Fit f = LeastSquares(x, prob.r, false);
     a.rss = f.rss;
     a.beta = f.beta;
     a.inverse = InverseGram(x);
@@ -98,7 +99,11 @@ std::vector<std::vector<std::pair<double, double>>> ProfileIntervals(const Probl
       taus.push_back(std::exp(std::log(tau_lo) + (std::log(tau_hi) - std::log(tau_lo)) * g / (kGrid - 1)));
     }
     taus.push_back(tau_hat);
-    for (double tau : taus) fits.push_back(fit_at(tau));
+    // One fit per τ, on the cores --threads allows (each into its own slot: the same numbers).
+    fits.resize(taus.size());
+    ParallelFor(static_cast<long>(taus.size()), 1, [&](long begin, long end) {
+      for (long g = begin; g < end; ++g) fits[static_cast<std::size_t>(g)] = fit_at(taus[static_cast<std::size_t>(g)]);
+    });
     // τ itself: bisection on its profile between the optimum and each end of the search range.
     const Eigen::MatrixXd others = DesignOf(s, nonlinear_term);
     const Term& term = s[static_cast<std::size_t>(nonlinear_term)].term;
@@ -114,7 +119,11 @@ std::vector<std::vector<std::pair<double, double>>> ProfileIntervals(const Probl
       }
       return std::exp(0.5 * (a + b));
     };
-    out[static_cast<std::size_t>(nonlinear_term)][static_cast<std::size_t>(q)] = {crossing(tau_lo), crossing(tau_hi)};
+    double ends[2] = {tau_lo, tau_hi};  // the two bisections side by side
+    ParallelFor(2, 1, [&](long begin, long end) {
+      for (long k = begin; k < end; ++k) ends[k] = crossing(ends[k]);
+    });
+    out[static_cast<std::size_t>(nonlinear_term)][static_cast<std::size_t>(q)] = {ends[0], ends[1]};
   }
   double rss_min = fits.front().rss;
   for (const auto& f : fits) rss_min = std::min(rss_min, f.rss);

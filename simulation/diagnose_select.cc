@@ -15,6 +15,7 @@
 #include <Eigen/Eigenvalues>
 #include <boost/math/distributions/fisher_f.hpp>
 
+#include "core/parallel.h"
 #include "metrology/morans_i.h"
 #include "simulation/diagnose_engine.h"
 
@@ -98,31 +99,38 @@ class Selector {
     const Eigen::MatrixXd x = s->empty() ? Eigen::MatrixXd(n_, 0) : DesignOf(*s);
     const Fit current = LeastSquares(x, prob_.r);
     const double k_tests = static_cast<double>(pool->size());
-    std::vector<TermFit> fits;
-    int best = -1;
-    for (const Term& c : *pool) {
-      TermFit f = With(*s, c);
-      ScreenedEffect e;
-      e.effect = prob_.Label(c);
-      e.parameters = f.theta;
-      e.std_errors = f.std_errors;
-      e.rss_drop = current.rss - f.fit.rss;
-      const int q = static_cast<int>(f.columns.cols());
-      const int dof2 = n_ - static_cast<int>(x.cols()) - q;
-      if (dof2 > 0 && f.fit.rss > 0 && e.rss_drop > 0) {
-        e.f = (e.rss_drop / q) / (f.fit.rss / dof2);
-        e.p_value = FTail(e.f, q, dof2);
+    // Every candidate fitted on the cores --threads allows (each into its own slot), then taken in order.
+    std::vector<TermFit> fits(pool->size());
+    std::vector<ScreenedEffect> screened(pool->size());
+    ParallelFor(static_cast<long>(pool->size()), 1, [&](long begin, long end) {
+      for (auto i = static_cast<std::size_t>(begin); i < static_cast<std::size_t>(end); ++i) {
+        const Term& c = (*pool)[i];
+        TermFit& f = fits[i];
+        f = With(*s, c);
+        ScreenedEffect& e = screened[i];
+        e.effect = prob_.Label(c);
+        e.parameters = f.theta;
+        e.std_errors = f.std_errors;
+        e.rss_drop = current.rss - f.fit.rss;
+        const int q = static_cast<int>(f.columns.cols());
+        const int dof2 = n_ - static_cast<int>(x.cols()) - q;
+        if (dof2 > 0 && f.fit.rss > 0 && e.rss_drop > 0) {
+          e.f = (e.rss_drop / q) / (f.fit.rss / dof2);
+          e.p_value = FTail(e.f, q, dof2);
+        }
+        e.delta_bic = n_ * std::log(std::max(f.fit.rss, 1e-300) / std::max(current.rss, 1e-300)) + q * std::log(n_);
+        const double systematic = current.rss - n_ * nugget;
+        e.share = systematic > 0 ? e.rss_drop / systematic : (e.rss_drop > 0 ? 1.0 : 0.0);
+        e.significant = e.p_value < options_.alpha / k_tests && e.delta_bic < 0 && e.share >= options_.min_share;
+        e.z_after = MoranZ(f.fit.residual, Concat(x, f.columns), w);
       }
-      e.delta_bic = n_ * std::log(std::max(f.fit.rss, 1e-300) / std::max(current.rss, 1e-300)) + q * std::log(n_);
-      const double systematic = current.rss - n_ * nugget;
-      e.share = systematic > 0 ? e.rss_drop / systematic : (e.rss_drop > 0 ? 1.0 : 0.0);
-      e.significant = e.p_value < options_.alpha / k_tests && e.delta_bic < 0 && e.share >= options_.min_share;
-      e.z_after = MoranZ(f.fit.residual, Concat(x, f.columns), w);
+    });
+    int best = -1;
+    for (const ScreenedEffect& e : screened) {
       if (e.significant && (best < 0 || e.delta_bic < (*table)[static_cast<std::size_t>(best)].delta_bic)) {
         best = static_cast<int>(table->size());
       }
       table->push_back(e);
-      fits.push_back(std::move(f));
     }
     int chosen = best;
     std::vector<int> order(table->size());
@@ -147,20 +155,29 @@ class Selector {
     const double bic0 = Bic(*s);
     double best_bic = bic0 - 1e-9 * std::abs(bic0) - 1e-9;
     int best_k = -1, best_c = -1;
-    TermFit best_fit;
+    // Every swap (k, c) scored on the cores --threads allows (swap i = k · pool + c), then taken in order;
+    // the winner is fitted again (the same numbers) rather than every fit kept.
+    const std::size_t swaps = s->size() * pool->size();
+    std::vector<double> bics(swaps);
+    ParallelFor(static_cast<long>(swaps), 1, [&](long begin, long end) {
+      for (auto i = static_cast<std::size_t>(begin); i < static_cast<std::size_t>(end); ++i) {
+        const int k = static_cast<int>(i / pool->size());
+        const TermFit f = With(*s, (*pool)[i % pool->size()], k);
+        bics[i] = Bic(f.fit.rss, Params(*s, k) + static_cast<int>(f.columns.cols()));
+      }
+    });
     for (std::size_t k = 0; k < s->size(); ++k) {
       for (std::size_t c = 0; c < pool->size(); ++c) {
-        TermFit f = With(*s, (*pool)[c], static_cast<int>(k));
-        const double bic = Bic(f.fit.rss, Params(*s, static_cast<int>(k)) + static_cast<int>(f.columns.cols()));
+        const double bic = bics[k * pool->size() + c];
         if (bic < best_bic) {
           best_bic = bic;
           best_k = static_cast<int>(k);
           best_c = static_cast<int>(c);
-          best_fit = std::move(f);
         }
       }
     }
     if (best_k < 0) return false;
+    TermFit best_fit = With(*s, (*pool)[static_cast<std::size_t>(best_c)], best_k);
     (*pool)[static_cast<std::size_t>(best_c)] = (*s)[static_cast<std::size_t>(best_k)].term;
     (*s)[static_cast<std::size_t>(best_k)] = std::move(best_fit);
     Refresh(s);
@@ -574,18 +591,26 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
   // look-alike too weak to be selected can still shift a named parameter (a set-up z offset against the
   // tool radius, a thermal amplitude against wear); its model's interval then widens the reported one.
   auto intervals = ProfileIntervals(prob, s, tau_lo, tau_hi, nu, f95);
-  for (const Term& c : pool) {
-    if (!c.effect->linear() &&
-        !(s.empty() || std::all_of(s.begin(), s.end(), [](const TermFit& t) { return t.term.effect->linear(); }))) {
-      continue;  // one nonlinear term at a time
+  // Each candidate's intervals on the cores --threads allows (empty: left out), then joined in order.
+  std::vector<std::vector<std::vector<std::pair<double, double>>>> widened(pool.size());
+  ParallelFor(static_cast<long>(pool.size()), 1, [&](long begin, long end) {
+    for (auto i = static_cast<std::size_t>(begin); i < static_cast<std::size_t>(end); ++i) {
+      const Term& c = pool[i];
+      if (!c.effect->linear() &&
+          !(s.empty() || std::all_of(s.begin(), s.end(), [](const TermFit& t) { return t.term.effect->linear(); }))) {
+        continue;  // one nonlinear term at a time
+      }
+      const TermFit with = sel.With(s, c);
+      if (!sel.PlausibleFit(with)) continue;
+      std::vector<TermFit> extended = s;
+      extended.push_back(with);
+      const int nu_c = std::max(1, nu - static_cast<int>(with.columns.cols()));
+      const double f95_c = boost::math::quantile(boost::math::fisher_f(1, nu_c), 0.95);
+      widened[i] = ProfileIntervals(prob, extended, tau_lo, tau_hi, nu_c, f95_c);
     }
-    const TermFit with = sel.With(s, c);
-    if (!sel.PlausibleFit(with)) continue;
-    std::vector<TermFit> extended = s;
-    extended.push_back(with);
-    const int nu_c = std::max(1, nu - static_cast<int>(with.columns.cols()));
-    const double f95_c = boost::math::quantile(boost::math::fisher_f(1, nu_c), 0.95);
-    const auto wider = ProfileIntervals(prob, extended, tau_lo, tau_hi, nu_c, f95_c);
+  });
+  for (const auto& wider : widened) {
+    if (wider.empty()) continue;
     for (std::size_t k = 0; k < s.size(); ++k) {
       for (std::size_t j = 0; j < intervals[k].size(); ++j) {
         if (std::isnan(wider[k][j].first) || std::isnan(intervals[k][j].first)) continue;
