@@ -32,7 +32,7 @@
 // of S(u, v) + t n is t to 1e-9 mm; on B-spline surfaces it agrees with OpenCASCADE's
 // GeomAPI_ProjectPointOnSurf to 1e-7 mm, and where OpenCASCADE finds no or a farther point ours is
 // at least as close. Speed against OpenCASCADE: bench/projection_bench.cc (100,000 points within 1 mm
-// of three fits, single thread, 2026-11: 0.75-0.85 µs a point; OpenCASCADE's Extrema Grad and Tree there).
+// of three fits, single thread, 2026-11: 0.72-0.83 µs a point; OpenCASCADE's Extrema Grad and Tree there).
 // B-spline evaluation: span_polynomials.h for non-rational surfaces (all six outputs in one pass), else
 // OpenCASCADE's span caches.
 
