@@ -189,6 +189,16 @@ class HeidenhainPost : public PostDialect {
     FL_RETURN_IF_ERROR(options.post.Validate());
     const auto stations = ProbeStations(plan, options);
     if (!stations.ok()) return stations.status();
+    for (const ProbeStation& s : *stations) {
+      if (s.tilted) {
+        return Status::BadInput(Where{.field = "separating_experiment"},
+                                "probe point " + std::to_string(s.id) +
+                                    " has a tilted approach; Heidenhain's cycle 444 probes along the normal it is "
+                                    "given, so a tilted approach cannot be programmed and no program was written",
+                                "probe the tilted points on a linuxcnc, fanuc or sinumerik control, or leave the "
+                                "separating experiment out of the part file");
+      }
+    }
     const int dec = options.post.decimals;
     auto num = [dec](double v) { return WithSign(FormatFixed(v, dec)); };
     auto unit = [](double v) { return WithSign(FormatFixed(v, 6)); };

@@ -90,13 +90,13 @@ class LinuxCncPost : public PostDialect {
       out << "G0 Z" << FormatFixed(s.start.z(), dec) << "\n";
       out << "G38.2 " << xyz(s.target) << " F" << FormatFixed(options.probe_feed_mm_per_min, 0) << "\n";
       if (two_touches) {
-        const Eigen::Vector3d back = options.backoff_mm * s.normal;
+        const Eigen::Vector3d back = -options.backoff_mm * s.approach;
         out << "G91 G0 " << xyz(back) << "\nG90\n";
         out << "G38.2 " << xyz(s.target) << " F" << FormatExact(options.touch_feed_mm_per_min) << "\n";
       }
       if (timed) out << "M66 E" << options.linuxcnc_time_input << " L0\n";
       if (logged) {
-        const Eigen::Vector3d a = -s.normal;
+        const Eigen::Vector3d& a = s.approach;
         out << "(LOG,point " << s.id << " #5061 #5062 #5063 #5070 " << FormatFixed(a.x(), 9) << " "
             << FormatFixed(a.y(), 9) << " " << FormatFixed(a.z(), 9) << (timed ? " #5399" : "") << ")\n";
       }

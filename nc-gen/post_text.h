@@ -89,6 +89,8 @@ Result<std::vector<ProgramMove>> ReadWordAddress(const std::string& text, const 
 struct ProbeStation {
   std::int64_t id = 0;
   Eigen::Vector3d surface, normal, above, start, target;
+  Eigen::Vector3d approach = -Eigen::Vector3d::UnitZ();  // unit, into the surface (−n unless tilted)
+  bool tilted = false;
 };
 // Every station of the plan, each position checked against the limits (SafetyLimit names the point id),
 // after the options and the probe feed.

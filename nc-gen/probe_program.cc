@@ -5,6 +5,8 @@
 // stations, the header text, and the dispatch by dialect name.
 
 #include <algorithm>
+#include <cmath>
+#include <numbers>
 
 #include "core/number_text.h"
 #include "nc-gen/post_text.h"
@@ -19,24 +21,41 @@ Result<std::vector<ProbeStation>> ProbeStations(const metrology::ProbingPlan& pl
   if (options.probe_feed_mm_per_min > options.post.limits.max_feed_mm_per_min) {
     return Status::SafetyLimit("probe feed exceeds the machine's feed limit; no probing program was written");
   }
+  if (!options.approaches.empty() && options.approaches.size() != plan.points.size()) {
+    return Status::BadInput("probing program: " + std::to_string(options.approaches.size()) +
+                            " approach directions for " + std::to_string(plan.points.size()) + " points");
+  }
+  const double min_cos = std::cos(kMaxApproachTiltDeg * std::numbers::pi / 180.0);
   std::vector<ProbeStation> stations;
-  for (const metrology::ProbePoint& p : plan.points) {
+  for (std::size_t i = 0; i < plan.points.size(); ++i) {
+    const metrology::ProbePoint& p = plan.points[i];
+    const std::string what = "probe point " + std::to_string(p.id);
     ProbeStation s;
     s.id = p.id;
     s.surface = p.point;
     s.normal = p.normal;
+    s.approach = -p.normal;
+    if (!options.approaches.empty()) {
+      const Eigen::Vector3d& a = options.approaches[i];
+      if (!(std::abs(a.norm() - 1.0) < 1e-6) || !(a.z() < 0) || !(-a.dot(p.normal) >= min_cos)) {
+        return Status::BadInput(what + ": approach (" + FormatExact(a.x()) + ", " + FormatExact(a.y()) + ", " +
+                                FormatExact(a.z()) + ") is not a unit vector coming down onto the part within " +
+                                FormatExact(kMaxApproachTiltDeg) + " degrees of the normal; no program was written");
+      }
+      s.approach = a;
+      s.tilted = (a + p.normal).norm() > 1e-9;
+    }
     const Eigen::Vector3d centre_on_surface = p.point + options.ball_radius_mm * p.normal;
-    s.start = centre_on_surface + options.clearance_mm * p.normal;
-    s.target = centre_on_surface - options.search_mm * p.normal;
+    s.start = centre_on_surface - options.clearance_mm * s.approach;
+    s.target = centre_on_surface + options.search_mm * s.approach;
     s.above = s.start;
     s.above.z() = options.safe_z_mm;
-    const std::string what = "probe point " + std::to_string(p.id);
     FL_RETURN_IF_ERROR(CheckTravel(options.post.limits, s.above, what));
     FL_RETURN_IF_ERROR(CheckTravel(options.post.limits, s.start, what));
     FL_RETURN_IF_ERROR(CheckTravel(options.post.limits, s.target, what));
     // Two touches: the back-off from a contact at the start point is the highest point reached.
     if (options.touch_feed_mm_per_min > 0) {
-      FL_RETURN_IF_ERROR(CheckTravel(options.post.limits, s.start + options.backoff_mm * s.normal, what));
+      FL_RETURN_IF_ERROR(CheckTravel(options.post.limits, s.start - options.backoff_mm * s.approach, what));
     }
     stations.push_back(s);
   }
@@ -114,6 +133,10 @@ Result<std::vector<std::string>> PostProbingBatches(const metrology::ProbingPlan
     const std::size_t first = b * capacity, last = std::min(plan.points.size(), first + capacity);
     part.points.assign(plan.points.begin() + static_cast<long>(first), plan.points.begin() + static_cast<long>(last));
     ProbeProgramOptions o = options;
+    if (!options.approaches.empty() && options.approaches.size() == plan.points.size()) {
+      o.approaches.assign(options.approaches.begin() + static_cast<long>(first),
+                          options.approaches.begin() + static_cast<long>(last));
+    }
     o.post.title += " (batch " + std::to_string(b + 1) + " of " + std::to_string(n) + ", points " +
                     std::to_string(part.points.front().id) + "-" + std::to_string(part.points.back().id) + ")";
     FL_ASSIGN_OR_RETURN(std::string text, PostProbing(part, dialect, o));

@@ -59,9 +59,19 @@ struct ProbeProgramOptions {
   int sinumerik_r_base = 10;      // Sinumerik: first R parameter of the result range (R10)
   // Sinumerik: the last R parameter the control has (MD28050 MM_NUM_R_PARAM − 1; 99 by default).
   int sinumerik_r_last = 99;
+  // Per plan point (plan order), the unit approach direction of a tilted probe (a separating experiment,
+  // simulation/proposal_plan.h); empty: every point along −n. A point's clearance and search end then lie
+  // along a from the ball centre at contact (nominal point + R·n): start = c − clearance·a, search end =
+  // c + search·a, the probing move along a, the back-off along −a and the LOG line's approach = a (the
+  // controlled point is the ball centre, which is what moves along a). An approach must come down onto
+  // the part (a_z < 0) within kMaxApproachTiltDeg of −n. Heidenhain's cycle 444 probes along the normal it
+  // is given and refuses a tilted point.
+  std::vector<Eigen::Vector3d> approaches;
   PostOptions post;
   Status Validate() const;
 };
+
+inline constexpr double kMaxApproachTiltDeg = 60;
 
 // The dialects PostProbing knows: every post (PostNames()), in registry order.
 std::vector<std::string> ProbingDialectNames();
