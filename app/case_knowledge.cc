@@ -45,6 +45,41 @@ nlohmann::json LearnedModelEntry(const sim::Model& model, const std::string& mac
           {"provenance", provenance}};
 }
 
+Result<std::vector<sim::PlannedProposal>> StoredSeparatingExperiments(kb::Library& library, const std::string& machine,
+                                                                      const std::string& tool,
+                                                                      const std::string& material,
+                                                                      const std::string& preferred,
+                                                                      std::string* from_case) {
+  FL_ASSIGN_OR_RETURN(std::vector<kb::CaseRecord> cases, library.ListCases());
+  std::stable_sort(cases.begin(), cases.end(), [&](const kb::CaseRecord& a, const kb::CaseRecord& b) {
+    if ((a.uid == preferred) != (b.uid == preferred)) return a.uid == preferred;
+    return a.uid < b.uid;
+  });
+  for (const kb::CaseRecord& c : cases) {
+    const nlohmann::json models = c.simulation.value("effect_models", nlohmann::json::array());
+    if (!models.is_array()) continue;
+    for (const nlohmann::json& m : models) {
+      if (!m.is_object() || m.value("machine", "") != machine || m.value("tool", "") != tool ||
+          m.value("material", "") != material || !m.contains("separating_experiments") ||
+          !m["separating_experiments"].is_array() || m["separating_experiments"].empty()) {
+        continue;
+      }
+      std::vector<sim::PlannedProposal> out;
+      const nlohmann::json& list = m["separating_experiments"];
+      for (std::size_t i = 0; i < list.size(); ++i) {
+        FL_ASSIGN_OR_RETURN(sim::PlannedProposal p,
+                            sim::PlannedProposal::FromJson(
+                                list[i], "case library, case " + c.uid,
+                                "simulation.effect_models[].separating_experiments[" + std::to_string(i) + "]."));
+        out.push_back(std::move(p));
+      }
+      *from_case = c.uid;
+      return out;
+    }
+  }
+  return std::vector<sim::PlannedProposal>{};
+}
+
 retrieval::PartDescription DescriptionOf(const PartSpec& part, const nc::ToolpathOptions& plan) {
   retrieval::PartDescription d;
   d.family_tag = part.name;
@@ -78,8 +113,9 @@ Result<kb::CaseRecord> MakeRetainedCase(const RetainInput& in) {
   record.concepts = in.features->Concepts();
   const std::string tool = planning::ToolKey(in.plan.tool.radius_mm);
   if (in.learned) {
-    const nlohmann::json entry =
+    nlohmann::json entry =
         LearnedModelEntry(*in.learned, part.machine_name, tool, part.material, in.learned_provenance);
+    if (!in.separating_experiments.empty()) entry["separating_experiments"] = in.separating_experiments;
     nlohmann::json models = record.simulation.value("effect_models", nlohmann::json::array());
     if (!models.is_array()) models = nlohmann::json::array();
     bool replaced = false;

@@ -15,6 +15,7 @@
 #include "retrieval/features.h"
 #include "simulation/model.h"
 #include "simulation/plausible_ranges.h"
+#include "simulation/proposal_plan.h"
 
 namespace formloop::app {
 
@@ -28,6 +29,15 @@ Result<sim::PlausibleRanges> PlausibleRangesFor(kb::Library* library, const std:
 nlohmann::json LearnedModelEntry(const sim::Model& model, const std::string& machine, const std::string& tool,
                                  const std::string& material, const nlohmann::json& provenance);
 
+// The separating experiments (simulation/proposal_plan.h) the case library holds for a machine/tool/material:
+// the "separating_experiments" of a case's learned-model entry with that key — the case `preferred` (the
+// retrieved one) when it has them, else the first such case by uid. Empty: none; *from_case names the case.
+Result<std::vector<sim::PlannedProposal>> StoredSeparatingExperiments(kb::Library& library, const std::string& machine,
+                                                                      const std::string& tool,
+                                                                      const std::string& material,
+                                                                      const std::string& preferred,
+                                                                      std::string* from_case);
+
 // The retrieval description of a part (retrieval::PartDescription) from its part file.
 retrieval::PartDescription DescriptionOf(const PartSpec& part, const nc::ToolpathOptions& plan);
 
@@ -39,6 +49,8 @@ struct RetainInput {
   nlohmann::json compensation_loops = nlohmann::json::array();
   std::optional<sim::Model> learned;  // the extended model of the diagnosis (or the baseline kept)
   nlohmann::json learned_provenance = nlohmann::json::object();
+  // This part's proposals for the next part (PlannedProposal::ToJson each), kept with the learned model.
+  nlohmann::json separating_experiments = nlohmann::json::array();
   const kb::CaseRecord* existing = nullptr;  // the part's own case, when it is already in the library
   // {"part": resolved part, "machine": "virtual[:PROFILE]"} when the part was cut on the virtual machine
   // (stored as part.rerun, so app/route_calibration.h can run it again); null otherwise.

@@ -22,6 +22,7 @@
 #include "retrieval/starter.h"
 #include "simulation/diagnose.h"
 #include "simulation/experiment_design.h"
+#include "simulation/proposal_plan.h"
 #include "simulation/virtual_machine.h"
 
 namespace formloop::app {
@@ -259,7 +260,10 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
       };
       FL_ASSIGN_OR_RETURN(const auto found, sim::ProposeExperiments(inputs, diagnosis, baseline, eo));
       for (const auto& p : found) {
-        proposals.push_back(p.ToJson());
+        nlohmann::json pj = p.ToJson();
+        // The same change for the next part of another shape (`formloop run`'s separating_experiment).
+        pj["next_part"] = sim::PlannedProposal::Of(p, first.q.domain()).ToJson();
+        proposals.push_back(pj);
         log::Info("proposal for {}: {} (cost {:.0f} s; design correlation {:.4f} -> {:.4f}{})",
                   fmt::format("{}", fmt::join(p.members, ", ")), p.change, p.cost_s, p.correlation_before,
                   p.correlation_after, p.predicted_to_split ? "" : "; not predicted to split it on its own");

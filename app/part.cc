@@ -90,6 +90,55 @@ Status ReadProbeProfileField(const JsonFields& f, const std::string& source, met
   return Status::Ok();
 }
 
+// separating_experiment: "library", a file of `formloop diagnose` (diagnosis.json: each proposal's
+// "next_part"; or {"proposals": [...]}), relative to the part file, or {"proposals": [...]} inline.
+Status ReadSeparatingExperiment(const nlohmann::json& json, const std::string& source, PartSpec* part) {
+  if (!json.contains("separating_experiment")) return Status::Ok();
+  const nlohmann::json& value = json.at("separating_experiment");
+  const std::string fix =
+      "write \"separating_experiment\": \"library\", the diagnosis.json of `formloop diagnose` (relative to the "
+      "part file), or {\"proposals\": [...]}";
+  nlohmann::json holder;
+  std::string from = source, prefix = "separating_experiment.";
+  if (value.is_string()) {
+    const std::string text = value.get<std::string>();
+    if (text == "library") {
+      part->separating_experiment = "library";
+      return Status::Ok();
+    }
+    if (text.empty()) return Status::BadInput(Where{.file = source, .field = "separating_experiment"}, "is empty", fix);
+    const std::filesystem::path file = std::filesystem::path(source).parent_path() / text;
+    FL_ASSIGN_OR_RETURN(holder, ReadJsonFile(file));
+    from = file.string();
+    prefix.clear();
+  } else if (value.is_object()) {
+    holder = value;
+  } else {
+    return Status::BadInput(Where{.file = source, .field = "separating_experiment"},
+                            "must be \"library\", a file name or an object", fix);
+  }
+  if (!holder.is_object() || !holder.contains("proposals") || !holder["proposals"].is_array()) {
+    return Status::BadInput(Where{.file = from, .field = prefix + "proposals"}, "missing or not an array", fix);
+  }
+  const nlohmann::json& list = holder["proposals"];
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const std::string at = prefix + "proposals[" + std::to_string(i) + "]";
+    // A proposal of `formloop diagnose` carries its change for the next part as "next_part".
+    const bool wrapped = list[i].is_object() && list[i].contains("next_part");
+    FL_ASSIGN_OR_RETURN(sim::PlannedProposal p,
+                        sim::PlannedProposal::FromJson(wrapped ? list[i]["next_part"] : list[i], from,
+                                                       at + (wrapped ? ".next_part." : ".")));
+    part->proposals.push_back(std::move(p));
+  }
+  if (part->proposals.empty()) {
+    return Status::BadInput(Where{.file = from, .field = prefix + "proposals"},
+                            "holds no proposal (the diagnosis found no alias group to separate)",
+                            "leave separating_experiment out of the part file");
+  }
+  part->separating_experiment = "given";
+  return Status::Ok();
+}
+
 }  // namespace
 
 Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source) {
@@ -97,7 +146,7 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
   JsonFields top(json, source);
   FL_RETURN_IF_ERROR(top.CheckKnown({"name", "surface", "material", "tolerance_mm", "seed", "fit", "tool", "tools",
                                      "toolpath", "machine", "probing", "analysis", "loops", "comment", "shape_family",
-                                     "finish_ra_um", "batch_size"}));
+                                     "finish_ra_um", "batch_size", "separating_experiment"}));
   FL_RETURN_IF_ERROR(top.OptionalString("shape_family", &part.shape_family));
   FL_RETURN_IF_ERROR(
       top.OptionalNumber("finish_ra_um", &part.finish_ra_um, {.min = 0, .max = 100, .exclusive_min = true}));
@@ -341,6 +390,7 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
   FL_RETURN_IF_ERROR(in_file(part.true_probe.Validate()));
   FL_RETURN_IF_ERROR(in_file(part.analysis.Validate()));
   FL_RETURN_IF_ERROR(in_file(part.fit.Validate()));
+  FL_RETURN_IF_ERROR(ReadSeparatingExperiment(json, source, &part));
   return part;
 }
 
@@ -454,6 +504,12 @@ nlohmann::json PartSpec::ToJson() const {
   }
   if (true_probe_profile_given) out["machine"]["probe"] = {{"profile", metrology::ProbeProfileToJson(true_probe)}};
   if (effects) out["machine"]["effects"] = effects->ToJson();
+  if (separating_experiment == "library") out["separating_experiment"] = "library";
+  if (separating_experiment == "given") {
+    nlohmann::json list = nlohmann::json::array();
+    for (const auto& p : proposals) list.push_back(p.ToJson());
+    out["separating_experiment"] = {{"proposals", list}};
+  }
   return out;
 }
 

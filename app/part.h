@@ -23,7 +23,12 @@
 //   "probing": {"grid": [20, 20], "inset_fraction": 0.05, "edge_margin_mm": 2, "ball_radius_mm": 1.0, ...,
 //               "profile": "probe.json"},        // a probe profile from `formloop calibrate sphere` (or inline)
 //   "analysis": {"neighbours": 8, "max_control_net": 8, "coverage_factor": 2},
-//   "loops": {"max": 3, "max_offset_um": 200}
+//   "loops": {"max": 3, "max_offset_um": 200},
+//   "separating_experiment": "library"           // optional (issue 20): apply the separating experiment the
+//                                                // case library holds for this machine/tool/material and
+//                                                // store this part's proposals there; or a diagnosis.json of
+//                                                // `formloop diagnose` (its proposals' "next_part"), or
+//                                                // {"proposals": [next_part, ...]} inline
 // }
 
 #include <filesystem>
@@ -44,6 +49,7 @@
 #include "nc-gen/toolpath.h"
 #include "reconstruction/bspline_surface.h"
 #include "simulation/model.h"
+#include "simulation/proposal_plan.h"
 #include "simulation/virtual_machine.h"
 
 namespace formloop::app {
@@ -89,6 +95,11 @@ struct PartSpec {
   metrology::DecompositionOptions analysis;
   int max_loops = 3;
   nc::CompensationOptions compensation;
+  // separating_experiment (simulation/proposal_plan.h): "" none; "library": the proposals the case library
+  // holds for this machine/tool/material (found by the run), and this part's own proposals stored there;
+  // "given": `proposals` (read from a file of `formloop diagnose` or inline).
+  std::string separating_experiment;
+  std::vector<sim::PlannedProposal> proposals;
 
   nlohmann::json ToJson() const;     // fully resolved
   std::string SurfaceName() const;   // the reference name, "<kind>(p=v, ...)", "cad:FILE[faces]" or "scan:FILE"

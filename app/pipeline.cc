@@ -1,6 +1,7 @@
 #include "app/pipeline.h"
 
 #include <chrono>
+#include <cmath>
 #include <memory>
 #include <optional>
 
@@ -52,13 +53,21 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
   FL_ASSIGN_OR_RETURN(planning::PlanChoice choice, stages::ChoosePlan(in, retrieved, q, options.learn, folder));
   summary->plan_source = choice.source;
   summary->flag_engineer = summary->flag_engineer || choice.flag_engineer;
+  FL_ASSIGN_OR_RETURN(const stages::Experiment experiment,
+                      stages::FindSeparatingExperiment(part, options, summary->case_uid, choice.plan));
+  if (!experiment.proposals.empty()) {
+    // The next part cut as the proposals say: the raster turned, the feed scaled.
+    const sim::PathChange change = sim::PathChangeOf(experiment.proposals);
+    choice.plan.raster_angle_deg = std::fmod(choice.plan.raster_angle_deg + change.raster_turn_deg + 360.0, 360.0);
+    choice.plan.feed_mm_per_min *= change.feed_scale;
+  }
   const nc::ToolpathOptions& plan = choice.plan;
   log::Info("[plan] {}: ball r = {} mm, scallop {} um, feed {} mm/min", choice.source, plan.tool.radius_mm,
             plan.scallop_um, plan.feed_mm_per_min);
 
   FL_RETURN_IF_ERROR(folder.Begin("5/9: nc"));
   FL_ASSIGN_OR_RETURN(const stages::Programs programs,
-                      stages::WritePrograms(part, q, plan, std::move(choice.path), folder));
+                      stages::WritePrograms(part, q, plan, std::move(choice.path), experiment, folder));
 
   FL_RETURN_IF_ERROR(folder.Begin("6/9: precompensation"));
   FL_ASSIGN_OR_RETURN(stages::FirstCut cut,
@@ -71,6 +80,7 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
                         : !in.machine.linuxcnc.empty() ? 1  // its part does not change (stages::Machine)
                                                        : static_cast<int>(in.machine.measured.size());
   std::optional<sim::Diagnosis> diagnosis;
+  std::vector<sim::PlannedProposal> proposals;  // for the next part (the part asks for a separating experiment)
   stages::CompensatedField& field = cut.field;
   // The program each cycle cuts: the pre-compensated or the nominal one, then the compensated one (no copies).
   stages::Program compensated;
@@ -79,7 +89,8 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
     const std::string cycle = "7/9: loop " + std::to_string(loop);
     FL_RETURN_IF_ERROR(folder.Begin(cycle + " machine"));
     FL_ASSIGN_OR_RETURN(stages::Machined machined,
-                        stages::MachineCycle(in, *current, plan.tool.radius_mm, programs.probing_plan, loop, folder));
+                        stages::MachineCycle(in, *current, plan.tool.radius_mm, programs.probing_plan,
+                                             programs.probe_approaches, loop, folder));
 
     FL_RETURN_IF_ERROR(folder.Begin(cycle + " analysis"));
     const bool another = loop + 1 < max_loops || !in.machine.virtual_machine;
@@ -98,9 +109,10 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
         FL_ASSIGN_OR_RETURN(library, kb::Library::Open(options.kb));
       }
       FL_ASSIGN_OR_RETURN(const sim::PlausibleRanges plausible, PlausibleRangesFor(library.get(), data_dir));
-      FL_ASSIGN_OR_RETURN(sim::Diagnosis d, stages::DiagnoseFirstCycle(part, q, machined, analysed.flagged_ids,
-                                                                       plan.tool.radius_mm, programs.probing_plan,
-                                                                       choice, summary->case_uid, plausible, folder));
+      FL_ASSIGN_OR_RETURN(sim::Diagnosis d,
+                          stages::DiagnoseFirstCycle(part, q, machined, analysed.flagged_ids, plan.tool.radius_mm,
+                                                     programs.probing_plan, choice, summary->case_uid, plausible,
+                                                     folder, experiment.asked ? &proposals : nullptr));
       for (const auto& c : d.causes) summary->causes.push_back(c.effect);
       diagnosis = std::move(d);
     }
@@ -118,7 +130,8 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
   summary->within_tolerance = summary->loops.back().within_tolerance;
 
   FL_RETURN_IF_ERROR(folder.Begin("8/9: retain"));
-  FL_ASSIGN_OR_RETURN(*retained, stages::PrepareRetain(part, options, retrieved, plan, diagnosis, summary, folder));
+  FL_ASSIGN_OR_RETURN(*retained,
+                      stages::PrepareRetain(part, options, retrieved, plan, diagnosis, summary, folder, proposals));
 
   FL_RETURN_IF_ERROR(folder.Begin("9/9: report"));
   json summary_json = summary->ToJson();

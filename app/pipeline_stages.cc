@@ -17,11 +17,13 @@
 #include "nc-gen/cutter_locations.h"
 #include "nc-gen/moves.h"
 #include "nc-gen/toolpath_io.h"
+#include "planning/case_plan.h"
 #include "planning/precompensation.h"
 #include "reconstruction/cad_io.h"
 #include "reconstruction/surface_family.h"
 #include "reconstruction/trim.h"
 #include "retrieval/retrieve.h"
+#include "simulation/experiment_design.h"
 #include "simulation/virtual_machine.h"
 
 namespace formloop::app::stages {
@@ -249,8 +251,32 @@ Result<planning::PlanChoice> ChoosePlan(const Inputs& in, const Retrieved& retri
   return choice;
 }
 
+Result<Experiment> FindSeparatingExperiment(const PartSpec& part, const RunOptions& options,
+                                            const std::string& retrieved_uid, const nc::ToolpathOptions& plan) {
+  Experiment out;
+  out.asked = !part.separating_experiment.empty();
+  if (part.separating_experiment == "given") {
+    out.proposals = part.proposals;
+    out.source = "part file";
+  } else if (part.separating_experiment == "library") {
+    const std::string tool = planning::ToolKey(plan.tool.radius_mm);
+    out.source =
+        "none in the case library for machine " + part.machine_name + ", tool " + tool + ", material " + part.material;
+    if (!options.kb.empty()) {
+      FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(options.kb));
+      std::string from;
+      FL_ASSIGN_OR_RETURN(out.proposals, StoredSeparatingExperiments(*library, part.machine_name, tool, part.material,
+                                                                     retrieved_uid, &from));
+      if (!out.proposals.empty()) out.source = "case library, case " + from;
+    }
+  }
+  if (out.asked) log::Info("[plan] separating experiment: {} ({} proposal(s))", out.source, out.proposals.size());
+  return out;
+}
+
 Result<Programs> WritePrograms(const PartSpec& part, const recon::BSplineSurface& q, const nc::ToolpathOptions& plan,
-                               std::shared_ptr<nc::Toolpath> planned, const RunFolderWriter& folder) {
+                               std::shared_ptr<nc::Toolpath> planned, const Experiment& experiment,
+                               const RunFolderWriter& folder) {
   Programs p;
   // The plan may come from a case or the simulation-correction step: its size is checked again.
   FL_RETURN_IF_ERROR(CheckPartWork(part, plan, "the chosen plan (plan.json)", &q));
@@ -276,8 +302,54 @@ Result<Programs> WritePrograms(const PartSpec& part, const recon::BSplineSurface
             p.nominal.total_time_s);
   FL_ASSIGN_OR_RETURN(p.probing_plan, metrology::PlanProbingGrid(q, part.probe_nu, part.probe_nv,
                                                                  part.probe_inset_fraction, part.probe_edge_margin_mm));
+  if (experiment.asked) {
+    const sim::PlanWithProposals applied = sim::ApplyProposals(p.probing_plan, q, experiment.proposals);
+    nlohmann::json list = nlohmann::json::array();
+    for (const auto& proposal : experiment.proposals) list.push_back(proposal.ToJson());
+    FL_RETURN_IF_ERROR(folder.WriteJson(
+        fs::path("toolpath") / "separating_experiment.json",
+        {{"source", experiment.source},
+         {"proposals", list},
+         {"points_added", applied.added},
+         {"points_dropped", applied.dropped},
+         {"first_added_id",
+          applied.added > 0 ? json(applied.plan.points[p.probing_plan.points.size()].id) : json(nullptr)},
+         {"raster_turn_deg", applied.raster_turn_deg},
+         {"feed_scale", applied.feed_scale}}));
+    if (applied.added > 0 || applied.dropped > 0) {
+      log::Info("      separating experiment: {} tilted probe point(s) added{}", applied.added,
+                applied.dropped > 0 ? fmt::format(", {} left out (trim or approach)", applied.dropped) : "");
+    }
+    if (applied.tilted()) {
+      p.probing_plan = applied.plan;
+      p.probe_approaches = applied.approaches;
+    }
+  }
   FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("toolpath") / "probing_plan.json", p.probing_plan.ToJson()));
+  if (!p.probe_approaches.empty()) {
+    // The approaches beside the plan (formloop's plan CSV with ax, ay, az: app/run_folder.h ReadPlanFile).
+    PointSet rows;
+    std::vector<double> u, v, ax, ay, az;
+    for (std::size_t i = 0; i < p.probing_plan.points.size(); ++i) {
+      const auto& pt = p.probing_plan.points[i];
+      rows.points.push_back(pt.point);
+      rows.normals.push_back(pt.normal);
+      rows.ids.push_back(pt.id);
+      u.push_back(pt.u);
+      v.push_back(pt.v);
+      ax.push_back(p.probe_approaches[i].x());
+      ay.push_back(p.probe_approaches[i].y());
+      az.push_back(p.probe_approaches[i].z());
+    }
+    rows.SetScalar("u", u);
+    rows.SetScalar("v", v);
+    rows.SetScalar("ax", ax);
+    rows.SetScalar("ay", ay);
+    rows.SetScalar("az", az);
+    FL_RETURN_IF_ERROR(WritePoints(folder.Path(fs::path("toolpath") / "probing_plan.csv"), rows, {.precision = 9}));
+  }
   nc::ProbeProgramOptions probe_options = part.probe_program;
+  probe_options.approaches = p.probe_approaches;
   probe_options.post = p.post;
   probe_options.post.title = "formloop " + std::string(kVersion) + " probing program for part " + part.name;
   probe_options.safe_z_mm = p.nominal.safe_z_mm + part.probe.ball_radius_mm + part.probe_program.clearance_mm;
@@ -345,7 +417,8 @@ Result<FirstCut> Precompensate(const PartSpec& part, const recon::BSplineSurface
 }
 
 Result<Machined> MachineCycle(const Inputs& in, const Program& program, double tool_radius_mm,
-                              const metrology::ProbingPlan& plan, int loop, const RunFolderWriter& folder) {
+                              const metrology::ProbingPlan& plan, const std::vector<Eigen::Vector3d>& approaches,
+                              int loop, const RunFolderWriter& folder) {
   const fs::path loop_dir = RunFolderWriter::LoopDir(loop);
   FL_RETURN_IF_ERROR(folder.MakeFolder(loop_dir));
   Machined out;
@@ -358,6 +431,7 @@ Result<Machined> MachineCycle(const Inputs& in, const Program& program, double t
     vm.model = machine.model;
     vm.true_probe = machine.probe;
     vm.seed = in.machine_seed + static_cast<std::uint64_t>(loop);
+    vm.approaches = approaches;
     FL_ASSIGN_OR_RETURN(sim::VirtualMachineResult machined, sim::MachineAndProbe(out.cutter_locations, plan, vm));
     FL_RETURN_IF_ERROR(metrology::WriteProbeLog(folder.Path(loop_dir / "probe_log.csv"), machined.log));
     FL_RETURN_IF_ERROR(folder.WriteJson(loop_dir / "machine.json", {{"machine", machine.name},
@@ -368,9 +442,10 @@ Result<Machined> MachineCycle(const Inputs& in, const Program& program, double t
     log::Info("[machine] loop {}: LinuxCNC '{}' probes the part (its probe surface; the cutting program is not run)",
               loop, machine.name);
     FL_ASSIGN_OR_RETURN(const cnc::LinuxCncConfig config, cnc::ReadLinuxCncConfig(machine.linuxcnc));
-    FL_ASSIGN_OR_RETURN(
-        const cnc::LinuxCncProbing probed,
-        cnc::ProbePlanOnLinuxCnc(config, plan, cnc::LinuxCncProbingOptions{}, folder.Path(loop_dir / "linuxcnc")));
+    cnc::LinuxCncProbingOptions probing;
+    probing.program.approaches = approaches;
+    FL_ASSIGN_OR_RETURN(const cnc::LinuxCncProbing probed,
+                        cnc::ProbePlanOnLinuxCnc(config, plan, probing, folder.Path(loop_dir / "linuxcnc")));
     FL_RETURN_IF_ERROR(metrology::WriteProbeLog(folder.Path(loop_dir / "probe_log.csv"), probed.log));
     out.cut = false;
     FL_RETURN_IF_ERROR(folder.WriteJson(loop_dir / "machine.json",
@@ -471,7 +546,8 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
                                           const Machined& machined, const std::vector<std::int64_t>& excluded_ids,
                                           double tool_radius_mm, const metrology::ProbingPlan& plan,
                                           const planning::PlanChoice& choice, const std::string& case_uid,
-                                          const sim::PlausibleRanges& plausible, const RunFolderWriter& folder) {
+                                          const sim::PlausibleRanges& plausible, const RunFolderWriter& folder,
+                                          std::vector<sim::PlannedProposal>* proposals) {
   metrology::ProbeLog used = machined.log;
   if (!excluded_ids.empty()) {
     const std::set<std::int64_t> excluded(excluded_ids.begin(), excluded_ids.end());
@@ -502,6 +578,30 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
   FL_RETURN_IF_ERROR(folder.WriteJson(dir / "diagnosis.json", dj));
   FL_RETURN_IF_ERROR(sim::WriteModel(folder.Path(dir / "model.json"), d.extended));
   log::Info("[diagnosis] {}", d.Summary());
+  if (proposals != nullptr && machined.cut && !d.alias_groups.empty()) {
+    // The experiment that would separate each alias group on the next part of this machine/tool/material.
+    sim::ExperimentOptions eo;
+    eo.plausible = plausible;
+    const nc::ToolpathOptions cut_plan = choice.plan;
+    eo.replan = [&q, cut_plan](double turn_deg, double feed_scale) -> Result<std::vector<sim::CutterLocation>> {
+      nc::ToolpathOptions o = cut_plan;
+      o.raster_angle_deg = std::fmod(o.raster_angle_deg + turn_deg, 360.0);
+      o.feed_mm_per_min *= feed_scale;
+      FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::PlanRaster(q, o));
+      return nc::CutterLocationsOf(path);
+    };
+    FL_ASSIGN_OR_RETURN(const auto found, sim::ProposeExperiments({input}, d, baseline, eo));
+    json list = json::array();
+    for (const auto& p : found) {
+      proposals->push_back(sim::PlannedProposal::Of(p, q.domain()));
+      json pj = p.ToJson();
+      pj["next_part"] = proposals->back().ToJson();
+      list.push_back(pj);
+      log::Info("[diagnosis] proposal for the next part: {} ({})", p.change,
+                p.predicted_to_split ? "predicted to split the group" : "not predicted to split it on its own");
+    }
+    FL_RETURN_IF_ERROR(folder.WriteJson(dir / "proposals.json", {{"proposals", list}}));
+  }
   return d;
 }
 
@@ -532,7 +632,8 @@ Result<Program> CompensateCycle(const PartSpec& part, const Programs& programs, 
 Result<std::optional<kb::CaseRecord>> PrepareRetain(const PartSpec& part, const RunOptions& options,
                                                     const Retrieved& retrieved, const nc::ToolpathOptions& plan,
                                                     const std::optional<sim::Diagnosis>& diagnosis, RunSummary* summary,
-                                                    const RunFolderWriter& folder) {
+                                                    const RunFolderWriter& folder,
+                                                    const std::vector<sim::PlannedProposal>& proposals) {
   if (options.kb.empty() || !options.retain) return std::optional<kb::CaseRecord>();
   RetainInput in;
   in.part = &part;
@@ -565,6 +666,7 @@ Result<std::optional<kb::CaseRecord>> PrepareRetain(const PartSpec& part, const 
         {"heldout_rms_before_um", diagnosis->heldout_rms_before_um},
         {"heldout_rms_after_um", diagnosis->heldout_rms_after_um}};
   }
+  for (const auto& p : proposals) in.separating_experiments.push_back(p.ToJson());
   if (retrieved.own) in.existing = &*retrieved.own;
   // A part cut on the virtual machine can be run again (the leave-one-out of app/route_calibration.h); a
   // measured one cannot.

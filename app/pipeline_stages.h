@@ -29,6 +29,7 @@
 #include "retrieval/features.h"
 #include "simulation/diagnose.h"
 #include "simulation/model.h"
+#include "simulation/proposal_plan.h"
 
 namespace formloop::app::stages {
 
@@ -88,6 +89,16 @@ Result<Retrieved> Retrieve(const PartSpec& part, const recon::BSplineSurface& q,
 Result<planning::PlanChoice> ChoosePlan(const Inputs& in, const Retrieved& retrieved, const recon::BSplineSurface& q,
                                         bool learn, const RunFolderWriter& folder);
 
+// 4b. The separating experiment the part asks for (part.separating_experiment; simulation/proposal_plan.h):
+// the proposals given in the part file, or those the case library holds for this machine/tool/material.
+struct Experiment {
+  std::vector<sim::PlannedProposal> proposals;  // empty: none to apply
+  std::string source;                           // "part file", "case library, case X", "none in the case library"
+  bool asked = false;                           // the part asks for one (and, "library", to store its own)
+};
+Result<Experiment> FindSeparatingExperiment(const PartSpec& part, const RunOptions& options,
+                                            const std::string& retrieved_uid, const nc::ToolpathOptions& plan);
+
 // A program as written into the run folder, with its moves as read back from its text (the text itself is
 // not kept: a million-point program is ~30 MB).
 struct Program {
@@ -104,9 +115,14 @@ struct Programs {
   std::string extension;  // of the dialect's programs
   Program program;
   metrology::ProbingPlan probing_plan;
+  // Per plan point, its approach when the separating experiment added tilted points (else empty: −n).
+  std::vector<Eigen::Vector3d> probe_approaches;
 };
+// With an experiment's proposals, their tilted re-probe points are appended to the probing plan and
+// carried by the probing program (toolpath/separating_experiment.json says what was applied).
 Result<Programs> WritePrograms(const PartSpec& part, const recon::BSplineSurface& q, const nc::ToolpathOptions& plan,
-                               std::shared_ptr<nc::Toolpath> planned, const RunFolderWriter& folder);
+                               std::shared_ptr<nc::Toolpath> planned, const Experiment& experiment,
+                               const RunFolderWriter& folder);
 
 // The sum of the fields compensated so far (mm): the pre-compensation and one term per loop.
 struct CompensatedField {
@@ -136,7 +152,8 @@ struct Machined {
   bool cut = true;
 };
 Result<Machined> MachineCycle(const Inputs& in, const Program& program, double tool_radius_mm,
-                              const metrology::ProbingPlan& plan, int loop, const RunFolderWriter& folder);
+                              const metrology::ProbingPlan& plan, const std::vector<Eigen::Vector3d>& approaches,
+                              int loop, const RunFolderWriter& folder);
 
 // 7b. The cycle's analysis (deviations.csv|.ply, analysis.json) and its compensation decision.
 struct Analysed {
@@ -150,12 +167,16 @@ Result<Analysed> AnalyseCycle(const PartSpec& part, const recon::BSplineSurface&
 
 // 7c. Loop 0: what the simulation (the case's model) gets wrong on this part, and the extended model
 // (loop-0/diagnosis/); effects are named only within `plausible` (app/case_knowledge.h PlausibleRangesFor).
-// The points the analysis flagged (`excluded_ids`) are left out of the diagnosis too.
+// The points the analysis flagged (`excluded_ids`) are left out of the diagnosis too. With `proposals`
+// (the part asks for a separating experiment) and alias groups on a part that was cut, the experiment
+// that would separate each group on the next part (sim::ProposeExperiments, the path re-planned by
+// nc-gen) is proposed, written to loop-0/diagnosis/proposals.json and returned for the case library.
 Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSplineSurface& q,
                                           const Machined& machined, const std::vector<std::int64_t>& excluded_ids,
                                           double tool_radius_mm, const metrology::ProbingPlan& plan,
                                           const planning::PlanChoice& choice, const std::string& case_uid,
-                                          const sim::PlausibleRanges& plausible, const RunFolderWriter& folder);
+                                          const sim::PlausibleRanges& plausible, const RunFolderWriter& folder,
+                                          std::vector<sim::PlannedProposal>* proposals = nullptr);
 
 // 7d. The mirror-compensated program of the next cycle from the sum of the fields so far
 // (loop-K/program_compensated.*, compensation_side.bin, compensation.json).
@@ -166,7 +187,8 @@ Result<Program> CompensateCycle(const PartSpec& part, const Programs& programs, 
 Result<std::optional<kb::CaseRecord>> PrepareRetain(const PartSpec& part, const RunOptions& options,
                                                     const Retrieved& retrieved, const nc::ToolpathOptions& plan,
                                                     const std::optional<sim::Diagnosis>& diagnosis, RunSummary* summary,
-                                                    const RunFolderWriter& folder);
+                                                    const RunFolderWriter& folder,
+                                                    const std::vector<sim::PlannedProposal>& proposals = {});
 
 // One transaction for the case, then the GHSOM insertion (a failure there leaves it stale, not wrong).
 Status CommitRetained(const std::string& kb_path, const kb::CaseRecord& record);

@@ -29,6 +29,13 @@ inline const sim::PlausibleRanges& StarterPlausibleRanges() {
   return ranges;
 }
 
+// Diagnose's defaults with the starter rule base's plausible ranges.
+inline sim::DiagnoseOptions StarterDiagnoseOptions() {
+  sim::DiagnoseOptions o;
+  o.plausible = StarterPlausibleRanges();
+  return o;
+}
+
 inline bool IsSetupEffect(std::string_view name) { return name == "setup_offset" || name == "setup_rotation"; }
 
 // One part of a machine: its surface, raster angle, probing grid and probing start time.
@@ -324,6 +331,7 @@ inline std::vector<sim::ProbeDataInput> InputsOf(const MultiScenario& s, std::si
 }  // namespace formloop::testing
 
 #include "simulation/experiment_design.h"
+#include "simulation/proposal_plan.h"
 
 namespace formloop::testing {
 
@@ -370,6 +378,18 @@ inline Scenario NextPart(const Scenario& s, const sim::ExperimentProposal& p, co
   const PartLayout layout{s.surface, std::fmod(s.machined->raster_angle_deg + p.raster_turn_deg, 360.0), 0,
                           s.machined->feed_mm_per_min * p.feed_scale};
   return ProbePart(layout, truth, seed, nullptr, &s.plan);
+}
+
+// Part `p` of scenario `s` as `formloop run` plans it when the case library holds `planned` for its
+// machine: its own plan with the proposals' tilted re-probe points (sim::ApplyProposals), its path
+// with the raster turned and the feed scaled as they say; the same machine and set-up, new noise.
+inline Scenario PartAsPipelinePlansIt(const MultiScenario& s, std::size_t p,
+                                      const std::vector<sim::PlannedProposal>& planned, std::uint64_t seed) {
+  const Scenario& plain = s.parts[p];
+  const sim::PlanWithProposals applied = sim::ApplyProposals(plain.plan, plain.machined->q, planned);
+  const PartLayout layout{plain.surface, std::fmod(plain.machined->raster_angle_deg + applied.raster_turn_deg, 360.0),
+                          0, plain.machined->feed_mm_per_min * applied.feed_scale};
+  return ProbePart(layout, s.TruthOf(p), seed, &applied.approaches, &applied.plan);
 }
 
 }  // namespace formloop::testing

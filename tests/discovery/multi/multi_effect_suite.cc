@@ -96,21 +96,37 @@ nlohmann::json RunScenario(int index) {
   row["named"] = named;
   row["groups"] = GroupSignatures(*d);
   if (!d->alias_groups.empty()) {
-    nlohmann::json pooled = nlohmann::json::object();
-    for (std::size_t parts : {2, 3}) {
-      const auto dp = sim::DiagnosePooled(InputsOf(s, parts), s.parts[0].baseline, Options());
-      EXPECT_TRUE(dp.ok()) << dp.status().message();
-      if (!dp.ok()) continue;
-      nlohmann::json split = nlohmann::json::object();
-      for (const auto& sig : GroupSignatures(*d)) split[sig] = Splits(sig, *dp);
-      pooled[std::to_string(parts)] = {
-          {"grade", GradeDiagnosis(*dp, s, parts).ToJson()}, {"split", split}, {"groups", GroupSignatures(*dp)}};
-    }
-    row["pooled"] = pooled;
-    // The separating experiment: proposed on this part, applied on the virtual machine, diagnosed again.
+    // The separating experiments proposed on this part: what the case library holds for the machine.
     const auto proposals =
         sim::ProposeExperiments({InputOf(s.parts[0])}, *d, s.parts[0].baseline, ExperimentOptionsFor(s.parts[0]));
     EXPECT_TRUE(proposals.ok()) << proposals.status().message();
+    // Pooling: the later parts probed with their plain plans, and as the pipeline plans them (the
+    // proposals applied: tilted re-probe points, a raster turn).
+    std::vector<sim::PlannedProposal> planned;
+    for (std::size_t g = 0; proposals.ok() && g < proposals->size(); ++g) {
+      planned.push_back(sim::PlannedProposal::Of((*proposals)[g], s.parts[0].machined->q.domain()));
+    }
+    std::vector<Scenario> pipeline_parts = {s.parts[0]};
+    for (std::size_t p = 1; p < s.parts.size(); ++p) {
+      pipeline_parts.push_back(PartAsPipelinePlansIt(s, p, planned, seed + 9000000 + p));
+    }
+    nlohmann::json pooled = nlohmann::json::object(), pooled_pipeline = nlohmann::json::object();
+    for (std::size_t parts : {2, 3}) {
+      for (const bool pipeline : {false, true}) {
+        std::vector<sim::ProbeDataInput> inputs;
+        for (std::size_t p = 0; p < parts; ++p) inputs.push_back(InputOf(pipeline ? pipeline_parts[p] : s.parts[p]));
+        const auto dp = sim::DiagnosePooled(inputs, s.parts[0].baseline, Options());
+        EXPECT_TRUE(dp.ok()) << dp.status().message();
+        if (!dp.ok()) continue;
+        nlohmann::json split = nlohmann::json::object();
+        for (const auto& sig : GroupSignatures(*d)) split[sig] = Splits(sig, *dp);
+        (pipeline ? pooled_pipeline : pooled)[std::to_string(parts)] = {
+            {"grade", GradeDiagnosis(*dp, s, parts).ToJson()}, {"split", split}, {"groups", GroupSignatures(*dp)}};
+      }
+    }
+    row["pooled"] = pooled;
+    row["pooled_pipeline"] = pooled_pipeline;
+    // The separating experiment: applied on the virtual machine, diagnosed again.
     nlohmann::json experiments = nlohmann::json::array();
     for (std::size_t g = 0; proposals.ok() && g < proposals->size(); ++g) {
       const sim::ExperimentProposal& p = (*proposals)[g];
@@ -210,6 +226,8 @@ struct SuiteTotals {
   int experiment_scenarios = 0, scenarios_split = 0;
   // Per alias group seen on one part: {2-part splits, 2-part tries, 3-part splits, 3-part tries}.
   std::map<std::string, std::array<int, 4>> pooled;
+  // ... the later parts planned as the pipeline plans them (the first part's proposals applied).
+  std::map<std::string, std::array<int, 4>> pooled_pipeline;
 };
 
 SuiteTotals Summarise() {
@@ -225,7 +243,8 @@ SuiteTotals Summarise() {
       inside = 0, gain_ok = 0, aliased = 0;
   std::map<std::string, int> surfaces, group_count;
   std::map<std::string, std::array<int, 4>> split;  // signature -> {2-part splits, 2-part tries, 3-part splits, tries}
-  std::map<std::string, std::array<int, 2>> per_effect;  // effect -> {found, true}
+  std::map<std::string, std::array<int, 4>> split_pipeline;  // the same, later parts with the proposals applied
+  std::map<std::string, std::array<int, 2>> per_effect;      // effect -> {found, true}
   struct ExperimentTally {
     int count = 0, predicted_split = 0, split = 0;
     double rho_before = 0, rho_predicted = 0, rho_measured = 0, cost_s = 0;
@@ -274,13 +293,15 @@ SuiteTotals Summarise() {
         scenarios_split += all_split;
       }
     }
-    if (row.contains("pooled")) {
+    for (const char* kind : {"pooled", "pooled_pipeline"}) {
+      if (!row.contains(kind)) continue;
+      auto& tally = std::string(kind) == "pooled" ? split : split_pipeline;
       for (int parts : {2, 3}) {
         const std::string key = std::to_string(parts);
-        if (!row["pooled"].contains(key)) continue;
-        for (const auto& [sig, ok] : row["pooled"][key]["split"].items()) {
-          split[sig][parts == 2 ? 0 : 2] += ok.get<bool>();
-          split[sig][parts == 2 ? 1 : 3] += 1;
+        if (!row[kind].contains(key)) continue;
+        for (const auto& [sig, ok] : row[kind][key]["split"].items()) {
+          tally[sig][parts == 2 ? 0 : 2] += ok.get<bool>();
+          tally[sig][parts == 2 ? 1 : 3] += 1;
         }
       }
     }
@@ -301,12 +322,27 @@ SuiteTotals Summarise() {
   std::printf("  scenarios with an alias group: %d\n", aliased);
   std::printf("  %-18s %6s %6s\n", "effect", "true", "found");
   for (const auto& [e, c] : per_effect) std::printf("  %-18s %6d %5.0f%%\n", e.c_str(), c[1], 100.0 * c[0] / c[1]);
-  std::printf("  %-60s %5s %14s %14s\n", "alias group", "seen", "split by 2", "split by 3");
+  std::printf(
+      "  pooling (plain: the later parts probed with their own plans; pipeline: with the first part's\n"
+      "  proposals applied as formloop run applies them)\n");
+  std::printf("  %-60s %5s %14s %14s %14s %14s\n", "alias group", "seen", "plain by 2", "plain by 3", "pipeline by 2",
+              "pipeline by 3");
+  std::array<int, 8> all{};
   for (const auto& [sig, n] : group_count) {
     const auto& sp = split[sig];
-    std::printf("  %-60s %5d %6d/%-3d %3.0f%% %6d/%-3d %3.0f%%\n", sig.c_str(), n, sp[0], sp[1],
-                100.0 * sp[0] / std::max(1, sp[1]), sp[2], sp[3], 100.0 * sp[2] / std::max(1, sp[3]));
+    const auto& pp = split_pipeline[sig];
+    for (int k = 0; k < 4; ++k) {
+      all[static_cast<std::size_t>(k)] += sp[static_cast<std::size_t>(k)];
+      all[static_cast<std::size_t>(k + 4)] += pp[static_cast<std::size_t>(k)];
+    }
+    std::printf("  %-60s %5d %6d/%-3d %3.0f%% %6d/%-3d %3.0f%% %6d/%-3d %3.0f%% %6d/%-3d %3.0f%%\n", sig.c_str(), n,
+                sp[0], sp[1], 100.0 * sp[0] / std::max(1, sp[1]), sp[2], sp[3], 100.0 * sp[2] / std::max(1, sp[3]),
+                pp[0], pp[1], 100.0 * pp[0] / std::max(1, pp[1]), pp[2], pp[3], 100.0 * pp[2] / std::max(1, pp[3]));
   }
+  std::printf("  %-60s %5s %6d/%-3d %3.0f%% %6d/%-3d %3.0f%% %6d/%-3d %3.0f%% %6d/%-3d %3.0f%%\n", "all groups", "",
+              all[0], all[1], 100.0 * all[0] / std::max(1, all[1]), all[2], all[3],
+              100.0 * all[2] / std::max(1, all[3]), all[4], all[5], 100.0 * all[4] / std::max(1, all[5]), all[6],
+              all[7], 100.0 * all[6] / std::max(1, all[7]));
   std::printf(
       "  separating experiment: %d of %d groups split (%.1f%%); all groups of the scenario in %d of %d aliased "
       "scenarios (%.1f%%)\n",
@@ -332,7 +368,10 @@ SuiteTotals Summarise() {
   t.surfaces = surfaces.size();
   t.experiment_scenarios = experiment_scenarios;
   t.scenarios_split = scenarios_split;
-  for (const auto& [sig, n] : group_count) t.pooled[sig] = split[sig];
+  for (const auto& [sig, n] : group_count) {
+    t.pooled[sig] = split[sig];
+    t.pooled_pipeline[sig] = split_pipeline[sig];
+  }
   return t;
 }
 
