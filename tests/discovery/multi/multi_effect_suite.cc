@@ -387,15 +387,19 @@ TEST(MultiEffect, Rates) {
 }
 
 // Issue 20, 2 and 3: pooling two or three parts splits each alias group in ≥ 80 % of the scenarios it
-// occurs in, and applying the proposed experiment splits every group of the scenario in ≥ 80 % of the
-// aliased scenarios. NOT MET today (see the printed tables and docs/ARCHITECTURE.md): a tool radius
-// and a probe radius probed along −n have identical columns on every part, so no number of parts splits
-// them; the proposed experiments split far fewer than 80 %. Kept as a disabled check of the targets:
+// occurs in — the later parts planned as `formloop run` plans them when the case library holds the first
+// part's proposals (pooled_pipeline: tilted re-probe points, a raster turn) — and applying the proposed
+// experiment splits every group of the scenario in ≥ 80 % of the aliased scenarios. NOT MET today (see the
+// printed tables and docs/ARCHITECTURE.md): with the pipeline's plans the probe radius is split from the
+// tool radius (probe_radius + tool_radius 100 %), but a tool radius (a constant along n, shared) and each
+// part's own z offset (n_z · t_z) differ only by 1 − n_z, which no number of near-flat parts with their own
+// set-ups separates well: a tool-setter reading or a set-up datum does (the separating experiment's
+// direct measurements). Kept as a disabled check of the targets:
 //   build/tests/formloop_multi_effect_tests --gtest_also_run_disabled_tests
 //     --gtest_filter=MultiEffect.DISABLED_PoolingAndExperimentTargets
 TEST(MultiEffect, DISABLED_PoolingAndExperimentTargets) {
   const SuiteTotals t = Summarise();
-  for (const auto& [sig, sp] : t.pooled) {
+  for (const auto& [sig, sp] : t.pooled_pipeline) {
     const int best = std::max(sp[0], sp[2]);
     EXPECT_GE(best, 0.80 * std::max(sp[1], sp[3])) << sig;
   }
