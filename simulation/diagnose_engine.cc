@@ -344,6 +344,7 @@ double BlockCvRms(const Problem& prob, const Eigen::MatrixXd& design, int blocks
     for (int i = 0; i < n; ++i) {
       if (prob.part_of[static_cast<std::size_t>(i)] == p) rows.push_back(i);
     }
+    if (rows.empty()) continue;  // a part whose every point lies in a region set aside (RunEngine)
     Eigen::VectorXd x(rows.size()), y(rows.size());
     for (std::size_t k = 0; k < rows.size(); ++k) {
       x[static_cast<Eigen::Index>(k)] = prob.xy(rows[k], 0);
