@@ -221,7 +221,7 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
     for (std::size_t k = 0; k < tools.size(); ++k) {
       const std::string field = "tools[" + std::to_string(k) + "]";
       if (!tools[k].is_object()) return Status::BadInput(Where{.file = source, .field = field}, "must be an object");
-      JsonFields t(tools[k], source, field);
+      JsonFields t(tools[k], source, field + ".");
       FL_RETURN_IF_ERROR(t.CheckKnown({"number", "radius_mm"}));
       nc::BallEndTool tool;
       FL_RETURN_IF_ERROR(ReadInt(t, "number", &tool.number, 1, 9999));

@@ -431,7 +431,7 @@ inline std::vector<Case> AllCases() {
           .File("p.json", ReplaceOnce(LeanPart(), "0.010", "NaN")),
       C("part_missing_surface", "part JSON", "run p.json --out r", 2, {"p.json", "surface"})
           .File("p.json", PartWithout("surface")),
-      C("part_tools_without_radius", "part JSON", "run p.json --out r", 2, {"p.json", "tools[0]"})
+      C("part_tools_without_radius", "part JSON", "run p.json --out r", 2, {"p.json", "tools[0].radius_mm"})
           .File("p.json", PartWith("/tools", nlohmann::json::array({{{"number", 2}}}))),
       C("part_effects_unknown", "part JSON", "run p.json --out r", 2, {"p.json", "wobble_um"})
           .File("p.json", PartWith("/machine/effects/wobble_um", 3)),
