@@ -1,15 +1,18 @@
 // formloop: closed-loop precision machining of free-form surfaces. One binary, one subcommand per
 // front door (docs/ARCHITECTURE.md). Exit codes: 0 ok, 1 the job's own failure, 2 bad input/usage.
 
+#include <cmath>
 #include <iostream>
 #include <string>
 
 #include "app/command.h"
 #include "core/log.h"
+#include "core/number_text.h"
 #include "core/parallel.h"
 #include "core/progress.h"
 #include "core/version.h"
 #include "core/work_estimate.h"
+#include "reconstruction/cad_io.h"
 
 int main(int argc, char** argv) {
   using namespace formloop;
@@ -37,6 +40,17 @@ int main(int argc, char** argv) {
                  "worker threads of the parallel stages (k-NN weights, ...); 0 = all cores. Every output is the "
                  "same bytes for any count")
       ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+
+  double cad_timeout_s = recon::kDefaultCadReadTimeout_s;
+  app.add_option("--cad-timeout-s", cad_timeout_s,
+                 "seconds OpenCASCADE's STEP/IGES reader may take for one file before it is stopped and the file "
+                 "reported (the reader runs in a child process, killed at the limit); 0 = no limit")
+      ->check([](const std::string& text) {
+        double seconds = 0;
+        const bool valid = ParseDouble(text, &seconds) && std::isfinite(seconds) && seconds >= 0;
+        return valid ? std::string() : "'" + text + "' is not a number of seconds >= 0 (0 = no limit)";
+      })
       ->capture_default_str();
 
   app::CommandAction action;
@@ -72,6 +86,7 @@ int main(int argc, char** argv) {
   if (quiet) Progress::SetEnabled(false);
   SetLargeWorkConfirmed(yes);
   SetThreadCount(threads);
+  recon::SetCadReadTimeoutSeconds(cad_timeout_s);
   if (!action) {
     std::cerr << app.help();
     return 2;

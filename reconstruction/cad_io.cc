@@ -1,6 +1,7 @@
 #include "reconstruction/cad_io.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cctype>
 #include <memory>
 #include <optional>
@@ -31,11 +32,14 @@
 #include <XSControl_WorkSession.hxx>
 
 #include "core/child_process.h"
+#include "core/number_text.h"
 #include "reconstruction/occt_support.h"
 #include "reconstruction/trim.h"
 
 namespace formloop::recon {
 namespace {
+
+std::atomic<double> cad_read_timeout_s{kDefaultCadReadTimeout_s};
 
 std::string Lower(std::string s) {
   std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
@@ -270,9 +274,18 @@ Result<LoadedCad> Load(const std::filesystem::path& path) {
     return Status::BadInput("'" + path.string() + "' is not a regular file, expected a " + kind + " file");
   }
   ChildFailure failure;
-  auto message = RunInChildProcess([&] { return ReadInChild(path, format, kind); }, &failure);
+  const double limit_s = CadReadTimeoutSeconds();
+  auto message = RunInChildProcess([&] { return ReadInChild(path, format, kind); }, &failure, limit_s);
   if (!message.ok()) {
     if (message.status().code() == StatusCode::kIoError) return message.status();
+    if (failure.timed_out) {
+      return Status::BadInput(Where{.file = path.string()},
+                              "could not be read: OpenCASCADE's " + kind + " reader took longer than " +
+                                  FormatSignificant(limit_s, 6) + " s and was stopped (a damaged file can make it " +
+                                  "loop; a valid file this large is rare)",
+                              "check the file in a CAD system or export it again; if it is valid and large, allow the "
+                              "reader more time with the global option --cad-timeout-s SECONDS (0 = no limit)");
+    }
     return Status::BadInput(
         Where{.file = path.string()},
         "could not be read: OpenCASCADE's " + kind + " reader crashed on it (" + failure.Describe() + ")",
@@ -280,6 +293,13 @@ Result<LoadedCad> Load(const std::filesystem::path& path) {
   }
   return FromChild(path, format, *message);
 }
+
+}  // namespace
+
+void SetCadReadTimeoutSeconds(double seconds) { cad_read_timeout_s.store(seconds); }
+double CadReadTimeoutSeconds() { return cad_read_timeout_s.load(); }
+
+namespace {
 
 std::string FaceList(const std::vector<CadFaceInfo>& infos) {
   std::string list;

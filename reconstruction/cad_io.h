@@ -23,6 +23,12 @@
 // format (exact), so the faces are the reader's bit for bit. A child that ends by a signal is BadInput
 // naming the file ("could not be read: OpenCASCADE's STEP reader crashed on it (signal 11, ...)").
 //
+// Hangs: the child has CadReadTimeoutSeconds() to answer (default kDefaultCadReadTimeout_s = 120 s, far above
+// what a part's file needs: the test parts take well under a second; the CLI's global option --cad-timeout-s
+// sets it, 0 = no limit). A child still reading then is killed with SIGKILL and reaped, and the read is
+// BadInput naming the file ("OpenCASCADE's STEP reader took longer than 120 s and was stopped"), with the fix:
+// a larger limit for a large valid file, or a check of the file in a CAD system.
+//
 // IGES files must state their length unit: a global section whose unit flag is missing or not one
 // of IGES 5.3's codes 1..11 (the standard then assumes inches, which for a part drawn in mm is a
 // factor 25.4) is refused, naming the field.
@@ -39,6 +45,11 @@
 namespace formloop::recon {
 
 enum class CadFormat { kStep, kIges };
+
+// The time limit of one read (listing or reading a file), process-wide; <= 0: no limit.
+inline constexpr double kDefaultCadReadTimeout_s = 120.0;
+void SetCadReadTimeoutSeconds(double seconds);
+double CadReadTimeoutSeconds();
 
 // From the extension (.step .stp .iges .igs, any case); BadInput naming the file otherwise.
 Result<CadFormat> CadFormatFromPath(const std::filesystem::path& path);

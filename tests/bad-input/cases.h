@@ -338,6 +338,13 @@ inline std::vector<Case> AllCases() {
       C("iges_occt_crash_run_part", "STEP/IGES", "run p.json --out r", 2, {"c.igs", "surface.faces"})
           .File("c.igs", FuzzFinding("fuzz_iges/crash-occt-igesread-out-of-bounds.igs"))
           .File("p.json", PartWith("/surface", {{"cad", "c.igs"}, {"faces", {0}}})),
+      // A reader past the time limit (--cad-timeout-s; 1 us expires before any reader answers) and a limit
+      // that is no number of seconds.
+      C("step_reader_time_limit_fit", "STEP/IGES", "--cad-timeout-s 0.000001 fit c.step --out q.step", 2,
+        {"c.step", "took longer than 1e-06 s", "--cad-timeout-s"})
+          .File("c.step", FuzzFinding("fuzz_step/formloop_export_saddle.step")),
+      C("cad_timeout_negative", "options", "--cad-timeout-s -5 fit c.step --out q.step", 2, {"--cad-timeout-s"})
+          .File("c.step", FuzzFinding("fuzz_step/formloop_export_saddle.step")),
 
       // ---- part JSON (formloop run PART)
       C("part_syntax_error", "part JSON", "run p.json --out r", 2, {"p.json:2", "column"})

@@ -246,6 +246,29 @@ TEST_F(CadIoTest, BadInputGivesClearErrors) {
   EXPECT_EQ(ReadCadFace(dir_ / "q.txt", {}).status().code(), StatusCode::kBadInput);
 }
 
+// A reader that does not answer within the time limit (a damaged file can make OpenCASCADE loop) is stopped
+// and the file named with the limit and the fix. A limit of 1 us expires before any child can answer, so the
+// time-out path runs deterministically; the child itself is killed and reaped (core/child_process_test.cc).
+TEST_F(CadIoTest, AReaderPastItsTimeLimitIsStoppedAndTheFileNamed) {
+  const fs::path box = dir_ / "box.step";
+  WriteBoxStep(box, "MM");
+  EXPECT_EQ(CadReadTimeoutSeconds(), 120.0);
+  SetCadReadTimeoutSeconds(1e-6);
+  const auto slow = ListCadFaces(box);
+  SetCadReadTimeoutSeconds(kDefaultCadReadTimeout_s);
+  ASSERT_FALSE(slow.ok());
+  EXPECT_EQ(slow.status().code(), StatusCode::kBadInput);
+  const std::string message = slow.status().ToString();
+  EXPECT_NE(message.find("box.step"), std::string::npos) << message;
+  EXPECT_NE(message.find("STEP reader took longer than 1e-06 s and was stopped"), std::string::npos) << message;
+  EXPECT_NE(message.find("--cad-timeout-s"), std::string::npos) << message;
+  // Within the default limit the same file reads, and 0 (no limit) reads too.
+  EXPECT_EQ(ListCadFaces(box).value().size(), 6u);
+  SetCadReadTimeoutSeconds(0);
+  EXPECT_EQ(ListCadFaces(box).value().size(), 6u);
+  SetCadReadTimeoutSeconds(kDefaultCadReadTimeout_s);
+}
+
 // fuzz_iges found a face whose edge is about 1.2e10 sampling steps long: the sample count was cast to int before
 // it was clamped (undefined; in practice one sample). It is clamped first: the edge gets the cap of samples.
 TEST_F(CadIoTest, AnEdgeTooLongForAnIntSampleCountIsSampledAtTheCap) {
