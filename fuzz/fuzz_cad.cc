@@ -12,12 +12,12 @@
 #include "fuzz/fuzz_input.h"
 #include "reconstruction/cad_io.h"
 
-// Each read's child has 8 s (reconstruction/cad_io.h's time limit), so listing and reading stay under the 20 s
-// that scripts/fuzz.sh gives libFuzzer per input: a reader that is slow under ASan on a loaded machine, or
-// loops, ends as a refused file (as `formloop fit` reports it), not as a libFuzzer time-out. A hang in
-// formloop's own code is still one.
+// Each read's child has 6 s (reconstruction/cad_io.h's time limit), so listing and reading (12 s) stay well under the
+// 20 s that scripts/fuzz.sh gives libFuzzer per input: a reader that is slow under ASan on a loaded machine, or loops,
+// ends as a refused file (as `formloop fit` reports it), not as a libFuzzer time-out. A hang in formloop's own code is
+// still one.
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
-  formloop::recon::SetCadReadTimeoutSeconds(8.0);
+  formloop::recon::SetCadReadTimeoutSeconds(6.0);
   return 0;
 }
 
