@@ -176,7 +176,9 @@ TEST_F(DistributeRs274Test, Rs274AcceptsTheOutputAndItsMovesAreTheCorrectedPath)
   for (std::size_t i = 0; i < n && j < corrected.moves.size(); ++i) {
     const CanonMove& m = nominal.moves[i];
     const Vector3d target = m.p + delta_end[i];
-    auto corrected_at = [&](double lambda) {
+    // Returns a Vector3d, not `auto`: an Eigen expression returned from the lambda would refer to PointOf's
+    // temporary after it is gone (ASan: stack-use-after-return; the sanitizer run found it).
+    auto corrected_at = [&](double lambda) -> Vector3d {
       return PointOf(m, lambda) + delta_start[i] + lambda * (delta_end[i] - delta_start[i]);
     };
     const CanonMove& c = corrected.moves[j];
