@@ -377,7 +377,10 @@ TEST_F(KbLibraryTest, RefusedFilesAreNamedAndLeftUnchanged) {
   for (std::size_t i = 0; i < garbage.size(); ++i) garbage[i] = static_cast<char>((i * 7919 + 13) & 0xff);
   WriteBytes(dir_ / "garbage.db", garbage);
   WriteBytes(dir_ / "notes.txt", "cases:\n  - blade\n  - plate\n");
-  WriteBytes(dir_ / "image.png", std::string("\x89PNG\r\n\x1a\n\0\0\0\rIHDR\0\0\0\x10", 24) + std::string(200, 'x'));
+  // 24 bytes: the PNG signature, the IHDR chunk's length and type, width and height 16 (the literal holds exactly
+  // these: reading 24 bytes of a shorter literal overran it; ASan found it).
+  WriteBytes(dir_ / "image.png",
+             std::string("\x89PNG\r\n\x1a\n\0\0\0\rIHDR\0\0\0\x10\0\0\0\x10", 24) + std::string(200, 'x'));
   {
     auto db = Database::Open(dir_ / "foreign.db", Database::Mode::kCreate);
     ASSERT_TRUE(db.ok());
