@@ -87,10 +87,12 @@ namespace {
 
 // A probe end point as an integer key at 0.1 µm. Both sides key the value the program states: the
 // controller formats and parses the planned end point as the program text does.
+// The mixing wraps modulo 2^64 (unsigned arithmetic: a signed overflow is undefined; UBSan found it in
+// CollectorTest.EveryDialectAndLayoutDeliversEveryPointExactly). The same bits as before on every build.
 std::int64_t EndKey(const std::array<double, 3>& p) {
-  std::int64_t key = 0;
-  for (double v : p) key = key * 10'000'019 + static_cast<std::int64_t>(std::llround(v * 10000.0));
-  return key;
+  std::uint64_t key = 0;
+  for (double v : p) key = key * 10'000'019u + static_cast<std::uint64_t>(std::llround(v * 10000.0));
+  return static_cast<std::int64_t>(key);
 }
 
 std::array<double, 3> AsWritten(const std::array<double, 3>& p, int decimals) {
