@@ -60,6 +60,9 @@ void AddDiagnoseCommand(CLI::App& root, CommandAction* action) {
                   "question); default: all")
       ->delimiter(',');
   cmd->add_flag("!--no-proposal", args->propose, "do not propose the experiment that separates an alias group");
+  cmd->add_option("--direct", args->direct,
+                  "DIRECT.json: parameters measured on the machine (tool setter, reference sphere, datum faces) with "
+                  "their uncertainty, used as extra observations in the fit (docs/formats.md, direct measurements)");
   cmd->callback([args, action, measured, runs] {
     if (!measured->empty()) args->measured = measured->front();
     if (!runs->empty()) args->run = runs->front();

@@ -157,6 +157,7 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
       {"--plan", args.plan},         {"--probe-profile", args.probe_profile}, {"--baseline", args.baseline},
       {"--validate", args.validate}, {"--validate-run", args.validate_run},   {"--validate-plan", args.validate_plan},
       {"--library", args.library}};
+  input_paths.push_back({"--direct", args.direct});
   for (const auto& m : args.more_measured) input_paths.push_back({"--measured", m});
   for (const auto& r : args.more_runs) input_paths.push_back({"--run", r});
   StagedOutputFolder folder;
@@ -172,6 +173,9 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
   }
   sim::DiagnoseOptions options;
   options.candidates = args.effects;
+  if (!args.direct.empty()) {
+    FL_ASSIGN_OR_RETURN(options.direct, sim::ReadDirectMeasurements(args.direct));
+  }
   {
     std::unique_ptr<kb::Library> library;
     if (!args.library.empty()) {
@@ -290,6 +294,7 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
                                                         {args.baseline, "baseline.json"},
                                                         {args.plan, "plan" + fs::path(args.plan).extension().string()},
                                                         {args.validate, "validate.csv"},
+                                                        {args.direct, "direct.json"},
                                                         {args.probe_profile, "probe_profile.json"}}) {
     if (!from.empty()) FL_RETURN_IF_ERROR(CopyInto(from, staging / "inputs" / name));
   }
@@ -301,7 +306,7 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
       {"measured", args.measured},           {"features", args.features},   {"run", args.run},
       {"more_measured", args.more_measured}, {"more_runs", args.more_runs}, {"plan", args.plan},
       {"probe_profile", args.probe_profile}, {"baseline", args.baseline},   {"validate", args.validate},
-      {"validate_run", args.validate_run}};
+      {"validate_run", args.validate_run},   {"direct", args.direct}};
   FL_RETURN_IF_ERROR(WriteJsonFile(staging / "inputs" / "arguments.json", args_json));
   FL_RETURN_IF_ERROR(WriteJsonFile(staging / "diagnosis.json", out));
   FL_RETURN_IF_ERROR(sim::WriteModel(staging / "model.json", diagnosis.extended));

@@ -44,6 +44,9 @@ struct DiagnoseArgs {
   // library's when --library is given, else data/starter/rules.json of `data_dir`.
   std::string data_dir;  // empty: retrieval::DefaultDataDir()
   bool propose = true;   // with --run: propose the experiment that separates each alias group
+  // Direct measurements (sim::ReadDirectMeasurements: tool setter, reference sphere, datum faces) used
+  // as extra observations in the fit; empty: none.
+  std::string direct;
 };
 // Returns diagnosis.json's content; the summary goes to the log (stderr).
 Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args);

@@ -5,8 +5,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 
+#include "core/json_io.h"
 #include "metrology/deviations.h"
 #include "simulation/diagnose_engine.h"
 #include "simulation/virtual_machine.h"
@@ -30,7 +32,8 @@ Eigen::MatrixXd ProbeJacobian(const std::vector<PointContext>& contexts, const E
 
 namespace detail {
 
-Result<Problem> BuildProbeProblem(const std::vector<PartRows>& sets, const std::vector<std::string>& labels, int knn) {
+Result<Problem> BuildProbeProblem(const std::vector<PartRows>& sets, const std::vector<std::string>& labels, int knn,
+                                  const std::vector<DirectMeasurement>& direct) {
   Problem prob;
   int n = 0, parts = 0;
   bool fixed_sigma = false;
@@ -65,6 +68,49 @@ Result<Problem> BuildProbeProblem(const std::vector<PartRows>& sets, const std::
     }
   }
   FL_ASSIGN_OR_RETURN(prob.neighbours, KnnLists(prob.pos, knn, &prob.part_of));
+  // Direct measurements: the part each belongs to and its parameter's column.
+  struct DirectRow {
+    const Effect* effect;
+    int column, part;
+    double value, sigma;
+  };
+  std::vector<DirectRow> direct_rows;
+  for (const DirectMeasurement& d : direct) {
+    FL_RETURN_IF_ERROR(d.Validate());
+    const Effect* e = FindEffect(d.effect);
+    int column = 0;
+    while (e->parameters()[column].name != d.parameter) ++column;
+    int part = 0;
+    if (!d.part.empty()) {
+      const auto it = std::find(labels.begin(), labels.end(), d.part);
+      if (it == labels.end()) {
+        return Status::BadInput(Where{.field = "direct measurement part"}, "no part is labelled '" + d.part + "'",
+                                "use one of the parts' labels (their run folders' names)");
+      }
+      part = static_cast<int>(it - labels.begin());
+    }
+    direct_rows.push_back({e, column, part, d.value, d.sigma});
+  }
+  if (!direct_rows.empty()) {
+    // Every row weighted by 1/σ: the points by their part's nugget σ̂ (as when pooling), a direct
+    // measurement by its own σ.
+    prob.points = n;
+    const int total = n + static_cast<int>(direct_rows.size());
+    prob.r.conservativeResize(total);
+    prob.weight = Eigen::VectorXd::Ones(total);
+    prob.xy.conservativeResize(total, 2);
+    prob.pos.conservativeResize(total, 3);
+    prob.neighbours.resize(static_cast<std::size_t>(total));
+    for (std::size_t k = 0; k < direct_rows.size(); ++k) {
+      const Eigen::Index row = n + static_cast<Eigen::Index>(k);
+      prob.r[row] = direct_rows[k].value;
+      prob.xy.row(row).setZero();
+      prob.pos.row(row).setZero();
+      prob.part_of.push_back(direct_rows[k].part);
+      sigma_of_row.push_back(direct_rows[k].sigma);
+    }
+    fixed_sigma = true;
+  }
   if (fixed_sigma || parts > 1) {
     for (int p = 0; p < parts; ++p) {
       std::vector<int> rows;
@@ -83,15 +129,18 @@ Result<Problem> BuildProbeProblem(const std::vector<PartRows>& sets, const std::
       if (!(sigma > 0)) return Status::BadInput("part " + labels[p] + ": the residual has no scatter at all");
       for (int i : rows) prob.weight[i] = 1.0 / sigma;
     }
-    for (int i = 0; i < n; ++i) {
+    for (int i = 0; i < prob.n(); ++i) {
       if (sigma_of_row[static_cast<std::size_t>(i)] > 0)
         prob.weight[i] = 1.0 / sigma_of_row[static_cast<std::size_t>(i)];
     }
     prob.r = prob.r.cwiseProduct(prob.weight);
   }
   prob.applicable = [](const Effect*) { return true; };
-  prob.jacobian = [sets, n](const Effect* e, const std::vector<double>& theta) {
-    Eigen::MatrixXd j(n, e->parameter_count());
+  prob.jacobian = [sets, n, direct_rows](const Effect* e, const std::vector<double>& theta) {
+    Eigen::MatrixXd j = Eigen::MatrixXd::Zero(n + static_cast<Eigen::Index>(direct_rows.size()), e->parameter_count());
+    for (std::size_t k = 0; k < direct_rows.size(); ++k) {
+      if (direct_rows[k].effect == e) j(n + static_cast<Eigen::Index>(k), direct_rows[k].column) = 1.0;
+    }
     Eigen::Index row = 0;
     for (const PartRows& set : sets) {
       const std::vector<PointContext>& contexts = *set.contexts;
@@ -132,8 +181,31 @@ Result<Diagnosis> DiagnoseParts(const std::vector<detail::PartRows>& parts, cons
                               (parts.size() > 1 ? " in part " + labels[p] : std::string()));
     }
   }
-  FL_ASSIGN_OR_RETURN(const detail::Problem prob, detail::BuildProbeProblem(parts, labels, options.knn));
-  return detail::RunEngine(prob, baseline, options);
+  for (const DirectMeasurement& d : options.direct) {
+    if (baseline.Has(d.effect)) {
+      return Status::BadInput(Where{.field = "direct measurement " + d.effect + "." + d.parameter},
+                              "the baseline model already holds " + d.effect + ", so it is not diagnosed",
+                              "diagnose against a baseline without it, or put the measured value into the baseline");
+    }
+  }
+  FL_ASSIGN_OR_RETURN(const detail::Problem prob,
+                      detail::BuildProbeProblem(parts, labels, options.knn, options.direct));
+  FL_ASSIGN_OR_RETURN(Diagnosis out, detail::RunEngine(prob, baseline, options));
+  // What the fit makes of each measured parameter (NaN: its effect is not named, or the parameter is
+  // inside an alias group).
+  out.direct = options.direct;
+  for (const DirectMeasurement& d : options.direct) {
+    const std::string part = parts.size() > 1 ? (d.part.empty() ? labels.front() : d.part) : std::string();
+    double fitted = std::numeric_limits<double>::quiet_NaN();
+    for (const Cause& c : out.causes) {
+      if (c.effect != d.effect || (FindEffect(d.effect)->part_specific() && c.part != part)) continue;
+      for (std::size_t j = 0; j < c.parameter_names.size(); ++j) {
+        if (c.parameter_names[j] == d.parameter) fitted = c.parameters[j];
+      }
+    }
+    out.direct_fitted.push_back(fitted);
+  }
+  return out;
 }
 
 std::vector<std::string> LabelsFor(std::size_t parts, const std::vector<std::string>& labels) {
@@ -144,6 +216,88 @@ std::vector<std::string> LabelsFor(std::size_t parts, const std::vector<std::str
 }
 
 }  // namespace
+
+Status DirectMeasurement::Validate() const {
+  const Effect* e = FindEffect(effect);
+  if (e == nullptr) {
+    return Status::BadInput(Where{.field = "effect"}, "unknown effect '" + effect + "'", "use one of " + EffectNames());
+  }
+  bool known = false;
+  std::string names;
+  for (const auto& p : e->parameters()) {
+    known = known || p.name == parameter;
+    names += (names.empty() ? "" : ", ") + p.name;
+  }
+  if (!known) {
+    return Status::BadInput(Where{.field = "parameter"}, effect + " has no parameter '" + parameter + "'",
+                            "use one of " + names);
+  }
+  if (!std::isfinite(value)) {
+    return Status::BadInput(Where{.field = "value"}, "must be a finite number");
+  }
+  for (const auto& p : e->parameters()) {
+    if (p.name == parameter && !p.linear) {
+      return Status::BadInput(Where{.field = "parameter"}, "a nonlinear parameter cannot be measured directly");
+    }
+  }
+  if (!(sigma > 0) || !std::isfinite(sigma)) {
+    return Status::BadInput(Where{.field = "sigma"}, "must be > 0", "the measurement's standard uncertainty");
+  }
+  return Status::Ok();
+}
+
+nlohmann::json DirectMeasurement::ToJson() const {
+  nlohmann::json j = {{"effect", effect}, {"parameter", parameter}, {"value", value}, {"sigma", sigma}, {"by", by}};
+  if (!part.empty()) j["part"] = part;
+  return j;
+}
+
+Result<std::vector<DirectMeasurement>> ReadDirectMeasurements(const std::string& path) {
+  FL_ASSIGN_OR_RETURN(const Json j, ReadJsonFile(path));
+  if (!j.is_object() || !j.contains("direct_measurements") || !j["direct_measurements"].is_array()) {
+    return Status::BadInput(Where{.file = path, .field = "direct_measurements"}, "missing or not an array",
+                            "give {\"direct_measurements\": [{\"effect\": \"tool_radius\", \"parameter\": "
+                            "\"delta_r_um\", \"value\": 6.1, \"sigma\": 1.0, \"by\": \"tool setter\"}]}");
+  }
+  std::vector<DirectMeasurement> out;
+  const Json& list = j["direct_measurements"];
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const std::string at = "direct_measurements[" + std::to_string(i) + "]";
+    const Json& e = list[i];
+    if (!e.is_object()) return Status::BadInput(Where{.file = path, .field = at}, "must be an object");
+    DirectMeasurement d;
+    for (const char* key : {"effect", "parameter"}) {
+      if (!e.contains(key) || !e[key].is_string()) {
+        return Status::BadInput(Where{.file = path, .field = at + "." + key}, "missing or not a string");
+      }
+    }
+    for (const char* key : {"value", "sigma"}) {
+      if (!e.contains(key) || !e[key].is_number()) {
+        return Status::BadInput(Where{.file = path, .field = at + "." + key}, "missing or not a number",
+                                "in the parameter's unit (the catalogue's: um, urad, um/m)");
+      }
+    }
+    d.effect = e["effect"].get<std::string>();
+    d.parameter = e["parameter"].get<std::string>();
+    d.value = e["value"].get<double>();
+    d.sigma = e["sigma"].get<double>();
+    d.part = e.value("part", "");
+    d.by = e.value("by", "");
+    const Status valid = d.Validate();
+    if (!valid.ok()) {
+      return Status::BadInput(Where{.file = path, .field = at}, std::string(valid.message()),
+                              "see docs/diagnose.md, direct measurements");
+    }
+    for (const auto& o : out) {
+      if (o.effect == d.effect && o.parameter == d.parameter && o.part == d.part) {
+        return Status::BadInput(Where{.file = path, .field = at}, "measures " + d.effect + "." + d.parameter + " twice",
+                                "average repeated measurements into one value and its uncertainty");
+      }
+    }
+    out.push_back(d);
+  }
+  return out;
+}
 
 Status DiagnoseOptions::Validate() const {
   if (!(alpha > 0 && alpha < 1)) return Status::BadInput(Where{.field = "alpha"}, "must be in (0, 1)");
@@ -158,6 +312,7 @@ Status DiagnoseOptions::Validate() const {
   if (!(min_share >= 0 && min_share < 1)) return Status::BadInput(Where{.field = "min_share"}, "must be in [0, 1)");
   if (knn < 1) return Status::BadInput(Where{.field = "knn"}, "must be >= 1");
   if (cv_blocks < 2) return Status::BadInput(Where{.field = "cv_blocks"}, "must be >= 2");
+  for (const auto& d : direct) FL_RETURN_IF_ERROR(d.Validate());
   for (const auto& c : candidates) {
     if (FindEffect(c) == nullptr) {
       return Status::BadInput(Where{.field = "candidates"}, "unknown effect '" + c + "'",

@@ -67,6 +67,28 @@
 
 namespace formloop::sim {
 
+// A direct measurement of a catalogue effect's parameter on the machine, outside the part's probe log:
+// the tool setter (tool_radius.delta_r_um: the cutting tool's radius error), a reference sphere
+// (probe_radius.delta_r_eff_um: the probe's effective radius error), a datum of the fixture
+// (setup_offset.tx_um/ty_um/tz_um: the part's set-up shift). It enters the fit as one more observation,
+// value = parameter + ε, ε ~ N(0, σ²) (a row of the least squares with weight 1/σ beside the points'),
+// so it splits effects the probe data alone cannot tell apart — by what it measures, never by fiat:
+// a parameter the data and the measurement disagree on still shows in the fit. docs/diagnose.md
+// describes the file (ReadDirectMeasurements).
+struct DirectMeasurement {
+  std::string effect;     // catalogue name
+  std::string parameter;  // one of its parameters (name as the catalogue gives it)
+  double value = 0;       // the parameter's measured value, in its unit (the catalogue's sign)
+  double sigma = 1;       // standard uncertainty of `value`, same unit
+  std::string part;       // a set-up's part label when several parts are diagnosed (empty: the first)
+  std::string by;         // the instrument, in words ("tool setter", "reference sphere", "datum bore")
+  Status Validate() const;
+  nlohmann::json ToJson() const;
+};
+// {"direct_measurements": [{"effect": "tool_radius", "parameter": "delta_r_um", "value": 6.1,
+//   "sigma": 1.0, "by": "tool setter"}, ...]} — errors name the file, the entry and the field.
+Result<std::vector<DirectMeasurement>> ReadDirectMeasurements(const std::string& path);
+
 struct DiagnoseOptions {
   double alpha = 0.01;        // family-wise level of the F test per step (spec: 0.01)
   double alias_alpha = 0.01;  // a selected term not significant at this level given a candidate is its alias
@@ -85,6 +107,8 @@ struct DiagnoseOptions {
   // Plausible parameter ranges (the rule base's "diagnose.plausible_ranges"); empty: none, and τ is
   // searched over [T/100, 100 T], T the longest cutting time.
   PlausibleRanges plausible;
+  // Direct measurements of parameters (probe data only; their effects must not be in the baseline).
+  std::vector<DirectMeasurement> direct;
   Status Validate() const;
 };
 
@@ -152,6 +176,10 @@ struct Diagnosis {
   std::vector<std::vector<ScreenedEffect>> screening;  // per forward-selection step
   std::vector<Confounding> confounded;                 // named effects with a look-alike the data still separate
   std::vector<std::string> not_screened;  // effects the data cannot test (e.g. no tool path), with the reason in ToJson
+  // The direct measurements used, each with the value the fit gives its parameter (NaN: its effect not
+  // named on its own) — a measurement the fit disagrees with by many σ is visible here.
+  std::vector<DirectMeasurement> direct;
+  std::vector<double> direct_fitted;
   bool unexplained = false;
   nlohmann::json unexplained_where = nlohmann::json::array();  // clusters of the remaining residual
   std::vector<double> residual_um, residual_after_um;

@@ -210,9 +210,10 @@ TermFit FitTerm(const Problem& prob, const Term& term, const Eigen::MatrixXd& x,
 }
 
 double MoranZ(const Eigen::VectorXd& residual, const Eigen::MatrixXd& design, const metrology::SpatialWeights& w) {
-  Eigen::MatrixXd x(residual.size(), design.cols() + 1);
-  x << Eigen::VectorXd::Ones(residual.size()), design;
-  const auto m = metrology::ResidualMoranI(residual, x, w, metrology::IslandPolicy::kZero);
+  const Eigen::Index points = w.n();
+  Eigen::MatrixXd x(points, design.cols() + 1);
+  x << Eigen::VectorXd::Ones(points), design.topRows(points);
+  const auto m = metrology::ResidualMoranI(residual.head(points), x, w, metrology::IslandPolicy::kZero);
   // The weights come from k-NN lists (no islands) and x has full column count ≤ n, so this cannot
   // fail short of a bug; NaN makes one visible in the report instead of passing as "independent".
   return m.ok() ? m->z : std::numeric_limits<double>::quiet_NaN();
@@ -230,6 +231,11 @@ double NuggetVariance(const Eigen::VectorXd& r, const std::vector<std::vector<in
     ++n;
   }
   return n > 0 ? sum / n : 0.0;
+}
+
+Result<metrology::SpatialWeights> PointWeights(const Problem& prob) {
+  const std::vector<std::vector<int>> lists(prob.neighbours.begin(), prob.neighbours.begin() + prob.Points());
+  return metrology::WeightsFromNeighbours(lists, metrology::WeightStyle::kRowStandardised);
 }
 
 Result<std::vector<std::vector<int>>> KnnLists(const Eigen::MatrixXd& points, int k, const std::vector<int>* part_of) {
@@ -294,7 +300,13 @@ Result<Problem> Subset(const Problem& prob, const std::vector<int>& keep, int kn
     sub.part_of.push_back(prob.part_of[static_cast<std::size_t>(keep[t])]);
   }
   sub.part_names = prob.part_names;
-  FL_ASSIGN_OR_RETURN(sub.neighbours, KnnLists(sub.pos, std::min(knn, m - 1), &sub.part_of));
+  // `keep` lists the points kept, then every direct-measurement row.
+  int points = 0;
+  while (points < m && keep[points] < prob.Points()) ++points;
+  if (points < m) sub.points = points;
+  const std::vector<int> point_part(sub.part_of.begin(), sub.part_of.begin() + points);
+  FL_ASSIGN_OR_RETURN(sub.neighbours, KnnLists(sub.pos.topRows(points), std::min(knn, points - 1), &point_part));
+  sub.neighbours.resize(static_cast<std::size_t>(m));
   sub.applicable = prob.applicable;
   sub.time_scale_s = prob.time_scale_s;
   const auto full_jacobian = prob.jacobian;
@@ -315,9 +327,9 @@ std::vector<bool> AnomalyRegion(const Problem& prob, const metrology::SpatialWei
   lo.permutations = 0;
   lo.alpha = 0.01;
   lo.islands = metrology::IslandPolicy::kZero;
-  const auto lisa = metrology::LocalMoranI(prob.r, w, lo);
+  const auto lisa = metrology::LocalMoranI(prob.r.head(prob.Points()), w, lo);
   if (!lisa.ok()) return in;
-  for (int i = 0; i < prob.n(); ++i) {
+  for (int i = 0; i < prob.Points(); ++i) {
     in[i] = (lisa->quadrant[i] == 1 || lisa->quadrant[i] == 3) && lisa->p_analytical[i] < lo.alpha;
   }
   for (int ring = 0; ring < rings; ++ring) {
@@ -336,9 +348,10 @@ std::vector<bool> AnomalyRegion(const Problem& prob, const metrology::SpatialWei
 // Spatial block CV (metrology/spatial_cv.h): leave one x-y block of one part out (each part's bounding
 // box cut into blocks × blocks), refit the design on the rest, predict it.
 double BlockCvRms(const Problem& prob, const Eigen::MatrixXd& design, int blocks) {
-  const int n = prob.n();
-  if (design.cols() == 0) return std::sqrt(prob.r.cwiseQuotient(prob.weight).squaredNorm() / n);
-  std::vector<int> block(static_cast<std::size_t>(n));
+  // Over the points; a direct-measurement row is in every training set (block −1) and never held out.
+  const int n = prob.Points();
+  if (design.cols() == 0) return std::sqrt(prob.r.head(n).cwiseQuotient(prob.weight.head(n)).squaredNorm() / n);
+  std::vector<int> block(static_cast<std::size_t>(prob.n()), -1);
   for (int p = 0; p < prob.parts(); ++p) {
     std::vector<int> rows;
     for (int i = 0; i < n; ++i) {
@@ -391,8 +404,7 @@ Result<Diagnosis> RunEngine(const Problem& prob, const Model& baseline, const Di
   if (!first.unexplained || (first.causes.empty() && first.alias_groups.empty()) || prob.pos.cols() == 0) {
     return first;
   }
-  FL_ASSIGN_OR_RETURN(const metrology::SpatialWeights w,
-                      metrology::WeightsFromNeighbours(prob.neighbours, metrology::WeightStyle::kRowStandardised));
+  FL_ASSIGN_OR_RETURN(const metrology::SpatialWeights w, PointWeights(prob));
   std::vector<bool> region;
   int set_aside = 0;
   Selection second_selection;
@@ -401,11 +413,12 @@ Result<Diagnosis> RunEngine(const Problem& prob, const Model& baseline, const Di
   for (int rings : {2, 4, 8, 16}) {
     region = AnomalyRegion(prob, w, rings);
     std::vector<int> keep;
-    for (int i = 0; i < prob.n(); ++i) {
+    for (int i = 0; i < prob.Points(); ++i) {
       if (!region[i]) keep.push_back(i);
     }
-    set_aside = prob.n() - static_cast<int>(keep.size());
-    if (set_aside == 0 || set_aside > prob.n() / 2 || static_cast<int>(keep.size()) < 20) break;
+    set_aside = prob.Points() - static_cast<int>(keep.size());
+    if (set_aside == 0 || set_aside > prob.Points() / 2 || static_cast<int>(keep.size()) < 20) break;
+    for (int i = prob.Points(); i < prob.n(); ++i) keep.push_back(i);
     FL_ASSIGN_OR_RETURN(const Problem outside, Subset(prob, keep, options.knn));
     FL_ASSIGN_OR_RETURN(second_selection, SelectCauses(outside, baseline, options));
     if (!second.unexplained) {
@@ -436,8 +449,9 @@ Result<Diagnosis> RunEngine(const Problem& prob, const Model& baseline, const Di
   }
   const Eigen::VectorXd residual = prob.r - predicted;
   const Eigen::VectorXd residual_um = residual.cwiseQuotient(prob.weight);
-  out.residual_after_um.assign(residual_um.data(), residual_um.data() + prob.n());
-  out.rms_after_um = std::sqrt(residual_um.squaredNorm() / prob.n());
+  const int points = prob.Points();
+  out.residual_after_um.assign(residual_um.data(), residual_um.data() + points);
+  out.rms_after_um = std::sqrt(residual_um.head(points).squaredNorm() / points);
   out.z_after = MoranZ(residual, Eigen::MatrixXd(prob.n(), 0), w);
   out.heldout_rms_after_um = BlockCvRms(prob, design, options.cv_blocks);
   out.unexplained = true;
@@ -445,7 +459,7 @@ Result<Diagnosis> RunEngine(const Problem& prob, const Model& baseline, const Di
   Eigen::Vector2d centroid = Eigen::Vector2d::Zero();
   double peak = 0, mean = 0;
   Eigen::Vector2d peak_xy = Eigen::Vector2d::Zero();
-  for (int i = 0; i < prob.n(); ++i) {
+  for (int i = 0; i < points; ++i) {
     if (!region[i]) continue;
     centroid += prob.xy.row(i).transpose();
     mean += residual_um[i];

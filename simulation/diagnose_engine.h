@@ -42,7 +42,12 @@ struct Problem {
   // n × p Jacobian of effect e at θ over every row, unweighted.
   std::function<Eigen::MatrixXd(const Effect*, const std::vector<double>&)> jacobian;
   double time_scale_s = 1;  // for the τ search range when no plausible range is given
+  // Rows [0, points) are measured points; rows after them direct measurements of parameters
+  // (DirectMeasurement: no position, no neighbours, always in the training set of the block CV).
+  // −1: every row is a point.
+  int points = -1;
   int n() const { return static_cast<int>(r.size()); }
+  int Points() const { return points < 0 ? n() : points; }
   int parts() const { return static_cast<int>(part_names.size()); }
   // Weighted columns of a term at θ (its Width() values; a linear term ignores them): zero outside its
   // part, one block per part for kEachPart.
@@ -97,9 +102,12 @@ Eigen::MatrixXd DesignOf(const std::vector<TermFit>& s, int skip = -1);
 std::vector<std::vector<std::pair<double, double>>> ProfileIntervals(const Problem& prob, const std::vector<TermFit>& s,
                                                                      double tau_lo, double tau_hi, int nu, double f95);
 
-// Residual Moran's z of `residual` after `design` (plus an intercept).
+// Residual Moran's z of `residual` after `design` (plus an intercept), over the first w.n() rows (the
+// points; direct-measurement rows after them have no place).
 double MoranZ(const Eigen::VectorXd& residual, const Eigen::MatrixXd& design, const metrology::SpatialWeights& w);
 double NuggetVariance(const Eigen::VectorXd& r, const std::vector<std::vector<int>>& neighbours);
+// The row-standardised k-NN weights of a problem's points (its direct-measurement rows left out).
+Result<metrology::SpatialWeights> PointWeights(const Problem& prob);
 // k-NN lists of the rows of `points` (n × d), each part on its own when `part_of` is given.
 Result<std::vector<std::vector<int>>> KnnLists(const Eigen::MatrixXd& points, int k,
                                                const std::vector<int>* part_of = nullptr);
@@ -122,7 +130,11 @@ struct PartRows {
   double sigma_um = 0;
 };
 // The stacked problem of probe data rows (diagnose.cc). `labels`: one per part.
-Result<Problem> BuildProbeProblem(const std::vector<PartRows>& sets, const std::vector<std::string>& labels, int knn);
+// `direct`: direct measurements appended as rows after the points (their effects are not in the
+// baseline, so a row's residual is the measured value), weighted by 1/σ_m; the points are then weighted
+// by 1/σ̂ of their part (its nugget) even when there is one part, so each row counts by its precision.
+Result<Problem> BuildProbeProblem(const std::vector<PartRows>& sets, const std::vector<std::string>& labels, int knn,
+                                  const std::vector<DirectMeasurement>& direct = {});
 
 // Selection, identifiability, plausibility, intervals and gain (steps 3–6 and 8 of diagnose.h), with
 // the terms selected (named and alias-group members in the model) and their parameters.

@@ -80,6 +80,10 @@ Result<std::vector<FeaturePosition>> ReadFeatures(const std::string& path) {
 Result<Diagnosis> DiagnoseFeatures(const std::vector<FeaturePosition>& features, const Model& baseline,
                                    const DiagnoseOptions& options) {
   if (features.size() < 4) return Status::BadInput("feature diagnosis needs at least 4 features");
+  if (!options.direct.empty()) {
+    return Status::BadInput(Where{.field = "direct measurements"}, "are used with probe data only",
+                            "diagnose the probe log (--measured with --run) with them");
+  }
   const bool has_z = features.front().has_z;
   const int dims = has_z ? 3 : 2;
   const int m = static_cast<int>(features.size());

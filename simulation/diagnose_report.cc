@@ -126,6 +126,17 @@ nlohmann::json Diagnosis::ToJson() const {
                         {"screening", screening_json},
                         {"extended_model", extended.ToJson()}};
   if (parts.size() > 1) out["parts"] = parts;
+  if (!direct.empty()) {
+    // Only when given: diagnoses without direct measurements keep their schema.
+    nlohmann::json list = nlohmann::json::array();
+    for (std::size_t k = 0; k < direct.size(); ++k) {
+      nlohmann::json entry = direct[k].ToJson();
+      const double fitted = k < direct_fitted.size() ? direct_fitted[k] : std::nan("");
+      entry["fitted"] = std::isnan(fitted) ? nlohmann::json() : nlohmann::json(fitted);
+      list.push_back(entry);
+    }
+    out["direct_measurements"] = list;
+  }
   return out;
 }
 
@@ -133,6 +144,13 @@ std::string Diagnosis::Summary() const {
   std::string s = fmt::format("diagnose: {} points{}, residual rms {:.2f} um, Moran z {:.2f}, noise sigma ~{:.2f} um\n",
                               n, parts.size() > 1 ? fmt::format(" of {} parts", parts.size()) : "", rms_before_um,
                               z_before, noise_sigma_um);
+  for (std::size_t k = 0; k < direct.size(); ++k) {
+    const double fitted = k < direct_fitted.size() ? direct_fitted[k] : std::nan("");
+    s += fmt::format("  measured directly{}: {}.{} = {:.4g} +- {:.2g}{}\n",
+                     direct[k].by.empty() ? "" : " (" + direct[k].by + ")", direct[k].effect, direct[k].parameter,
+                     direct[k].value, direct[k].sigma,
+                     std::isnan(fitted) ? std::string("; not named") : fmt::format("; fitted {:.4g}", fitted));
+  }
   if (explained_by_baseline) return s + "  the simulation explains the data: no cause named\n";
   for (const auto& c : causes) {
     s += fmt::format("  cause: {} (", c.Label());

@@ -287,15 +287,15 @@ double PartialCorrelation(const std::vector<TermFit>& s, int k, const Eigen::Mat
 
 Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const DiagnoseOptions& options) {
   const int n = prob.n();
+  const int points = prob.Points();  // the rows after them are direct measurements
   Selection result;
   Diagnosis& out = result.diagnosis;
-  out.n = n;
+  out.n = points;
   out.parts = prob.part_names;
   out.extended = baseline;
-  const Eigen::VectorXd r_um = prob.r.cwiseQuotient(prob.weight);
-  out.residual_um.assign(r_um.data(), r_um.data() + n);
-  FL_ASSIGN_OR_RETURN(const metrology::SpatialWeights w,
-                      metrology::WeightsFromNeighbours(prob.neighbours, metrology::WeightStyle::kRowStandardised));
+  const Eigen::VectorXd r_um = prob.r.cwiseQuotient(prob.weight).head(points);
+  out.residual_um.assign(r_um.data(), r_um.data() + points);
+  FL_ASSIGN_OR_RETURN(const metrology::SpatialWeights w, PointWeights(prob));
 
   // Candidates: applicable catalogue effects with parameters, not in the baseline, as asked; over
   // several parts a part-specific effect has each part's own parameters.
@@ -313,7 +313,7 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
     }
     candidates.push_back({e, e->part_specific() && prob.parts() > 1 ? kEachPart : kShared});
   }
-  out.rms_before_um = std::sqrt(r_um.squaredNorm() / n);
+  out.rms_before_um = std::sqrt(r_um.squaredNorm() / points);
   out.z_before = MoranZ(prob.r, Eigen::MatrixXd(n, 0), w);
   out.noise_sigma_um = std::sqrt(NuggetVariance(r_um, prob.neighbours));
   const double nugget = NuggetVariance(prob.r, prob.neighbours);
@@ -703,7 +703,7 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
       }
     }
     group.variance_explained = rss0 > 0 ? (LeastSquares(others, prob.r).rss - joint.rss) / rss0 : 0.0;
-    group.combined_rms_um = std::sqrt(combined.cwiseQuotient(prob.weight).squaredNorm() / n);
+    group.combined_rms_um = std::sqrt(combined.cwiseQuotient(prob.weight).head(points).squaredNorm() / points);
     group.max_correlation = GroupDesignCorrelation(member_columns, others);
     out.alias_groups.push_back(group);
   }
@@ -769,9 +769,9 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
     out.extended.alias_groups.push_back({"G" + std::to_string(g + 1), out.alias_groups[g].members});
   }
 
-  const Eigen::VectorXd after_um = joint.residual.cwiseQuotient(prob.weight);
-  out.residual_after_um.assign(after_um.data(), after_um.data() + n);
-  out.rms_after_um = std::sqrt(after_um.squaredNorm() / n);
+  const Eigen::VectorXd after_um = joint.residual.cwiseQuotient(prob.weight).head(points);
+  out.residual_after_um.assign(after_um.data(), after_um.data() + points);
+  out.rms_after_um = std::sqrt(after_um.squaredNorm() / points);
   out.z_after = MoranZ(joint.residual, x, w);
   out.heldout_rms_before_um = out.rms_before_um;
   out.heldout_rms_after_um = BlockCvRms(prob, x, options.cv_blocks);
@@ -783,13 +783,13 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
     lo.permutations = 0;
     lo.alpha = 0.01;
     lo.islands = metrology::IslandPolicy::kZero;
-    const auto lisa = metrology::LocalMoranI(joint.residual, w, lo);
+    const auto lisa = metrology::LocalMoranI(joint.residual.head(points), w, lo);
     if (lisa.ok()) {
       for (int q : {1, 3}) {
         int count = 0;
         Eigen::Vector2d centroid = Eigen::Vector2d::Zero();
         double mean = 0;
-        for (int i = 0; i < n; ++i) {
+        for (int i = 0; i < points; ++i) {
           if (lisa->quadrant[i] == q && lisa->p_analytical[i] < lo.alpha) {
             ++count;
             centroid += prob.xy.row(i).transpose();
@@ -805,7 +805,7 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
     }
   }
   out.extended.provenance = {{"baseline", baseline.provenance},
-                             {"diagnosed_points", n},
+                             {"diagnosed_points", points},
                              {"named", nlohmann::json::array()},
                              {"alias_groups", nlohmann::json::array()}};
   for (const auto& c : out.causes) out.extended.provenance["named"].push_back(c.Label());

@@ -100,14 +100,17 @@ class Designer {
     return Status::Ok();
   }
 
-  Result<GroupDesign> Evaluate(const Problem& prob) {
+  // `direct`: direct measurements appended as rows after the problem's (weight 1/σ; the combined
+  // prediction is 0 there, the rows being new observations).
+  Result<GroupDesign> Evaluate(const Problem& prob, const std::vector<DirectMeasurement>& direct = {}) {
     GroupDesign out;
-    out.others = Eigen::MatrixXd(prob.n(), 0);
+    const Eigen::Index rows = prob.n() + static_cast<Eigen::Index>(direct.size());
+    out.others = Eigen::MatrixXd(rows, 0);
     for (const Block& o : others_) {
-      Eigen::MatrixXd c = Columns(prob, o.term);
+      Eigen::MatrixXd c = WithDirectRows(Columns(prob, o.term), o.term, direct);
       if (o.column >= 0) {
         // The member column is taken out of its term; the rest stays.
-        Eigen::MatrixXd rest(prob.n(), 0);
+        Eigen::MatrixXd rest(rows, 0);
         for (Eigen::Index k = 0; k < c.cols(); ++k) {
           if (k != o.column) rest = Concat(rest, c.col(k));
         }
@@ -116,7 +119,7 @@ class Designer {
       out.others = Concat(out.others, c);
     }
     for (const Block& m : members_) {
-      Eigen::MatrixXd c = Columns(prob, m.term);
+      Eigen::MatrixXd c = WithDirectRows(Columns(prob, m.term), m.term, direct);
       if (m.column >= 0) c = Eigen::MatrixXd(c.col(m.column));
       out.members.push_back(c);
     }
@@ -128,18 +131,20 @@ class Designer {
       }
     }
     for (std::size_t m = 0; m < out.members.size(); ++m) out.members[m] *= scales_[m].asDiagonal();
-    out.combined = Eigen::VectorXd::Zero(prob.n());
+    out.combined = Eigen::VectorXd::Zero(rows);
     for (const auto& [b, own] : values_) {
       const Eigen::MatrixXd c = Columns(prob, b.term);
       // A part the diagnosis did not see (the next part) is given the first part's set-up as a stand-in.
       std::vector<double> v;
       for (Eigen::Index k = 0; k < c.cols(); ++k) v.push_back(own[static_cast<std::size_t>(k) % own.size()]);
       if (b.column >= 0) {
-        out.combined += c.col(b.column) * v[static_cast<std::size_t>(b.column)];
+        out.combined.head(prob.n()) += c.col(b.column) * v[static_cast<std::size_t>(b.column)];
       } else {
         const int p = b.term.effect->parameter_count();
         for (Eigen::Index k = 0; k < c.cols(); ++k) {
-          if (b.term.effect->parameters()[k % p].linear) out.combined += c.col(k) * v[static_cast<std::size_t>(k)];
+          if (b.term.effect->parameters()[k % p].linear) {
+            out.combined.head(prob.n()) += c.col(k) * v[static_cast<std::size_t>(k)];
+          }
         }
       }
     }
@@ -147,6 +152,23 @@ class Designer {
   }
 
  private:
+  // A term's columns with one row per direct measurement below them: 1/σ at the measured parameter's
+  // column (a set-up: the first part's) when it is this term's effect, else 0.
+  static Eigen::MatrixXd WithDirectRows(const Eigen::MatrixXd& c, const Term& t,
+                                        const std::vector<DirectMeasurement>& direct) {
+    if (direct.empty()) return c;
+    Eigen::MatrixXd out = Eigen::MatrixXd::Zero(c.rows() + static_cast<Eigen::Index>(direct.size()), c.cols());
+    out.topRows(c.rows()) = c;
+    for (std::size_t k = 0; k < direct.size(); ++k) {
+      if (direct[k].effect != t.effect->name()) continue;
+      for (int j = 0; j < t.effect->parameter_count(); ++j) {
+        if (t.effect->parameters()[j].name == direct[k].parameter && j < c.cols()) {
+          out(c.rows() + static_cast<Eigen::Index>(k), j) = 1.0 / direct[k].sigma;
+        }
+      }
+    }
+    return out;
+  }
   Eigen::MatrixXd Columns(const Problem& prob, const Term& t) const {
     if (t.effect->linear()) return prob.Columns(t, {});
     std::vector<double> theta(static_cast<std::size_t>(t.effect->parameter_count()), 1.0);
@@ -214,6 +236,38 @@ double Separation(const GroupDesign& g, Eigen::Index fit_rows) {
 
 }  // namespace
 
+std::vector<DirectKind> DefaultDirectKinds() {
+  return {{"tool_setter",
+           "tool setter",
+           "tool_radius",
+           {"delta_r_um"},
+           1.0,
+           60,
+           "measure the cutting tool's radius on the machine's tool setter"},
+          {"reference_sphere",
+           "reference sphere",
+           "probe_radius",
+           {"delta_r_eff_um"},
+           0.5,
+           120,
+           "calibrate the probe's effective radius on the reference sphere"},
+          {"datum",
+           "datum faces",
+           "setup_offset",
+           {"tx_um", "ty_um", "tz_um"},
+           1.0,
+           90,
+           "probe the fixture's datum faces (x, y and z) to measure where the part sits"},
+          {"datum_rotation",
+           "datum plane and edge",
+           "setup_rotation",
+           {"wx_urad", "wy_urad", "wz_urad"},
+           5.0,
+           120,
+           "probe the fixture's datum plane at three points and its edge at two, far apart, to measure how the "
+           "part is turned"}};
+}
+
 Status ExperimentOptions::Validate() const {
   if (!(tilt_deg > 0 && tilt_deg < 75)) return Status::BadInput(Where{.field = "tilt_deg"}, "must be in (0, 75)");
   if (candidate_grid < 4) return Status::BadInput(Where{.field = "candidate_grid"}, "must be >= 4");
@@ -223,6 +277,13 @@ Status ExperimentOptions::Validate() const {
   }
   for (double f : feed_scales) {
     if (!(f > 0)) return Status::BadInput(Where{.field = "feed_scales"}, "must be > 0");
+  }
+  for (const DirectKind& k : direct_kinds) {
+    for (const std::string& parameter : k.parameters) {
+      const DirectMeasurement d{k.effect, parameter, 0.0, k.sigma, "", k.instrument};
+      FL_RETURN_IF_ERROR(d.Validate());
+    }
+    if (!(k.cost_s > 0)) return Status::BadInput(Where{.field = "direct_kinds.cost_s"}, "must be > 0");
   }
   return Status::Ok();
 }
@@ -237,7 +298,13 @@ nlohmann::json ExperimentProposal::ToJson() const {
                       {"log_det_information_gain", log_det_gain},
                       {"separation_predicted", separation},
                       {"predicted_to_split", predicted_to_split}};
-  if (kind == "reprobe") {
+  if (!direct.empty()) {
+    nlohmann::json measure = nlohmann::json::array();
+    for (const DirectMeasurement& d : direct) {
+      measure.push_back({{"effect", d.effect}, {"parameter", d.parameter}, {"sigma", d.sigma}, {"by", d.by}});
+    }
+    j["measure"] = measure;
+  } else if (kind == "reprobe") {
     nlohmann::json points = nlohmann::json::array();
     for (std::size_t i = 0; i < plan.points.size(); ++i) {
       const auto& p = plan.points[i];
@@ -335,7 +402,8 @@ Result<std::pair<metrology::ProbingPlan, std::vector<Eigen::Vector3d>>> Candidat
 }  // namespace
 
 Result<double> GroupCorrelation(const std::vector<ProbeDataInput>& parts, const Diagnosis& diagnosis,
-                                const Model& baseline, const std::vector<std::string>& members) {
+                                const Model& baseline, const std::vector<std::string>& members,
+                                const std::vector<DirectMeasurement>& direct) {
   FL_ASSIGN_OR_RETURN(const PartData pd, ReadParts(parts, diagnosis, baseline));
   std::vector<detail::PartRows> rows;
   for (std::size_t p = 0; p < pd.data.size(); ++p) {
@@ -347,7 +415,7 @@ Result<double> GroupCorrelation(const std::vector<ProbeDataInput>& parts, const 
   group.members = members;
   Designer designer(diagnosis, group, TauOf(diagnosis, prob, PlausibleRanges{}));
   FL_RETURN_IF_ERROR(designer.Init(pd.labels));
-  FL_ASSIGN_OR_RETURN(const GroupDesign g, designer.Evaluate(prob));
+  FL_ASSIGN_OR_RETURN(const GroupDesign g, designer.Evaluate(prob, direct));
   return detail::GroupDesignCorrelation(g.members, g.others);
 }
 
@@ -406,7 +474,7 @@ Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<Pro
     const double logdet0 = LogDetInformation(base);
     std::vector<ExperimentProposal> options_for_group;
     auto assess = [&](const Problem& augmented, ExperimentProposal p) -> Status {
-      FL_ASSIGN_OR_RETURN(const GroupDesign g, designer.Evaluate(augmented));
+      FL_ASSIGN_OR_RETURN(const GroupDesign g, designer.Evaluate(augmented, p.direct));
       p.members = group.members;
       p.correlation_before = rho0;
       p.correlation_after = detail::GroupDesignCorrelation(g.members, g.others);
@@ -505,6 +573,34 @@ Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<Pro
                                       np.turn, np.turn == 180 ? " (the cutting order reversed)" : "");
       p.cost_s = np.cut_time_s + static_cast<double>(np.contexts.size()) * options.probe_seconds_per_point;
       FL_RETURN_IF_ERROR(assess(augmented, std::move(p)));
+    }
+    // Direct measurements of the group's members, every combination of the kinds that measure one.
+    {
+      std::vector<const DirectKind*> relevant;
+      for (const DirectKind& k : options.direct_kinds) {
+        for (const std::string& m : group.members) {
+          if (m.substr(0, std::min(m.find('@'), m.find('('))) == k.effect) {
+            relevant.push_back(&k);
+            break;
+          }
+        }
+      }
+      for (unsigned mask = 1; mask < (1u << relevant.size()); ++mask) {
+        ExperimentProposal p;
+        std::string actions;
+        for (std::size_t k = 0; k < relevant.size(); ++k) {
+          if (!(mask & (1u << k))) continue;
+          const DirectKind& dk = *relevant[k];
+          p.kind += (p.kind.empty() ? "" : "+") + dk.kind;
+          actions += (actions.empty() ? "" : "; ") + dk.action;
+          p.cost_s += dk.cost_s;
+          for (const std::string& parameter : dk.parameters) {
+            p.direct.push_back({dk.effect, parameter, 0.0, dk.sigma, "", dk.instrument});
+          }
+        }
+        p.change = actions + ", and diagnose again with the measured values (formloop diagnose --direct)";
+        FL_RETURN_IF_ERROR(assess(now, std::move(p)));
+      }
     }
     if (options_for_group.empty()) continue;
     // The cheapest change predicted to split the group; else the most separation per second.

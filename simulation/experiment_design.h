@@ -10,6 +10,9 @@
 //     (Fedorov 1972; Atkinson, Donev & Tobias, Optimum Experimental Designs, 2007, ch. 11–12). Cost:
 //     K × the probing time per point. Splits what differs in where or how a point is probed (a probe
 //     radius against a tool radius: the tilt; effects that differ on steep or far regions).
+//   - a direct measurement on the machine (DirectKind): the tool setter, a reference sphere, the
+//     fixture's datum faces — alone or together. Splits what it measures from what it does not (a
+//     tool radius from a probe radius, a set-up shift from a rotation), whatever the part's shape.
 //   - the next part cut another way: the raster turned by 45° or 90°, the cutting order reversed
 //     (180°), or the feed halved, probed with the same plan and diagnosed together with this part.
 //     Cost: the new path's cutting time plus probing. Splits effects of cutting time from those of path
@@ -39,6 +42,24 @@
 
 namespace formloop::sim {
 
+// A direct measurement a shop can make beside the probe log: which catalogue parameters it observes,
+// how precisely (σ, in the parameter's unit) and at what cost. Modelled as one more observation of each
+// parameter (a row of weight 1/σ in the group's Fisher information); applied, it is given to diagnose
+// as DiagnoseOptions::direct (`formloop diagnose --direct FILE.json`).
+struct DirectKind {
+  std::string kind;        // "tool_setter"
+  std::string instrument;  // "tool setter"
+  std::string effect;      // catalogue effect
+  std::vector<std::string> parameters;
+  double sigma = 1;
+  double cost_s = 60;
+  std::string action;  // what to do, in words
+};
+// The tool setter (tool_radius, σ 1 µm, 60 s), a reference sphere (probe_radius, σ 0.5 µm, 120 s), the
+// fixture's datum faces (setup_offset tx, ty, tz, σ 1 µm each, 90 s) and its datum plane and edge probed
+// at points ~100 mm apart (setup_rotation wx, wy, wz, σ 5 µrad each: 0.5 µm over 100 mm, 120 s).
+std::vector<DirectKind> DefaultDirectKinds();
+
 struct ExperimentOptions {
   std::vector<int> reprobe_counts = {8, 16, 32, 64};
   double tilt_deg = 30;                  // of a tilted approach from −n
@@ -47,6 +68,9 @@ struct ExperimentOptions {
   std::vector<double> raster_turns_deg = {45, 90, 180};
   std::vector<double> feed_scales = {0.5};
   double required_noncentrality = 15;
+  // Direct measurements considered, alone and together (every combination of those that measure a
+  // member of the group); empty: none.
+  std::vector<DirectKind> direct_kinds = DefaultDirectKinds();
   PlausibleRanges plausible;  // the τ search range of a thermal member not in the model
   // The part's path cut with the raster turned by `turn_deg` and the feed scaled: cutter locations (in
   // cutting order, with path length and time). Without it no next-part change is considered (the
@@ -57,7 +81,7 @@ struct ExperimentOptions {
 
 struct ExperimentProposal {
   std::vector<std::string> members;  // the alias group
-  std::string kind;                  // "reprobe", "raster_turn", "feed"
+  std::string kind;                  // "reprobe", "raster_turn", "feed", or direct kinds joined by '+'
   std::string change;                // what to do, in words
   double cost_s = 0;
   double correlation_before = 0, correlation_after = 0;  // design correlation of the group
@@ -69,6 +93,8 @@ struct ExperimentProposal {
   metrology::ProbingPlan plan;
   std::vector<Eigen::Vector3d> approaches;
   double raster_turn_deg = 0, feed_scale = 1;
+  // Or the direct measurements to make (their value is what the shop measures; 0 here).
+  std::vector<DirectMeasurement> direct;
   nlohmann::json ToJson() const;
 };
 
@@ -80,8 +106,9 @@ Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<Pro
 
 // The design correlation of `members` (labels as an AliasGroup lists them) against the other effects
 // of `diagnosis`' extended model, on the data of `parts`: what ProposeExperiments predicts, measured on
-// the data actually taken.
+// the data actually taken (with the direct measurements that were made, if any).
 Result<double> GroupCorrelation(const std::vector<ProbeDataInput>& parts, const Diagnosis& diagnosis,
-                                const Model& baseline, const std::vector<std::string>& members);
+                                const Model& baseline, const std::vector<std::string>& members,
+                                const std::vector<DirectMeasurement>& direct = {});
 
 }  // namespace formloop::sim

@@ -235,3 +235,66 @@ TEST_F(DiagnoseCliTest, BadInputIsRefusedWithTheFieldNamedAndNothingWritten) {
 
 }  // namespace
 }  // namespace formloop::app
+
+namespace formloop::app {
+namespace {
+
+// The separating experiment applied through the CLI: a tool radius error alone is an alias group with
+// the probe radius on probe data; the diagnosis proposes what separates them; a tool-setter reading
+// given with --direct splits it and names the tool radius, the reading echoed with its fitted value.
+TEST_F(DiagnoseCliTest, ADirectMeasurementGivenWithDirectSplitsAnAliasGroup) {
+  const fs::path run = MakeRun("part", "saddle");
+  const fs::path machine = WriteModel("machine.json", R"({"format": "formloop-model", "version": 1, "effects": [
+      {"name": "tool_radius", "parameters": {"delta_r_um": 6}},
+      {"name": "noise", "parameters": {"surface_sigma_um": 0.5, "probe_sigma_um": 0.5}}]})");
+  std::string out, err;
+  const fs::path log = dir_ / "log.csv";
+  ASSERT_EQ(RunFormloop("simulate --run " + run.string() + " --model " + machine.string() + " --out " + log.string() +
+                            " --seed 3",
+                        &out, &err),
+            0)
+      << err;
+  ASSERT_EQ(RunFormloop("diagnose --measured " + log.string() + " --run " + run.string() + " --out " +
+                            (dir_ / "alone").string(),
+                        &out, &err),
+            0)
+      << err;
+  const auto alone = ParseJson(out, "stdout");
+  ASSERT_TRUE(alone.ok()) << out;
+  ASSERT_FALSE((*alone)["alias_groups"].empty()) << out;
+  EXPECT_FALSE((*alone)["proposals"].empty()) << out;
+  EXPECT_FALSE(alone->contains("direct_measurements"));
+  const fs::path direct = WriteModel("direct.json", R"({"direct_measurements": [
+      {"effect": "tool_radius", "parameter": "delta_r_um", "value": 6.4, "sigma": 1.0, "by": "tool setter"}]})");
+  const fs::path out_dir = dir_ / "with_setter";
+  ASSERT_EQ(RunFormloop("diagnose --measured " + log.string() + " --run " + run.string() + " --direct " +
+                            direct.string() + " --out " + out_dir.string(),
+                        &out, &err),
+            0)
+      << err;
+  const auto json = ParseJson(out, "stdout");
+  ASSERT_TRUE(json.ok()) << out;
+  EXPECT_TRUE((*json)["alias_groups"].empty()) << out;
+  ASSERT_EQ((*json)["causes"].size(), 1u) << out;
+  EXPECT_EQ((*json)["causes"][0]["effect"], "tool_radius");
+  const auto& interval = (*json)["causes"][0]["interval_95"]["delta_r_um"];
+  EXPECT_LE(interval[0].get<double>(), 6.0) << out;
+  EXPECT_GE(interval[1].get<double>(), 6.0) << out;
+  EXPECT_NEAR((*json)["direct_measurements"][0]["fitted"].get<double>(), 6.0, 0.3) << out;
+  EXPECT_EQ((*json)["direct_measurements"][0]["by"], "tool setter");
+  EXPECT_NE(err.find("measured directly (tool setter)"), std::string::npos) << err;
+  EXPECT_TRUE(fs::exists(out_dir / "inputs" / "direct.json"));
+  // A bad file: refused with the file and field named, nothing written.
+  const fs::path bad = WriteModel("bad_direct.json", R"({"direct_measurements": [
+      {"effect": "tool_radius", "parameter": "delta_r_um", "value": 6.4, "sigma": -1}]})");
+  EXPECT_NE(RunFormloop("diagnose --measured " + log.string() + " --run " + run.string() + " --direct " + bad.string() +
+                            " --out " + (dir_ / "refused").string(),
+                        &out, &err),
+            0);
+  EXPECT_NE(err.find("bad_direct.json"), std::string::npos) << err;
+  EXPECT_NE(err.find("sigma"), std::string::npos) << err;
+  EXPECT_FALSE(fs::exists(dir_ / "refused"));
+}
+
+}  // namespace
+}  // namespace formloop::app

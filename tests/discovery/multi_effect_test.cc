@@ -14,17 +14,10 @@
 namespace formloop::testing {
 namespace {
 
-sim::DiagnoseOptions Options() {
-  sim::DiagnoseOptions o;
-  o.plausible = StarterPlausibleRanges();
-  return o;
-}
+sim::DiagnoseOptions Options() { return StarterDiagnoseOptions(); }
 
 sim::Model MachineOf(const std::vector<std::pair<std::string, std::vector<double>>>& effects) {
-  sim::Model m;
-  for (const auto& [name, values] : effects) EXPECT_TRUE(m.Set(name, values).ok()) << name;
-  EXPECT_TRUE(m.Set("noise", {0.8, 0.6}).ok());
-  return m;
+  return MachineWithNoise(effects);
 }
 
 // Every true effect named or inside an alias group, nothing named that is not there, every named

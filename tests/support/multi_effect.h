@@ -18,6 +18,8 @@
 #include <string>
 #include <vector>
 
+#include <gtest/gtest.h>
+
 #include "simulation/plausible_ranges.h"
 #include "tests/support/discovery.h"
 
@@ -29,11 +31,19 @@ inline const sim::PlausibleRanges& StarterPlausibleRanges() {
   return ranges;
 }
 
-// Diagnose's defaults with the starter rule base's plausible ranges.
+// Diagnose's options as the tests run it: the starter rule base's plausible ranges.
 inline sim::DiagnoseOptions StarterDiagnoseOptions() {
   sim::DiagnoseOptions o;
   o.plausible = StarterPlausibleRanges();
   return o;
+}
+
+// A machine with these effects and the regression machines' noise (0.8 µm roughness, 0.6 µm probe).
+inline sim::Model MachineWithNoise(const std::vector<std::pair<std::string, std::vector<double>>>& effects) {
+  sim::Model m;
+  for (const auto& [name, values] : effects) EXPECT_TRUE(m.Set(name, values).ok()) << name;
+  EXPECT_TRUE(m.Set("noise", {0.8, 0.6}).ok());
+  return m;
 }
 
 inline bool IsSetupEffect(std::string_view name) { return name == "setup_offset" || name == "setup_rotation"; }
@@ -353,6 +363,25 @@ inline Scenario Reprobed(const Scenario& s, const sim::ExperimentProposal& p, st
   }
   for (const auto& point : p.plan.points) out.plan.points.push_back(point);
   out.points = static_cast<int>(out.plan.points.size());
+  return out;
+}
+
+// A direct-measurement proposal applied on the virtual machine: each parameter it measures read from
+// the part's TRUE model (0 when the machine lacks the effect) plus N(0, σ²) noise of the instrument —
+// never from what the diagnosis said.
+inline std::vector<sim::DirectMeasurement> Measured(const Scenario& s, const sim::ExperimentProposal& p,
+                                                    std::uint64_t seed) {
+  Rng rng(seed);
+  std::vector<sim::DirectMeasurement> out = p.direct;
+  for (auto& d : out) {
+    double truth = 0;
+    if (const sim::EffectInstance* e = s.truth.Find(d.effect)) {
+      for (int j = 0; j < e->effect->parameter_count(); ++j) {
+        if (e->effect->parameters()[j].name == d.parameter) truth = e->values[static_cast<std::size_t>(j)];
+      }
+    }
+    d.value = rng.Normal(truth, d.sigma);
+  }
   return out;
 }
 

@@ -133,7 +133,13 @@ nlohmann::json RunScenario(int index) {
       Scenario second;
       std::vector<sim::ProbeDataInput> inputs;
       Result<sim::Diagnosis> after = Status::Internal("not run");
-      if (p.kind == "reprobe") {
+      sim::DiagnoseOptions with_direct = Options();
+      if (!p.direct.empty()) {
+        // Measured on the machine (truth + the instrument's noise), then the same log diagnosed again.
+        with_direct.direct = Measured(s.parts[0], p, seed + 9000000);
+        inputs = {InputOf(s.parts[0])};
+        after = sim::Diagnose(inputs[0], s.parts[0].baseline, with_direct);
+      } else if (p.kind == "reprobe") {
         second = Reprobed(s.parts[0], p, seed + 7000000);
         inputs = {InputOf(second)};
         after = sim::Diagnose(inputs[0], s.parts[0].baseline, Options());
@@ -144,8 +150,10 @@ nlohmann::json RunScenario(int index) {
       }
       EXPECT_TRUE(after.ok()) << after.status().message();
       if (!after.ok()) continue;
-      const auto measured = sim::GroupCorrelation(inputs, *after, s.parts[0].baseline, p.members);
+      const auto measured = sim::GroupCorrelation(inputs, *after, s.parts[0].baseline, p.members, with_direct.direct);
       const std::string sig = GroupSignatures(*d)[g];
+      // Right: after the experiment, every true effect is named or in a group and nothing false is named.
+      const Grade after_grade = GradeDiagnosis(*after, s, p.kind == "reprobe" || !p.direct.empty() ? 1 : 2);
       experiments.push_back({{"group", sig},
                              {"kind", p.kind},
                              {"change", p.change},
@@ -155,6 +163,7 @@ nlohmann::json RunScenario(int index) {
                              {"correlation_measured", measured.ok() ? nlohmann::json(*measured) : nlohmann::json()},
                              {"predicted_to_split", p.predicted_to_split},
                              {"split", Splits(sig, *after)},
+                             {"right", after_grade.found == after_grade.true_effects && after_grade.false_named == 0},
                              {"named",
                               [&] {
                                 nlohmann::json names = nlohmann::json::array();
