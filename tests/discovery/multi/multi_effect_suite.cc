@@ -255,12 +255,12 @@ SuiteTotals Summarise() {
   std::map<std::string, std::array<int, 4>> split_pipeline;  // the same, later parts with the proposals applied
   std::map<std::string, std::array<int, 2>> per_effect;      // effect -> {found, true}
   struct ExperimentTally {
-    int count = 0, predicted_split = 0, split = 0;
+    int count = 0, predicted_split = 0, split = 0, right = 0;
     double rho_before = 0, rho_predicted = 0, rho_measured = 0, cost_s = 0;
     std::map<std::string, int> kinds;
   };
   std::map<std::string, ExperimentTally> experiment;
-  int experiment_groups = 0, groups_split = 0, experiment_scenarios = 0, scenarios_split = 0;
+  int experiment_groups = 0, groups_split = 0, experiment_scenarios = 0, scenarios_split = 0, scenarios_right = 0;
   for (const auto& row : rows) {
     if (!row.contains("grade")) continue;
     const auto& g = row["grade"];
@@ -282,24 +282,27 @@ SuiteTotals Summarise() {
     }
     for (const auto& sig : row["groups"]) ++group_count[sig.get<std::string>()];
     if (row.contains("experiments")) {
-      bool all_split = !row["experiments"].empty();
+      bool all_split = !row["experiments"].empty(), all_right = all_split;
       for (const auto& e : row["experiments"]) {
         auto& t = experiment[e["group"].get<std::string>()];
         t.count += 1;
         t.predicted_split += e["predicted_to_split"].get<bool>();
         t.split += e["split"].get<bool>();
+        t.right += e.value("right", false);
         t.rho_before += e["correlation_before"].get<double>();
         t.rho_predicted += e["correlation_predicted"].get<double>();
         t.rho_measured += e["correlation_measured"].is_number() ? e["correlation_measured"].get<double>() : 1.0;
         t.cost_s += e["cost_s"].get<double>();
         ++t.kinds[e["kind"].get<std::string>()];
         all_split = all_split && e["split"].get<bool>();
+        all_right = all_right && e["split"].get<bool>() && e.value("right", false);
         ++experiment_groups;
         groups_split += e["split"].get<bool>();
       }
       if (!row["experiments"].empty()) {
         ++experiment_scenarios;
         scenarios_split += all_split;
+        scenarios_right += all_right;
       }
     }
     for (const char* kind : {"pooled", "pooled_pipeline"}) {
@@ -357,14 +360,18 @@ SuiteTotals Summarise() {
       "scenarios (%.1f%%)\n",
       groups_split, experiment_groups, 100.0 * groups_split / std::max(1, experiment_groups), scenarios_split,
       experiment_scenarios, 100.0 * scenarios_split / std::max(1, experiment_scenarios));
-  std::printf("  %-60s %5s %9s %9s %9s %9s %9s %8s  %s\n", "alias group", "n", "corr now", "predicted", "measured",
-              "pred.split", "split", "cost s", "changes proposed");
+  // Right: after the change every true effect named or in a group, nothing false named.
+  std::printf("  ... split with every true effect found and nothing false named after it: %d of %d (%.1f%%)\n",
+              scenarios_right, experiment_scenarios, 100.0 * scenarios_right / std::max(1, experiment_scenarios));
+  std::printf("  %-60s %5s %9s %9s %9s %9s %9s %9s %8s  %s\n", "alias group", "n", "corr now", "predicted", "measured",
+              "pred.split", "split", "right", "cost s", "changes proposed");
   for (const auto& [sig, t] : experiment) {
     std::string kinds;
     for (const auto& [k, c] : t.kinds) kinds += k + " " + std::to_string(c) + " ";
-    std::printf("  %-60s %5d %9.4f %9.4f %9.4f %8.0f%% %8.0f%% %8.0f  %s\n", sig.c_str(), t.count,
+    std::printf("  %-60s %5d %9.4f %9.4f %9.4f %8.0f%% %8.0f%% %8.0f%% %8.0f  %s\n", sig.c_str(), t.count,
                 t.rho_before / t.count, t.rho_predicted / t.count, t.rho_measured / t.count,
-                100.0 * t.predicted_split / t.count, 100.0 * t.split / t.count, t.cost_s / t.count, kinds.c_str());
+                100.0 * t.predicted_split / t.count, 100.0 * t.split / t.count, 100.0 * t.right / t.count,
+                t.cost_s / t.count, kinds.c_str());
   }
   SuiteTotals t;
   t.scenarios = scenarios;
@@ -400,10 +407,13 @@ TEST(MultiEffect, Rates) {
 // part's proposals (pooled_pipeline: tilted re-probe points, a raster turn) — and applying the proposed
 // experiment splits every group of the scenario in ≥ 80 % of the aliased scenarios. NOT MET today (see the
 // printed tables and docs/ARCHITECTURE.md): with the pipeline's plans the probe radius is split from the
-// tool radius (probe_radius + tool_radius 100 %), but a tool radius (a constant along n, shared) and each
+// tool radius (probe_radius + tool_radius 98 %), but a tool radius (a constant along n, shared) and each
 // part's own z offset (n_z · t_z) differ only by 1 − n_z, which no number of near-flat parts with their own
-// set-ups separates well: a tool-setter reading or a set-up datum does (the separating experiment's
-// direct measurements). Kept as a disabled check of the targets:
+// set-ups separates well: a tool-setter reading or a set-up datum does. The proposed experiments (re-probe,
+// next part, and the direct measurements: tool setter, reference sphere, datum faces, datum plane) split
+// every group in 158 of 260 aliased scenarios (60.8 %), the misses mostly single parameters aliased
+// (setup_offset(tz_um), thermal_drift_z(A_um)) for which no change is predicted to split. Kept as a disabled
+// check of the targets:
 //   build/tests/formloop_multi_effect_tests --gtest_also_run_disabled_tests
 //     --gtest_filter=MultiEffect.DISABLED_PoolingAndExperimentTargets
 TEST(MultiEffect, DISABLED_PoolingAndExperimentTargets) {
