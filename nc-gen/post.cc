@@ -165,31 +165,59 @@ std::string ProgramText::NumberPrefix(bool numbered) {
   return "N" + std::to_string(n) + " ";
 }
 
-void ProgramText::Emit(const std::string& text, bool numbered) {
-  const std::string line = NumberPrefix(numbered) + text;
+void ProgramText::Emit(std::string_view text, bool numbered) {
+  const std::string prefix = NumberPrefix(numbered);
   ++lines_;
   const std::size_t limit = static_cast<std::size_t>(options_.max_line_length);
-  if (limit > 0 && line.size() > limit && error_.ok()) {
+  const std::size_t size = prefix.size() + text.size();
+  if (limit > 0 && size > limit && error_.ok()) {
+    const std::string line = prefix + std::string(text);
     error_ =
         Status::BadInput(Where{.line = lines_, .field = "post.max_line_length"},
-                         "program line '" + line + "' is " + std::to_string(line.size()) +
-                             " characters, over the limit of " + std::to_string(limit) + "; no program was written",
+                         "program line '" + line + "' is " + std::to_string(size) + " characters, over the limit of " +
+                             std::to_string(limit) + "; no program was written",
                          "raise max_line_length or use fewer decimals or no block numbers");
   }
-  out_ += line;
+  out_ += prefix;
+  out_ += text;
   out_ += '\n';
 }
 
-void ProgramText::Raw(const std::string& text) { Emit(text, false); }
-void ProgramText::Continuation(const std::string& text) {
+void ProgramText::Raw(std::string_view text) { Emit(text, false); }
+void ProgramText::Continuation(std::string_view text) {
   const Numbering numbering = numbering_;
   numbering_ = Numbering::kBlocks;  // unnumbered in either scheme: Emit(.., false) adds no number for kBlocks
-  Emit("    " + text, false);
+  Emit("    " + std::string(text), false);
   numbering_ = numbering;
 }
-void ProgramText::Block(const std::string& text) { Emit(text, true); }
+void ProgramText::Block(std::string_view text) { Emit(text, true); }
 
-void ProgramText::Comment(const std::string& text) {
+void ProgramText::Append(const LineBatch& batch) {
+  std::size_t begin = 0;
+  for (std::size_t i = 0; i < batch.ends_.size(); ++i) {
+    const std::string_view line(batch.text_.data() + begin, batch.ends_[i] - begin);
+    if (batch.comment_[i]) {
+      Comment(line);
+    } else {
+      Block(line);
+    }
+    begin = batch.ends_[i];
+  }
+}
+
+void LineBatch::Add(std::string_view text, bool comment) {
+  text_ += text;
+  ends_.push_back(text_.size());
+  comment_.push_back(comment);
+}
+
+void LineBatch::Clear() {
+  text_.clear();
+  ends_.clear();
+  comment_.clear();
+}
+
+void ProgramText::Comment(std::string_view text) {
   const bool numbered = numbering_ == Numbering::kAllLines;
   const std::size_t limit = static_cast<std::size_t>(options_.max_line_length);
   // Room for the text on one line: the limit less the delimiters and the widest number the line can get.
@@ -197,11 +225,11 @@ void ProgramText::Comment(const std::string& text) {
       numbered ? std::to_string(next_number_ + 1000).size() + 1 : 0;  // generous: numbers grow while wrapping
   const std::size_t frame = comment_open_.size() + comment_close_.size() + number_width;
   if (limit == 0 || text.size() + frame <= limit || limit <= frame + 8) {
-    Emit(comment_open_ + text + comment_close_, numbered);
+    Emit(comment_open_ + std::string(text) + comment_close_, numbered);
     return;
   }
   const std::size_t room = limit - frame;
-  std::string rest = text;
+  std::string rest(text);
   while (!rest.empty()) {
     std::size_t cut = rest.size();
     if (cut > room) {
@@ -229,37 +257,44 @@ std::string PlainComment(const std::string& text) {
   return out;
 }
 
+namespace {
+
+// The modal state of a word-address body before a move.
+struct WordAddressState {
+  double feed = -1;             // the feed in effect (-1: none yet)
+  bool offset_written = false;  // the length offset has been programmed
+};
+
+}  // namespace
+
 Status WriteWordAddressBody(const MoveSequence& moves, const std::string& rapid, const std::string& feed,
                             std::string (*comment)(const std::string&), ProgramText* w,
                             const std::string& length_offset) {
   w->Reserve(32 * moves.Size());  // "G1 X-123.4567 Y-123.4567 Z-12.3456" and a newline is about 32
-  double modal_feed = -1;
-  bool offset_written = length_offset.empty();
-  return moves.ForEach([&](std::size_t, const Move& m) {
+  const auto format = [&](const Move& m, std::size_t, const WordAddressState& s, LineBatch* out) {
     switch (m.type) {
       case MoveType::kComment:
-        w->Comment(comment(m.text));
+        out->Comment(comment(m.text));
         break;
       case MoveType::kRapid:
-        w->Block(rapid + " " + (offset_written ? "" : length_offset + " ") + AxisWords(*w, m));
-        offset_written = true;
+        out->Block(rapid + " " + (s.offset_written ? "" : length_offset + " ") + AxisWords(*w, m));
         break;
       case MoveType::kSetFeed:
-        modal_feed = m.feed_mm_per_min;
-        w->Block("F" + FormatFixed(m.feed_mm_per_min, 0));
+        out->Block("F" + FormatFixed(m.feed_mm_per_min, 0));
         break;
       case MoveType::kFeed: {
         std::string block = feed + " " + AxisWords(*w, m);
-        if (m.feed_mm_per_min != modal_feed) {
-          modal_feed = m.feed_mm_per_min;
-          block += " F" + FormatFixed(m.feed_mm_per_min, 0);
-        }
-        w->Block(block);
+        if (m.feed_mm_per_min != s.feed) block += " F" + FormatFixed(m.feed_mm_per_min, 0);
+        out->Block(block);
         break;
       }
     }
-    return Status::Ok();
-  });
+  };
+  const auto advance = [](WordAddressState* s, const Move& m) {
+    if (m.type == MoveType::kRapid) s->offset_written = true;
+    if (m.type == MoveType::kSetFeed || m.type == MoveType::kFeed) s->feed = m.feed_mm_per_min;
+  };
+  return FormatMovesInChunks(moves, WordAddressState{.offset_written = length_offset.empty()}, format, advance, w);
 }
 
 std::size_t LineCount(const std::string& text) {

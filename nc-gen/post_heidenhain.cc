@@ -77,13 +77,13 @@ class HeidenhainPost : public PostDialect {
               " mm; programmed point = ball tip [TOOL CALL: length L of the tool table to the ball tip]; " +
               std::to_string(h.passes) + " passes");
     w.Block("TOOL CALL " + std::to_string(h.tool_number) + " Z S" + FormatFixed(h.spindle_rpm, 0));
-    double written_feed = -1;  // the last numeric F in the program (FMAX does not change it)
-    FL_RETURN_IF_ERROR(moves.ForEach([&](std::size_t i, const Move& m) {
+    // The modal state before a move: the last numeric F in the program (FMAX does not change it; -1: none).
+    const auto format = [&](const Move& m, std::size_t i, const double& written_feed, LineBatch* out) {
       if (m.type == MoveType::kComment) {
-        w.Comment(PlainComment(m.text));
-        return Status::Ok();
+        out->Comment(PlainComment(m.text));
+        return;
       }
-      if (m.type == MoveType::kSetFeed) return Status::Ok();  // no block of its own: the next L carries the new F
+      if (m.type == MoveType::kSetFeed) return;  // no block of its own: the next L carries the new F
       std::string block = "L";
       static const char kAxis[] = {'X', 'Y', 'Z'};
       for (int a = 0; a < 3; ++a) {
@@ -93,14 +93,16 @@ class HeidenhainPost : public PostDialect {
       if (m.type == MoveType::kRapid) {
         block += " FMAX";
       } else if (m.feed_mm_per_min != written_feed) {
-        written_feed = m.feed_mm_per_min;
         block += " F" + FormatFixed(m.feed_mm_per_min, 0);
       }
       if (i == first_motion) block += h.coolant ? " M3 M8" : " M3";
       if (i == last_motion) block += " M30";
-      w.Block(block);
-      return Status::Ok();
-    }));
+      out->Block(block);
+    };
+    const auto advance = [](double* written_feed, const Move& m) {
+      if (m.type == MoveType::kFeed) *written_feed = m.feed_mm_per_min;
+    };
+    FL_RETURN_IF_ERROR(FormatMovesInChunks(moves, -1.0, format, advance, &w));
     w.Block("END PGM " + options.program_name + " MM");
     return w.Finish();
   }

@@ -3,10 +3,14 @@
 // enforces the line-length limit, and the read-back of the ISO word-address dialects (LinuxCNC, Fanuc,
 // Sinumerik) through the one G-code reader.
 
+#include <algorithm>
+#include <cstddef>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
+#include "core/parallel.h"
 #include "core/status.h"
 #include "nc-gen/gcode_reader.h"
 #include "nc-gen/post.h"
@@ -19,16 +23,21 @@ enum class Numbering {
   kAllLines,  // "<n> " on every line from 0 in steps of 1 (Heidenhain: numbers are part of the syntax)
 };
 
+class LineBatch;
+
 class ProgramText {
  public:
   // A comment line is comment_open + text + comment_close.
   ProgramText(const PostOptions& options, Numbering numbering, std::string comment_open, std::string comment_close);
-  void Raw(const std::string& text);      // never numbered in kBlocks ('%', "O1234", ...)
-  void Block(const std::string& text);    // an NC block
-  void Comment(const std::string& text);  // sanitised text; wrapped at spaces to fit the line length
+  void Raw(std::string_view text);      // never numbered in kBlocks ('%', "O1234", ...)
+  void Block(std::string_view text);    // an NC block
+  void Comment(std::string_view text);  // sanitised text; wrapped at spaces to fit the line length
   // A continuation line of the block before, never numbered, indented by four spaces (Heidenhain's
   // multi-line cycle blocks).
-  void Continuation(const std::string& text);
+  void Continuation(std::string_view text);
+  // The blocks and comments of a batch, in order, as if written here one by one (numbers, wrapping and the
+  // line-length check are done here).
+  void Append(const LineBatch& batch);
   // Room for `bytes` more characters, allocated once (a million-line program).
   void Reserve(std::size_t bytes) { out_.reserve(out_.size() + bytes); }
   // The coordinate value with PostOptions::decimals; never "-0.000".
@@ -38,7 +47,7 @@ class ProgramText {
 
  private:
   std::string NumberPrefix(bool numbered);
-  void Emit(const std::string& line, bool numbered);
+  void Emit(std::string_view text, bool numbered);
   const PostOptions& options_;
   Numbering numbering_;
   std::string comment_open_, comment_close_;
@@ -47,6 +56,72 @@ class ProgramText {
   long lines_ = 0;
   Status error_ = Status::Ok();
 };
+
+// Blocks and comments formatted away from the program (a chunk of moves on a worker thread), without
+// their numbers: ProgramText::Append writes them in order.
+class LineBatch {
+ public:
+  void Block(std::string_view text) { Add(text, false); }
+  void Comment(std::string_view text) { Add(text, true); }  // sanitised text, wrapped when appended
+  void Clear();
+
+ private:
+  friend class ProgramText;
+  void Add(std::string_view text, bool comment);
+  std::string text_;               // the lines one after another
+  std::vector<std::size_t> ends_;  // end of each line in text_
+  std::vector<bool> comment_;      // each line a comment (else a block)
+};
+
+// Moves per chunk of the parallel posts: fixed, so the chunks and the bytes never depend on the threads.
+inline constexpr long kPostChunk = 4096;
+// Moves held at a time: this many chunks (a few MB; the program text itself is the big buffer).
+inline constexpr long kPostBatchChunks = 8;
+
+// Formats the moves on every core (core/parallel.h), the same bytes as one move after the other: the moves
+// are collected in order into batches of kPostBatchChunks fixed chunks; the modal state before each chunk
+// comes from the moves before it (advance, a walk over the batch), then the chunks are formatted in
+// parallel into LineBatches and appended to `w` in order. format(move, index, state before the move, out)
+// writes the move's lines; advance(&state, move) is the modal state after it.
+template <typename State, typename FormatMove, typename Advance>
+Status FormatMovesInChunks(const MoveSequence& moves, State state, const FormatMove& format, const Advance& advance,
+                           ProgramText* w) {
+  const std::size_t chunk = static_cast<std::size_t>(kPostChunk);
+  const std::size_t batch_size = chunk * static_cast<std::size_t>(kPostBatchChunks);
+  std::vector<Move> batch;
+  batch.reserve(std::min(batch_size, moves.Size()));
+  std::vector<LineBatch> lines(static_cast<std::size_t>(kPostBatchChunks));
+  std::vector<State> before(static_cast<std::size_t>(kPostBatchChunks), state);
+  std::size_t first_index = 0;  // the sequence index of batch[0]
+  const auto flush = [&] {
+    for (std::size_t i = 0; i < batch.size(); ++i) {
+      if (i % chunk == 0) before[i / chunk] = state;
+      advance(&state, batch[i]);
+    }
+    ParallelFor(static_cast<long>(batch.size()), kPostChunk, [&](long begin, long end) {
+      const std::size_t c = static_cast<std::size_t>(begin) / chunk;
+      State s = before[c];
+      for (long i = begin; i < end; ++i) {
+        const Move& m = batch[static_cast<std::size_t>(i)];
+        format(m, first_index + static_cast<std::size_t>(i), s, &lines[c]);
+        advance(&s, m);
+      }
+    });
+    for (std::size_t c = 0; c * chunk < batch.size(); ++c) {
+      w->Append(lines[c]);
+      lines[c].Clear();
+    }
+    first_index += batch.size();
+    batch.clear();
+  };
+  FL_RETURN_IF_ERROR(moves.ForEach([&](std::size_t, const Move& m) {
+    batch.push_back(m);
+    if (batch.size() == batch_size) flush();
+    return Status::Ok();
+  }));
+  flush();
+  return Status::Ok();
+}
 
 // Lines of a program text (the last without a newline counts): a bound on its moves.
 std::size_t LineCount(const std::string& text);

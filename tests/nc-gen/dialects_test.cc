@@ -4,6 +4,7 @@
 // The golden files were written by this implementation once and checked by eye against each dialect's
 // rules (post_*.cc headers). To rewrite them after an intended change: FORMLOOP_UPDATE_GOLDEN=1 ctest ...
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -14,8 +15,10 @@
 #include <gtest/gtest.h>
 
 #include "core/atomic_file.h"
+#include "core/parallel.h"
 #include "nc-gen/moves.h"
 #include "nc-gen/post.h"
+#include "nc-gen/post_text.h"
 #include "nc-gen/toolpath.h"
 #include "tests/support/golden.h"
 #include "tests/support/locale.h"
@@ -199,6 +202,83 @@ TEST_P(DialectTest, LineLengthLimitWrapsCommentsAndRefusesBlocksThatCannotFit) {
   EXPECT_EQ(refused.status().code(), StatusCode::kBadInput);
   EXPECT_NE(refused.status().message().find("over the limit of 30"), std::string::npos) << refused.status().message();
   EXPECT_NE(refused.status().message().find("-7.5000"), std::string::npos) << refused.status().message();
+}
+
+// Posting runs on every core in fixed chunks of moves (post_text.h FormatMovesInChunks): a path of several
+// batches of chunks, with long pass comments that wrap and numbered blocks (the numbers and the wrapping
+// follow the lines of the chunks before), gives the same bytes for 1 and 2 threads, as a held list and as
+// moves made while they are visited; and a line over the limit deep in the path is refused the same way.
+TEST_P(DialectTest, ChunkedPostIsTheSameBytesForOneAndTwoThreads) {
+  Toolpath path = SmallPath();
+  path.points.clear();
+  path.passes = 60;
+  for (int pass = 0; pass < path.passes; ++pass) {
+    for (int i = 0; i < 1000; ++i) {  // 60,000 CL points: about 60,240 moves, two batches of 8 chunks
+      ClPoint cl;
+      cl.pass = pass;
+      cl.index_in_pass = i;
+      cl.tip = Eigen::Vector3d(-50.0 + 0.1 * i, -30.0 + pass, 0.5 * std::sin(0.01 * i + pass));
+      path.points.push_back(cl);
+    }
+  }
+  MoveList list = BuildMoveList(path).value();
+  ASSERT_GT(list.moves.size(), static_cast<std::size_t>(internal::kPostChunk * internal::kPostBatchChunks));
+  for (Move& m : list.moves) {
+    if (m.type == MoveType::kComment) m.text += " of a long comment that wraps onto more than one line " + m.text;
+  }
+  PostOptions options = GoldenOptions();
+  options.block_numbers = true;
+  options.max_line_length = 52;
+  const ToolpathMoves made = ToolpathMoves::Of(path).value();
+  std::string first;
+  for (const int threads : {1, 2}) {
+    SetThreadCount(threads);
+    const auto held = Post(list, GetParam(), options);
+    const auto visited = Post(made, GetParam(), options);
+    PostOptions tight = options;
+    tight.max_line_length = 40;
+    const auto refused = Post(list, GetParam(), tight);
+    SetThreadCount(0);
+    ASSERT_TRUE(held.ok()) << held.status().message();
+    ASSERT_TRUE(visited.ok()) << visited.status().message();
+    ASSERT_FALSE(refused.ok());
+    EXPECT_NE(refused.status().message().find("over the limit of 40"), std::string::npos) << refused.status().message();
+    const std::string wrapped = GetParam() == "fanuc" ? "WRAPS ONTO" : "wraps onto";
+    EXPECT_NE(held->find(wrapped), std::string::npos);
+    EXPECT_GT(std::count(held->begin(), held->end(), '\n'), 60000);
+    // The modal state carried across the chunk and batch boundaries: the cutting feed is written once per pass
+    // (no chunk restarts it), the plunge feed once per pass, the length offset once (the first rapid), the
+    // numbers run on without a gap, and Heidenhain's M30 rides on the very last motion only.
+    const auto count = [&](const std::string& word) {
+      std::size_t n = 0;
+      for (std::size_t at = held->find(word); at != std::string::npos; at = held->find(word, at + 1)) ++n;
+      return n;
+    };
+    EXPECT_EQ(count("F1200\n"), 60u);
+    EXPECT_EQ(count("F300\n"), 60u);
+    EXPECT_EQ(count("M30"), 1u);
+    EXPECT_EQ(count("G43 H2 Z"), GetParam() == "linuxcnc" || GetParam() == "fanuc" ? 1u : 0u);
+    std::istringstream lines(*held);
+    long expected = GetParam() == "heidenhain" ? 0 : options.block_start;
+    for (std::string line; std::getline(lines, line);) {
+      if (GetParam() == "heidenhain") {
+        ASSERT_TRUE(line.starts_with(std::to_string(expected++) + " ")) << line;
+      } else if (line.starts_with("N")) {
+        ASSERT_TRUE(line.starts_with("N" + std::to_string(expected) + " ")) << line;
+        expected += options.block_increment;
+      }
+    }
+    EXPECT_GT(expected, 60000);
+    if (threads == 1) {
+      first = *held;
+    } else {
+      EXPECT_TRUE(*held == first) << "2 threads changed the program";
+    }
+    // The path's own moves post like the list did before its comments were lengthened: same moves, same blocks.
+    const auto plain = Post(BuildMoveList(path).value(), GetParam(), options);
+    ASSERT_TRUE(plain.ok());
+    EXPECT_TRUE(*visited == *plain) << "moves made while visited differ from the held list";
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(AllDialects, DialectTest, ::testing::ValuesIn(PostNames()),
