@@ -36,6 +36,10 @@ struct C {
     c.setup.push_back(std::move(command));
     return *this;
   }
+  C& ThirdPartyCrash() {
+    c.third_party_crash = true;
+    return *this;
+  }
   C& FailedFolder(std::string dir) {
     c.failed = std::move(dir);
     return *this;
@@ -324,20 +328,25 @@ inline std::vector<Case> AllCases() {
       // Files on which OpenCASCADE 7.6's readers crash (fuzz/corpus/fuzz_step|fuzz_iges/crash-*): the reader runs
       // in a child process, so every command that reads CAD ends with an error naming the file, not a signal.
       C("step_occt_crash_fit", "STEP/IGES", "fit c.step --out q.step", 2, {"c.step", "could not be read"})
-          .File("c.step", FuzzFinding("fuzz_step/crash-occt-null-cartesian-point.step")),
+          .File("c.step", FuzzFinding("fuzz_step/crash-occt-null-cartesian-point.step"))
+          .ThirdPartyCrash(),
       C("step_occt_crash_run_part", "STEP/IGES", "run p.json --out r", 2, {"c.step", "surface.faces"})
           .File("c.step", FuzzFinding("fuzz_step/crash-occt-null-cartesian-point.step"))
-          .File("p.json", PartWith("/surface", {{"cad", "c.step"}, {"faces", {0}}})),
+          .File("p.json", PartWith("/surface", {{"cad", "c.step"}, {"faces", {0}}}))
+          .ThirdPartyCrash(),
       C("step_occt_crash_nc_compensate_program", "STEP/IGES",
         "nc compensate --program {F}/prog.ngc --surface c.step --ball-radius-mm 3 --field {F}/field.csv --out o.ngc "
         "--side s.csv",
         2, {"c.step", "could not be read"})
-          .File("c.step", FuzzFinding("fuzz_step/crash-occt-null-cartesian-point.step")),
+          .File("c.step", FuzzFinding("fuzz_step/crash-occt-null-cartesian-point.step"))
+          .ThirdPartyCrash(),
       C("iges_occt_crash_fit", "STEP/IGES", "fit c.igs --out q.step", 2, {"c.igs"})
-          .File("c.igs", FuzzFinding("fuzz_iges/crash-occt-igesread-out-of-bounds.igs")),
+          .File("c.igs", FuzzFinding("fuzz_iges/crash-occt-igesread-out-of-bounds.igs"))
+          .ThirdPartyCrash(),
       C("iges_occt_crash_run_part", "STEP/IGES", "run p.json --out r", 2, {"c.igs", "surface.faces"})
           .File("c.igs", FuzzFinding("fuzz_iges/crash-occt-igesread-out-of-bounds.igs"))
-          .File("p.json", PartWith("/surface", {{"cad", "c.igs"}, {"faces", {0}}})),
+          .File("p.json", PartWith("/surface", {{"cad", "c.igs"}, {"faces", {0}}}))
+          .ThirdPartyCrash(),
       // A reader past the time limit (--cad-timeout-s; 1 us expires before any reader answers) and a limit
       // that is no number of seconds.
       C("step_reader_time_limit_fit", "STEP/IGES", "--cad-timeout-s 0.000001 fit c.step --out q.step", 2,
