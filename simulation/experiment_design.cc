@@ -130,7 +130,14 @@ class Designer {
         scales_.push_back(s);
       }
     }
-    for (std::size_t m = 0; m < out.members.size(); ++m) out.members[m] *= scales_[m].asDiagonal();
+    // The scales are the current data's; a design with more columns (a part-specific member on a part the
+    // diagnosis did not see) repeats each parameter's scale, as the combined prediction repeats its value.
+    for (std::size_t m = 0; m < out.members.size(); ++m) {
+      const Eigen::VectorXd& own = scales_[m];
+      Eigen::VectorXd s(out.members[m].cols());
+      for (Eigen::Index k = 0; k < s.size(); ++k) s[k] = own[k % own.size()];
+      out.members[m] *= s.asDiagonal();
+    }
     out.combined = Eigen::VectorXd::Zero(rows);
     for (const auto& [b, own] : values_) {
       const Eigen::MatrixXd c = Columns(prob, b.term);
