@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <map>
 
@@ -24,6 +26,7 @@ struct Block {
   Term term;
   int column = -1;  // −1: every column of the term
   std::string label;
+  std::vector<int> drop;  // of another effect: the columns that are members of the group (left out)
 };
 
 // "effect", "effect@each part", "effect@PART", "effect(param)", "effect(param)@PART" → a block. A
@@ -71,7 +74,7 @@ class Designer {
     // sibling columns stay among the others).
     auto add_other = [&](const Block& b) {
       for (const auto& o : others_) {
-        if (o.term == b.term && o.column == b.column) return;
+        if (o.term == b.term) return;
       }
       others_.push_back(b);
     };
@@ -87,9 +90,18 @@ class Designer {
         add_other(b);
       }
     }
+    // A member term leaves the others; a member column leaves its term, whose other columns stay (a
+    // named set-up whose tz alone is aliased keeps tx and ty among the others, not tz).
     for (const Block& m : members_) {
       for (auto it = others_.begin(); it != others_.end();) {
-        it = it->term == m.term && m.column < 0 ? others_.erase(it) : it + 1;
+        if (!(it->term == m.term)) {
+          ++it;
+        } else if (m.column < 0) {
+          it = others_.erase(it);
+        } else {
+          it->drop.push_back(m.column);
+          ++it;
+        }
       }
     }
     // In-model members' values (the combined prediction).
@@ -108,11 +120,13 @@ class Designer {
     out.others = Eigen::MatrixXd(rows, 0);
     for (const Block& o : others_) {
       Eigen::MatrixXd c = WithDirectRows(Columns(prob, o.term), o.term, direct);
-      if (o.column >= 0) {
-        // The member column is taken out of its term; the rest stays.
+      if (!o.drop.empty()) {
+        // The member columns are taken out of their term; the rest stays.
         Eigen::MatrixXd rest(rows, 0);
         for (Eigen::Index k = 0; k < c.cols(); ++k) {
-          if (k != o.column) rest = Concat(rest, c.col(k));
+          if (std::find(o.drop.begin(), o.drop.end(), static_cast<int>(k)) == o.drop.end()) {
+            rest = Concat(rest, c.col(k));
+          }
         }
         c = rest;
       }
@@ -236,7 +250,9 @@ double Separation(const GroupDesign& g, Eigen::Index fit_rows) {
     for (std::size_t o = 0; o < g.members.size(); ++o) {
       if (o != m) rest = Concat(rest, g.members[o]);
     }
-    worst = std::min(worst, detail::LeastSquares(rest, h).rss);
+    const double lambda = detail::LeastSquares(rest, h).rss;
+    if (std::getenv("FL_DEBUG_EXPERIMENT")) std::fprintf(stderr, "    member %zu: lambda %.2f\n", m, lambda);
+    worst = std::min(worst, lambda);
   }
   return std::isfinite(worst) ? worst : 0.0;
 }
@@ -474,6 +490,11 @@ Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<Pro
   labels_plus.push_back("next");
 
   for (const AliasGroup& group : diagnosis.alias_groups) {
+    if (std::getenv("FL_DEBUG_EXPERIMENT")) {
+      std::string names;
+      for (const auto& m : group.members) names += m + " ";
+      std::fprintf(stderr, "group: %s\n", names.c_str());
+    }
     Designer designer(diagnosis, group, TauOf(diagnosis, now, options.plausible));
     FL_RETURN_IF_ERROR(designer.Init(pd.labels));
     FL_ASSIGN_OR_RETURN(const GroupDesign base, designer.Evaluate(now));
@@ -488,6 +509,11 @@ Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<Pro
       p.log_det_gain = LogDetInformation(g) - logdet0;
       p.separation = Separation(g, n_now);
       p.predicted_to_split = p.separation >= options.required_noncentrality;
+      if (std::getenv("FL_DEBUG_EXPERIMENT")) {
+        std::fprintf(stderr, "  %s cost %.0f: corr %.4f -> %.4f, separation %.2f, combined |.|^2 %.2f\n",
+                     p.kind.c_str(), p.cost_s, rho0, p.correlation_after, p.separation,
+                     g.combined.head(n_now).squaredNorm());
+      }
       options_for_group.push_back(std::move(p));
       return Status::Ok();
     };

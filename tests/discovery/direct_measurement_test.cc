@@ -135,6 +135,49 @@ TEST(DirectMeasurementTest, ToolSetterAndDatumSplitRadiusFromSetupZ) {
   EXPECT_LT(after->heldout_rms_after_um, 1.5) << after->Summary();
 }
 
+// A named set-up whose z shift alone is aliased (with the radii: a constant along n on this saddle)
+// keeps tx and ty as estimates. The experiment design must leave only tz out of the others: before the
+// fix it kept the whole set-up there, so the member tz_um was explained by its own column — design
+// correlation 0 reported for an inseparable group and no change predicted to split it (the suite's
+// probe_radius + setup_offset(tz_um) + tool_radius misses). Now the group's correlation is 1, the tool
+// setter with the datum faces is predicted to split it, and applied (truth + the instruments' noise)
+// they do.
+TEST(DirectMeasurementTest, AnAliasedSetupParameterIsSplitByTheProposedReadings) {
+  const sim::Model m = MachineOf({{"tool_deflection", {96.0}}, {"setup_offset", {-14.8, 13.8, 17.5}}});
+  const Scenario s = ProbePart({"saddle", 45, 28}, m, 5);
+  const auto d = sim::Diagnose(InputOf(s), s.baseline, Options());
+  ASSERT_TRUE(d.ok()) << d.status().message();
+  std::printf("probe data alone:\n%s", d->Summary().c_str());
+  const auto tz = std::find_if(d->alias_groups.begin(), d->alias_groups.end(), [](const sim::AliasGroup& g) {
+    return std::find(g.members.begin(), g.members.end(), "setup_offset(tz_um)") != g.members.end();
+  });
+  ASSERT_NE(tz, d->alias_groups.end()) << d->Summary();
+  const auto proposals = sim::ProposeExperiments({InputOf(s)}, *d, s.baseline, ExperimentOptionsFor(s));
+  ASSERT_TRUE(proposals.ok()) << proposals.status().message();
+  const auto p = std::find_if(proposals->begin(), proposals->end(),
+                              [&](const sim::ExperimentProposal& q) { return q.members == tz->members; });
+  ASSERT_NE(p, proposals->end());
+  std::printf("proposal [%s]: %s (cost %.0f s; correlation %.4f -> %.4f; separation %.1f)\n", p->kind.c_str(),
+              p->change.c_str(), p->cost_s, p->correlation_before, p->correlation_after, p->separation);
+  EXPECT_GT(p->correlation_before, 0.99);
+  ASSERT_TRUE(p->predicted_to_split);
+  ASSERT_FALSE(p->direct.empty());
+  EXPECT_NE(p->kind.find("datum"), std::string::npos) << p->kind;
+  sim::DiagnoseOptions o = Options();
+  o.direct = Measured(s, *p, 54);
+  const auto after = sim::Diagnose(InputOf(s), s.baseline, o);
+  ASSERT_TRUE(after.ok()) << after.status().message();
+  std::printf("with the readings:\n%s", after->Summary().c_str());
+  EXPECT_FALSE(after->InAliasGroup("setup_offset")) << after->Summary();
+  EXPECT_FALSE(Named(*after, "tool_radius")) << after->Summary();
+  EXPECT_FALSE(Named(*after, "probe_radius")) << after->Summary();
+  ASSERT_TRUE(Named(*after, "setup_offset")) << after->Summary();
+  for (const auto& c : after->causes) {
+    if (c.effect != "setup_offset") continue;
+    EXPECT_TRUE(c.lower[2] <= 17.5 && 17.5 <= c.upper[2]) << after->Summary();
+  }
+}
+
 // The file `formloop diagnose --direct` reads: values, errors naming the entry and the field.
 TEST(DirectMeasurementTest, TheFileIsReadAndBadEntriesAreNamed) {
   const std::filesystem::path dir = FreshTestDir("direct_measurements");

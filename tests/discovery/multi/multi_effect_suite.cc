@@ -226,6 +226,9 @@ TEST(MultiEffect, DISABLED_One) {
   const auto d = sim::Diagnose(InputOf(s.parts[0]), s.parts[0].baseline, Options());
   ASSERT_TRUE(d.ok());
   std::printf("%s", d->Summary().c_str());
+  // The separating experiments proposed and applied, as the suite grades them.
+  const nlohmann::json row = RunScenario(i);
+  if (row.contains("experiments")) std::printf("experiments: %s\n", row["experiments"].dump(1).c_str());
 }
 
 // The suite's totals over all shards (the tables printed on the way).
