@@ -288,7 +288,78 @@ std::vector<DirectKind> DefaultDirectKinds() {
            5.0,
            120,
            "probe the fixture's datum plane at three points and its edge at two, far apart, to measure how the "
-           "part is turned"}};
+           "part is turned"},
+          {"step_gauge_x",
+           "step gauge along X",
+           "axis_scale_x",
+           {"e_x_um_per_m"},
+           1.0,
+           600,
+           "clamp a calibrated step gauge (or length bar, ~500 mm) along X and probe its faces to measure the X "
+           "scale"},
+          {"step_gauge_y",
+           "step gauge along Y",
+           "axis_scale_y",
+           {"e_y_um_per_m"},
+           1.0,
+           600,
+           "clamp a calibrated step gauge (or length bar, ~500 mm) along Y and probe its faces to measure the Y "
+           "scale"},
+          {"step_gauge_z",
+           "step gauge along Z",
+           "axis_scale_z",
+           {"e_z_um_per_m"},
+           2.5,
+           600,
+           "stand a calibrated step gauge (or length bar, ~200 mm) along Z and probe its faces to measure the Z "
+           "scale"},
+          {"ball_bar_xy",
+           "ball bar in XY",
+           "squareness_xy",
+           {"S_xy_urad"},
+           5.0,
+           900,
+           "run a ball-bar circle in the XY plane (ISO 230-4, both directions) to measure the squareness of X and "
+           "Y"},
+          {"ball_bar_yz",
+           "ball bar in YZ",
+           "squareness_yz",
+           {"S_yz_urad"},
+           5.0,
+           900,
+           "run a ball-bar arc in the YZ plane (ISO 230-4, both directions) to measure the squareness of Y and Z"},
+          {"ball_bar_zx",
+           "ball bar in ZX",
+           "squareness_zx",
+           {"S_zx_urad"},
+           5.0,
+           900,
+           "run a ball-bar arc in the ZX plane (ISO 230-4, both directions) to measure the squareness of Z and X"},
+          {"deflection_test_cut",
+           "test cut at two engagements",
+           "tool_deflection",
+           {"k_d_um"},
+           1.0,
+           600,
+           "cut a vertical wall in a spare block with the finishing tool at two radial engagements (0.05 r and "
+           "0.2 r) and probe both walls: their offset is the deflection"},
+          {"sphere_directions",
+           "reference sphere, many directions",
+           "probe_lobing",
+           {"c3_um", "s3_um"},
+           0.3,
+           180,
+           "probe the reference sphere in 12 or more directions around its equator to measure the probe's "
+           "lobing"},
+          {"tool_setter_before_after",
+           "tool setter before and after the cut",
+           "tool_wear",
+           {"k_w_um_per_m"},
+           1.4,
+           120,
+           "measure the cutting tool's radius on the tool setter before and after cutting the part: the loss over "
+           "the part's path length is the wear rate",
+           true}};
 }
 
 Status ExperimentOptions::Validate() const {
@@ -484,6 +555,8 @@ Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<Pro
       next_parts.push_back(std::move(np));
     }
   }
+  const double path_length_m =
+      parts.front().cutter_locations->empty() ? 0.0 : parts.front().cutter_locations->back().path_length_mm * 1e-3;
   const Eigen::VectorXd next_zero = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(parts.front().plan->points.size()));
   std::vector<std::string> labels_plus = pd.labels;
   if (labels_plus.size() == 1) labels_plus = {"1"};
@@ -607,7 +680,9 @@ Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<Pro
       p.cost_s = np.cut_time_s + static_cast<double>(np.contexts.size()) * options.probe_seconds_per_point;
       FL_RETURN_IF_ERROR(assess(augmented, std::move(p)));
     }
-    // Direct measurements of the group's members, every combination of the kinds that measure one.
+    // Direct measurements of the group's members: every combination of the kinds that measure one when
+    // there are at most kExhaustiveKinds of them, else a greedy forward choice (each step adds the kind
+    // that separates most, until the set is predicted to split or every kind is in).
     {
       std::vector<const DirectKind*> relevant;
       for (const DirectKind& k : options.direct_kinds) {
@@ -618,21 +693,55 @@ Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<Pro
           }
         }
       }
-      for (unsigned mask = 1; mask < (1u << relevant.size()); ++mask) {
+      auto assess_set = [&](const std::vector<std::size_t>& picks) -> Result<const ExperimentProposal*> {
         ExperimentProposal p;
         std::string actions;
-        for (std::size_t k = 0; k < relevant.size(); ++k) {
-          if (!(mask & (1u << k))) continue;
+        for (std::size_t k : picks) {
           const DirectKind& dk = *relevant[k];
           p.kind += (p.kind.empty() ? "" : "+") + dk.kind;
           actions += (actions.empty() ? "" : "; ") + dk.action;
           p.cost_s += dk.cost_s;
+          const double sigma = dk.per_path_length ? dk.sigma / std::max(1e-3, path_length_m) : dk.sigma;
           for (const std::string& parameter : dk.parameters) {
-            p.direct.push_back({dk.effect, parameter, 0.0, dk.sigma, "", dk.instrument});
+            p.direct.push_back({dk.effect, parameter, 0.0, sigma, "", dk.instrument});
           }
         }
         p.change = actions + ", and diagnose again with the measured values (formloop diagnose --direct)";
         FL_RETURN_IF_ERROR(assess(now, std::move(p)));
+        return &options_for_group.back();
+      };
+      constexpr std::size_t kExhaustiveKinds = 6;
+      if (relevant.size() <= kExhaustiveKinds) {
+        for (unsigned mask = 1; mask < (1u << relevant.size()); ++mask) {
+          std::vector<std::size_t> picks;
+          for (std::size_t k = 0; k < relevant.size(); ++k) {
+            if (mask & (1u << k)) picks.push_back(k);
+          }
+          FL_RETURN_IF_ERROR(assess_set(picks).status());
+        }
+      } else {
+        std::vector<std::size_t> picks;
+        std::vector<bool> in(relevant.size(), false);
+        while (picks.size() < relevant.size()) {
+          double best_separation = -1, best_cost = 0;
+          std::size_t best_k = relevant.size();
+          bool split = false;
+          for (std::size_t k = 0; k < relevant.size(); ++k) {
+            if (in[k]) continue;
+            std::vector<std::size_t> trial = picks;
+            trial.push_back(k);
+            FL_ASSIGN_OR_RETURN(const ExperimentProposal* p, assess_set(trial));
+            if (p->separation > best_separation || (p->separation == best_separation && p->cost_s < best_cost)) {
+              best_separation = p->separation;
+              best_cost = p->cost_s;
+              best_k = k;
+              split = p->predicted_to_split;
+            }
+          }
+          in[best_k] = true;
+          picks.push_back(best_k);
+          if (split) break;
+        }
       }
     }
     if (options_for_group.empty()) continue;

@@ -54,10 +54,20 @@ struct DirectKind {
   double sigma = 1;
   double cost_s = 60;
   std::string action;  // what to do, in words
+  // σ is of a radius difference (µm) over the first part's cutting path: the parameter's σ is σ / the
+  // path length in m (the tool setter before and after the cut for a wear rate in µm/m).
+  bool per_path_length = false;
 };
 // The tool setter (tool_radius, σ 1 µm, 60 s), a reference sphere (probe_radius, σ 0.5 µm, 120 s), the
 // fixture's datum faces (setup_offset tx, ty, tz, σ 1 µm each, 90 s) and its datum plane and edge probed
-// at points ~100 mm apart (setup_rotation wx, wy, wz, σ 5 µrad each: 0.5 µm over 100 mm, 120 s).
+// at points ~100 mm apart (setup_rotation wx, wy, wz, σ 5 µrad each: 0.5 µm over 100 mm, 120 s); a
+// calibrated step gauge or length bar along X, Y (~500 mm: axis_scale, σ 1 µm/m, 600 s) and Z (~200 mm:
+// σ 2.5 µm/m); a ball-bar test per plane (ISO 230-4: squareness_xy/yz/zx, σ 5 µrad, 900 s); a test cut
+// of a wall at two radial engagements in a spare block, both walls probed (tool_deflection, σ 1 µm,
+// 600 s); the reference sphere probed in many directions (probe_lobing c3, s3, σ 0.3 µm, 180 s); the
+// tool setter before and after the cut (tool_wear: σ 1.4 µm of the radius loss over the path length,
+// 120 s). Every σ and cost is our assumption for a typical shop, not a figure measured in one; they are
+// options (ExperimentOptions::direct_kinds).
 std::vector<DirectKind> DefaultDirectKinds();
 
 struct ExperimentOptions {
