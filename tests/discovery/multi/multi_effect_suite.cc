@@ -30,6 +30,9 @@ namespace {
 constexpr int kShards = 30;
 constexpr int kPerShard = 10;
 constexpr std::uint64_t kSeedBase = 900000;
+// Suite scenarios whose proposals use the newer direct kinds (MultiEffect.NewDirectKindsSplitTheirGroups).
+constexpr int kNewKindScenarios[] = {2, 15};
+const std::vector<std::string> kNewKindsShown = {"step_gauge", "tool_setter_before_after"};
 
 sim::DiagnoseOptions Options() {
   sim::DiagnoseOptions o;
@@ -73,7 +76,11 @@ bool Splits(const std::string& signature, const sim::Diagnosis& d) {
   return true;
 }
 
-nlohmann::json RunScenario(int index) {
+// FORMLOOP_MULTI_NO_POOLING=1: the experiment half alone (for measuring it on a loaded machine; the
+// pooling table is then empty).
+bool PoolingWanted() { return std::getenv("FORMLOOP_MULTI_NO_POOLING") == nullptr; }
+
+nlohmann::json RunScenario(int index, bool pool = PoolingWanted()) {
   const std::uint64_t seed = kSeedBase + static_cast<std::uint64_t>(index);
   Rng layout_rng(seed ^ 0x5bd1e995ULL);
   const std::vector<PartLayout> layouts = DrawLayouts(layout_rng, 3);
@@ -107,11 +114,12 @@ nlohmann::json RunScenario(int index) {
       planned.push_back(sim::PlannedProposal::Of((*proposals)[g], s.parts[0].machined->q.domain()));
     }
     std::vector<Scenario> pipeline_parts = {s.parts[0]};
-    for (std::size_t p = 1; p < s.parts.size(); ++p) {
+    for (std::size_t p = 1; pool && p < s.parts.size(); ++p) {
       pipeline_parts.push_back(PartAsPipelinePlansIt(s, p, planned, seed + 9000000 + p));
     }
     nlohmann::json pooled = nlohmann::json::object(), pooled_pipeline = nlohmann::json::object();
     for (std::size_t parts : {2, 3}) {
+      if (!pool) break;
       for (const bool pipeline : {false, true}) {
         std::vector<sim::ProbeDataInput> inputs;
         for (std::size_t p = 0; p < parts; ++p) inputs.push_back(InputOf(pipeline ? pipeline_parts[p] : s.parts[p]));
@@ -405,27 +413,58 @@ TEST(MultiEffect, Rates) {
   EXPECT_GE(t.gain_ok, 0.90 * t.scenarios);
 }
 
-// Issue 20, 2 and 3: pooling two or three parts splits each alias group in ≥ 80 % of the scenarios it
-// occurs in — the later parts planned as `formloop run` plans them when the case library holds the first
-// part's proposals (pooled_pipeline: tilted re-probe points, a raster turn) — and applying the proposed
-// experiment splits every group of the scenario in ≥ 80 % of the aliased scenarios. NOT MET today (see the
-// printed tables and docs/ARCHITECTURE.md): with the pipeline's plans the probe radius is split from the
-// tool radius (probe_radius + tool_radius 98 %), but a tool radius (a constant along n, shared) and each
-// part's own z offset (n_z · t_z) differ only by 1 − n_z, which no number of near-flat parts with their own
-// set-ups separates well: a tool-setter reading or a set-up datum does. The proposed experiments (re-probe,
-// next part, and the direct measurements: tool setter, reference sphere, datum faces, datum plane) split
-// every group in 158 of 260 aliased scenarios (60.8 %), the misses mostly single parameters aliased
-// (setup_offset(tz_um), thermal_drift_z(A_um)) for which no change is predicted to split. Kept as a disabled
-// check of the targets:
+// Issue 20, 3: applying the proposed experiment (on the virtual machine; a direct reading simulated from
+// the scenario's truth plus the instrument's noise) and diagnosing again splits every group of the
+// scenario in >= 80 % of the aliased scenarios. The table of predicted and measured correlations is
+// printed by Summarise. Measured on a part of the suite only (shards 0-3 of branch i20b: 31 of 34 aliased
+// scenarios, 91.2 %; main 23 of 34 on the same shards) — disabled until a whole run confirms it:
 //   build/tests/formloop_multi_effect_tests --gtest_also_run_disabled_tests
-//     --gtest_filter=MultiEffect.DISABLED_PoolingAndExperimentTargets
-TEST(MultiEffect, DISABLED_PoolingAndExperimentTargets) {
+//     --gtest_filter=MultiEffect.DISABLED_ExperimentTarget
+TEST(MultiEffect, DISABLED_ExperimentTarget) {
+  const SuiteTotals t = Summarise();
+  EXPECT_GE(t.scenarios_split, 0.80 * t.experiment_scenarios);
+}
+
+// The direct kinds for what the first ones (tool setter, reference sphere, datum faces and plane) do not
+// measure — step gauges, ball bars, the deflection test cut, the sphere in many directions, the tool
+// setter before and after the cut: in these suite scenarios the proposal of a group includes one of them,
+// and its reading (truth + the instrument's noise) splits the group.
+TEST(MultiEffect, NewDirectKindsSplitTheirGroups) {
+  const std::vector<std::string> kinds = {"step_gauge", "ball_bar", "deflection_test_cut", "sphere_directions",
+                                          "tool_setter_before_after"};
+  std::map<std::string, int> proposed, split;
+  for (int index : kNewKindScenarios) {
+    const nlohmann::json row = RunScenario(index, false);
+    ASSERT_TRUE(row.contains("experiments")) << row.dump();
+    for (const auto& e : row["experiments"]) {
+      const std::string kind = e["kind"].get<std::string>();
+      for (const std::string& k : kinds) {
+        if (kind.find(k) == std::string::npos) continue;
+        ++proposed[k];
+        split[k] += e["split"].get<bool>();
+        EXPECT_TRUE(e["split"].get<bool>()) << "scenario " << index << ": " << e.dump(1);
+      }
+    }
+  }
+  for (const auto& [k, n] : proposed) std::printf("  %s: proposed %d, split %d\n", k.c_str(), n, split[k]);
+  for (const std::string& k : kNewKindsShown) EXPECT_GT(proposed[k], 0) << k << " never proposed";
+}
+
+// Issue 20, 2: pooling two or three parts splits each alias group in >= 80 % of the scenarios it occurs
+// in — the later parts planned as `formloop run` plans them when the case library holds the first part's
+// proposals (pooled_pipeline: tilted re-probe points, a raster turn). NOT MET today (see the printed
+// tables and docs/ARCHITECTURE.md): with the pipeline's plans the probe radius is split from the tool
+// radius (probe_radius + tool_radius 98 %), but a tool radius (a constant along n, shared) and each
+// part's own z offset (n_z · t_z) differ only by 1 − n_z, which no number of near-flat parts with their
+// own set-ups separates well: a tool-setter reading or a set-up datum does. Kept as a disabled check:
+//   build/tests/formloop_multi_effect_tests --gtest_also_run_disabled_tests
+//     --gtest_filter=MultiEffect.DISABLED_PoolingTarget
+TEST(MultiEffect, DISABLED_PoolingTarget) {
   const SuiteTotals t = Summarise();
   for (const auto& [sig, sp] : t.pooled_pipeline) {
     const int best = std::max(sp[0], sp[2]);
     EXPECT_GE(best, 0.80 * std::max(sp[1], sp[3])) << sig;
   }
-  EXPECT_GE(t.scenarios_split, 0.80 * t.experiment_scenarios);
 }
 
 }  // namespace
