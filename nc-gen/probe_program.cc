@@ -8,11 +8,47 @@
 #include <cmath>
 #include <numbers>
 
+#include "core/log.h"
 #include "core/number_text.h"
 #include "nc-gen/post_text.h"
+#include "nc-gen/probe_clearance.h"
 
 namespace formloop::nc {
 namespace internal {
+namespace {
+
+// The start (s->clearance_mm back along the approach from the ball centre at contact), the search end
+// and the position above the start at safe Z.
+void Place(const ProbeProgramOptions& options, ProbeStation* s) {
+  const Eigen::Vector3d centre_on_surface = s->surface + options.ball_radius_mm * s->normal;
+  s->start = centre_on_surface - s->clearance_mm * s->approach;
+  s->target = centre_on_surface + options.search_mm * s->approach;
+  s->above = s->start;
+  s->above.z() = options.safe_z_mm;
+}
+
+// A tilted point that is not clear of the part: tries the clearance halved, then quartered (above the
+// two-touch back-off), and keeps the first that clears; false when none does (s unchanged).
+bool Shorten(const recon::FootPointProjector& part, const ProbeStation* previous, const ProbeProgramOptions& options,
+             ProbeStation* s) {
+  for (const double fraction : {0.5, 0.25}) {
+    ProbeStation shorter = *s;
+    shorter.clearance_mm = fraction * options.clearance_mm;
+    if (options.touch_feed_mm_per_min > 0 && !(shorter.clearance_mm > options.backoff_mm)) break;
+    Place(options, &shorter);
+    if (CheckProbeClearance(part, shorter, previous, options).ok()) {
+      log::Warn(
+          "[nc] probe point {}: its tilted approach starts {} mm from the contact instead of {} mm, to keep "
+          "the probe clear of the part",
+          s->id, FormatExact(shorter.clearance_mm), FormatExact(options.clearance_mm));
+      *s = shorter;
+      return true;
+    }
+  }
+  return false;
+}
+
+}  // namespace
 
 Result<std::vector<ProbeStation>> ProbeStations(const metrology::ProbingPlan& plan,
                                                 const ProbeProgramOptions& options) {
@@ -45,11 +81,13 @@ Result<std::vector<ProbeStation>> ProbeStations(const metrology::ProbingPlan& pl
       s.approach = a;
       s.tilted = (a + p.normal).norm() > 1e-9;
     }
-    const Eigen::Vector3d centre_on_surface = p.point + options.ball_radius_mm * p.normal;
-    s.start = centre_on_surface - options.clearance_mm * s.approach;
-    s.target = centre_on_surface + options.search_mm * s.approach;
-    s.above = s.start;
-    s.above.z() = options.safe_z_mm;
+    s.clearance_mm = options.clearance_mm;
+    Place(options, &s);
+    if (options.part_surface) {
+      const ProbeStation* previous = stations.empty() ? nullptr : &stations.back();
+      const Status clear = CheckProbeClearance(*options.part_surface, s, previous, options);
+      if (!clear.ok() && !(s.tilted && Shorten(*options.part_surface, previous, options, &s))) return clear;
+    }
     FL_RETURN_IF_ERROR(CheckTravel(options.post.limits, s.above, what));
     FL_RETURN_IF_ERROR(CheckTravel(options.post.limits, s.start, what));
     FL_RETURN_IF_ERROR(CheckTravel(options.post.limits, s.target, what));
@@ -76,6 +114,8 @@ std::string ProbeHeader(const ProbeProgramOptions& options, std::size_t points) 
 }  // namespace internal
 
 Status ProbeProgramOptions::Validate() const {
+  if (!(min_gap_mm > 0)) return Status::BadInput(Where{.field = "probe.min_gap_mm"}, "must be > 0");
+  if (!(shank_radius_mm >= 0)) return Status::BadInput(Where{.field = "probe.shank_radius_mm"}, "must be >= 0");
   if (!(ball_radius_mm > 0)) return Status::BadInput(Where{.field = "probe.ball_radius_mm"}, "must be > 0");
   if (!(clearance_mm > 0)) return Status::BadInput(Where{.field = "probe.clearance_mm"}, "must be > 0");
   if (!(search_mm > 0)) return Status::BadInput(Where{.field = "probe.search_mm"}, "must be > 0");

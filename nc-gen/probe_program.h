@@ -3,11 +3,12 @@
 // probing format is part of its post (PostDialect::FormatProbing, nc-gen/post_<dialect>.cc, where its
 // conventions and sources are written down), so a new dialect brings its probing with it. Every dialect has
 // the same structure: per point a rapid at safe Z over a clearance point that lies clearance_mm above the
-// surface along +n, down to it, a probing move along −n that ends search_mm beyond the nominal surface, a
-// retract along +n and up to safe Z, and the point id in a comment ("point <id>"), so logs map back to the
-// plan. The programmed point is the stylus-ball centre (nominal contact point + R·n). Before any text is
+// surface along +n (along −a for a tilted approach a), down to it, a probing move along −n that ends search_mm beyond
+// the nominal surface, a retract along +n and up to safe Z, and the point id in a comment ("point <id>"), so logs map
+// back to the plan. The programmed point is the stylus-ball centre (nominal contact point + R·n). Before any text is
 // written, the probe feed and every position (above, clearance, search end) of every point are checked
-// against MachineLimits; a refusal names the probe point id and no program is returned.
+// against MachineLimits, and, when the part's surface is given, every move against the part
+// (ProbeProgramOptions::part_surface); a refusal names the probe point id and no program is returned.
 //
 //   "linuxcnc"   G38.2 probing, results logged between (PROBEOPEN file) and (PROBECLOSE). With touch_feed_mm_per_min >
 //   0 each point is probed twice: the
@@ -29,6 +30,7 @@
 //   "sinumerik"  840D sl MEAS=1 G1 (measuring with deletion of distance to go); the measured position
 //                $AA_MW[X/Y/Z] (workpiece frame) is copied into R[base+3k] .. R[base+3k+2].
 
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -36,6 +38,7 @@
 #include "core/status.h"
 #include "metrology/probe.h"
 #include "nc-gen/post.h"
+#include "reconstruction/foot_point.h"
 
 namespace formloop::nc {
 
@@ -67,6 +70,17 @@ struct ProbeProgramOptions {
   // the part (a_z < 0) within kMaxApproachTiltDeg of −n. Heidenhain's cycle 444 probes along the normal it
   // is given and refuses a tilted point.
   std::vector<Eigen::Vector3d> approaches;
+  // The part's surface Q (a foot-point projector on it). Given, the moves of every point are checked
+  // against it before any text is written (nc-gen/probe_clearance.h): the stylus ball keeps min_gap_mm
+  // from the part on the traverse at safe Z, min(min_gap_mm, ½·clearance·cos tilt) on the vertical
+  // descent to the start, and that gap shrinking towards the contact on the probing move; the shank too
+  // when shank_radius_mm > 0. A tilted point that fails is tried again with the clearance halved, then
+  // quartered (above backoff_mm with two touches): the first that clears is programmed (a warning names
+  // the point and the clearance); otherwise, and for a point along −n, the program is refused naming
+  // the point, the move and the gap (SafetyLimit). Not given: nothing is checked against the part.
+  std::optional<recon::FootPointProjector> part_surface;
+  double min_gap_mm = 1.0;
+  double shank_radius_mm = 0;  // the stylus shank, a vertical cylinder above the ball centre; 0 = not checked
   PostOptions post;
   Status Validate() const;
 };

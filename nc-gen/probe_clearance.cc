@@ -1,0 +1,114 @@
+#include "nc-gen/probe_clearance.h"
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <string>
+
+#include "core/number_text.h"
+
+namespace formloop::nc::internal {
+namespace {
+
+// The gap between a ball of `radius` centred at x and the part: the signed foot-point distance minus
+// the radius (negative: the ball overlaps the part).
+Result<double> BallGap(const recon::FootPointProjector& part, const Eigen::Vector3d& x, double radius) {
+  FL_ASSIGN_OR_RETURN(const recon::FootPoint f, part.Project(x));
+  return (f.deviation_mm < 0 ? -f.distance_mm : f.distance_mm) - radius;
+}
+
+// The sample of a traced segment with the least margin (gap − required).
+struct Shortfall {
+  double margin = std::numeric_limits<double>::infinity();
+  double gap = 0, required = 0;
+  Eigen::Vector3d where = Eigen::Vector3d::Zero();
+  bool short_of_it() const { return margin < 0; }
+};
+
+using GapAt = std::function<Result<double>(const Eigen::Vector3d&)>;
+
+// Sphere tracing from → to (header comment); the requirement runs linearly from req_from to req_to.
+// Stops at the first sample short of its requirement (with the sampling allowance where it steps short).
+Result<Shortfall> Trace(const Eigen::Vector3d& from, const Eigen::Vector3d& to, double req_from, double req_to,
+                        const GapAt& gap) {
+  const double length = (to - from).norm();
+  const double slope = length > 0 ? std::abs(req_to - req_from) / length : 0;
+  Shortfall worst;
+  for (double t = 0;;) {
+    const double f = length > 0 ? t / length : 0;
+    const Eigen::Vector3d x = from + f * (to - from);
+    FL_ASSIGN_OR_RETURN(const double g, gap(x));
+    double required = req_from + f * (req_to - req_from);
+    const double reach = (g - required) / (1 + slope);  // clear within this distance of x
+    // A short step: this sample answers for half of it, so it must clear half a step's change more.
+    if (reach < kProbeTraceStepMm) required += 0.5 * (1 + slope) * kProbeTraceStepMm;
+    if (g - required < worst.margin) worst = {g - required, g, required, x};
+    if (worst.short_of_it() || t >= length) break;
+    t = std::min(length, t + std::max(reach, kProbeTraceStepMm));
+  }
+  return worst;
+}
+
+std::string Point(const Eigen::Vector3d& p) {
+  return "(" + FormatFixed(p.x(), 3) + ", " + FormatFixed(p.y(), 3) + ", " + FormatFixed(p.z(), 3) + ")";
+}
+
+Status Refusal(const ProbeStation& s, const std::string& body, const std::string& move, const Shortfall& w) {
+  const std::string how = w.gap < 0 ? "would enter the part by " + FormatFixed(-w.gap, 3) + " mm"
+                                    : "would come within " + FormatFixed(w.gap, 3) + " mm of the part";
+  return Status::SafetyLimit("probe point " + std::to_string(s.id) + ": the " + body + " " + how + " (" +
+                             FormatFixed(w.required, 3) + " mm required) " + move + ", at " + Point(w.where) +
+                             "; the part is in the way; no probing program was written. Fix: leave the point out of "
+                             "the plan or probe it with a smaller tilt");
+}
+
+}  // namespace
+
+Status CheckProbeClearance(const recon::FootPointProjector& part, const ProbeStation& s, const ProbeStation* previous,
+                           const ProbeProgramOptions& options) {
+  const double clearance = s.clearance_mm;
+  const double g = options.min_gap_mm;
+  const double g_probe = std::min(g, 0.5 * clearance * -s.approach.dot(s.normal));
+  const Eigen::Vector3d contact = s.surface + options.ball_radius_mm * s.normal;
+  const GapAt ball = [&part, &options](const Eigen::Vector3d& x) { return BallGap(part, x, options.ball_radius_mm); };
+  if (previous != nullptr) {
+    FL_ASSIGN_OR_RETURN(const Shortfall w, Trace(previous->above, s.above, g, g, ball));
+    if (w.short_of_it()) {
+      return Refusal(s, "stylus ball", "on the traverse at safe Z from point " + std::to_string(previous->id), w);
+    }
+  }
+  {
+    FL_ASSIGN_OR_RETURN(const Shortfall w, Trace(s.above, s.start, g_probe, g_probe, ball));
+    if (w.short_of_it()) return Refusal(s, "stylus ball", "on the descent from safe Z to its start point", w);
+  }
+  {
+    const Eigen::Vector3d touch_zone = contact - kProbeTouchZone * clearance * s.approach;
+    FL_ASSIGN_OR_RETURN(const Shortfall w, Trace(s.start, touch_zone, g_probe, kProbeTouchZone * g_probe, ball));
+    if (w.short_of_it()) return Refusal(s, "stylus ball", "on the probing move before it reaches the surface", w);
+  }
+  if (options.shank_radius_mm <= 0) return Status::Ok();
+  const GapAt shank_ball = [&part, &options](const Eigen::Vector3d& x) {
+    return BallGap(part, x, options.shank_radius_mm);
+  };
+  // The shank above a ball centre x: its axis from x up to safe Z.
+  auto shank = [&](const Eigen::Vector3d& x, double required) {
+    const Eigen::Vector3d top(x.x(), x.y(), std::max(x.z(), options.safe_z_mm));
+    return Trace(x, top, required, required, shank_ball);
+  };
+  {
+    FL_ASSIGN_OR_RETURN(const Shortfall w, shank(s.start, g_probe));
+    if (w.short_of_it()) return Refusal(s, "stylus shank", "on the descent from safe Z to its start point", w);
+  }
+  const int lines = std::max(1, static_cast<int>(std::ceil(clearance / kProbeShankSpacingMm)));
+  const double spacing = clearance / lines;
+  for (int i = 0; i <= lines; ++i) {
+    const double to_go = clearance - i * spacing;
+    FL_ASSIGN_OR_RETURN(const Shortfall w,
+                        shank(contact - to_go * s.approach, g_probe * to_go / clearance + 0.5 * spacing));
+    if (w.short_of_it()) return Refusal(s, "stylus shank", "on the probing move", w);
+  }
+  return Status::Ok();
+}
+
+}  // namespace formloop::nc::internal
