@@ -502,7 +502,13 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
         }
       }
     }
-    // A selected term all of whose parameters are aliased is aliased as a whole.
+    // A selected term all of whose parameters are aliased is aliased as a whole when its candidates
+    // together can do its work: in the model with all of them, the term is not significant at
+    // `alias_alpha`. Each parameter aliased on its own is not enough: on a sphere cap a rotation about
+    // the part origin moves it like a shift perpendicular to the line from the origin to the sphere's
+    // centre, so tx, ty and tz each lose significance beside setup_rotation, yet the shift along that
+    // line is something no rotation does — the set-up offset is there, only its components are not told
+    // apart (it stays named, none of its parameters printed).
     {
       std::vector<int> size(static_cast<std::size_t>(nodes), 0);
       for (int m = 0; m < nodes; ++m) ++size[static_cast<std::size_t>(uf.Find(m))];
@@ -514,7 +520,24 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
         const bool every_column = !own.empty() && std::all_of(own.begin(), own.end(), [&](int m) {
           return size[static_cast<std::size_t>(uf.Find(m))] > 1;
         });
-        if (every_column) {
+        if (!every_column) continue;
+        std::vector<TermFit> partners;  // fitted one after the other beside the other selected terms
+        Eigen::MatrixXd others = DesignOf(s, k);
+        for (int c = 0; c < np; ++c) {
+          const bool partner =
+              std::any_of(own.begin(), own.end(), [&](int m) { return uf.Find(m) == uf.Find(ns + c); });
+          if (!partner) continue;
+          partners.push_back(FitTerm(prob, pool[static_cast<std::size_t>(c)], others, tau_lo, tau_hi));
+          others = Concat(others, partners.back().columns);
+        }
+        const int q = static_cast<int>(s[static_cast<std::size_t>(k)].columns.cols());
+        const Fit with_all = LeastSquares(Concat(others, s[static_cast<std::size_t>(k)].columns), prob.r, false);
+        const Fit without = LeastSquares(others, prob.r, false);
+        const int dof = n - static_cast<int>(others.cols()) - q;
+        const double f = dof > 0 && with_all.rss > 0 ? ((without.rss - with_all.rss) / q) / (with_all.rss / dof) : 0;
+        // (Each partner's own values were plausible when it took the parameter's work; together they may
+        // trade huge values against each other, which says nothing for the term.)
+        if (dof > 0 && FTail(f, q, dof) >= options.alias_alpha) {
           for (int m : own) uf.Join(k, m);
         }
       }
@@ -736,7 +759,19 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
     const Eigen::VectorXd contribution = x.middleCols(jv.offsets[k], width) * joint.beta.segment(jv.offsets[k], width);
     const double total = contribution.squaredNorm();
     if (total <= 0) continue;
-    for (const Term& c : pool) {
+    // A candidate in a group with one of this term's parameters is reported there, not as separated.
+    std::vector<bool> grouped_with(pool.size(), false);
+    for (const auto& members : groups) {
+      const bool holds_own = std::any_of(members.begin(), members.end(), [&](int m) {
+        return m >= ns + np && columns[static_cast<std::size_t>(m - ns - np)].first == k;
+      });
+      for (int m : members) {
+        if (holds_own && m >= ns && m < ns + np) grouped_with[static_cast<std::size_t>(m - ns)] = true;
+      }
+    }
+    for (std::size_t i = 0; i < pool.size(); ++i) {
+      if (grouped_with[i]) continue;
+      const Term& c = pool[i];
       const Eigen::MatrixXd cols = sel.With(s, c).columns;
       const double corr = std::sqrt(std::max(0.0, 1.0 - LeastSquares(cols, contribution).rss / total));
       if (corr >= options.confounded_correlation) {

@@ -11,7 +11,8 @@
 
 #include <gtest/gtest.h>
 
-#include "tests/support/discovery.h"
+#include "simulation/experiment_design.h"
+#include "tests/support/multi_effect.h"
 
 namespace formloop::testing {
 namespace {
@@ -20,13 +21,44 @@ constexpr int kPerEffect = 20;
 
 class SingleEffect : public ::testing::TestWithParam<std::string> {};
 
+bool NamedFirst(const sim::Diagnosis& d, const std::string& effect) {
+  return !d.causes.empty() && d.causes.front().effect == effect;
+}
+
+// The separating experiment the diagnosis proposes for its first alias group, applied on the virtual
+// machine (the applied measurement simulated from the scenario's truth and the instrument's noise, never
+// from the diagnosis; as the multi-effect suite does it) and diagnosed again. A next-part change cuts
+// another part on the same machine with the same set-up (the scenario's truth). Not ok: no proposal.
+Result<sim::Diagnosis> AfterTheProposedExperiment(const Scenario& s, const sim::Diagnosis& d, std::uint64_t seed,
+                                                  std::string* kind) {
+  sim::ExperimentOptions eo = ExperimentOptionsFor(s);
+  eo.plausible = {};  // the suite diagnoses without a rule base: τ searched over the default range
+  FL_ASSIGN_OR_RETURN(const std::vector<sim::ExperimentProposal> proposals,
+                      sim::ProposeExperiments({InputOf(s)}, d, s.baseline, eo));
+  if (proposals.empty()) return Status::NotFound("no proposal");
+  const sim::ExperimentProposal& p = proposals.front();
+  *kind = p.kind;
+  if (!p.direct.empty()) {
+    sim::DiagnoseOptions with_direct;
+    with_direct.direct = Measured(s, p, seed + 9000000);
+    return sim::Diagnose(InputOf(s), s.baseline, with_direct);
+  }
+  if (p.kind == "reprobe") return DiagnoseScenario(Reprobed(s, p, seed + 7000000));
+  const Scenario next = NextPart(s, p, s.truth, sim::Model(), seed + 8000000);
+  return sim::DiagnosePooled({InputOf(s), InputOf(next)}, s.baseline, sim::DiagnoseOptions());
+}
+
 // Named first, parameters inside the reported 95 % interval, held-out gain ≥ 50 % of the injected
-// RMS — per effect, over kPerEffect scenarios (surfaces, point counts 400–3000, SNR 3–20 drawn).
+// RMS — per effect, over kPerEffect scenarios (surfaces, point counts 400–3000, SNR 3–20 drawn). Named
+// first: the diagnosis' first cause is the injected effect (a parameter of it may sit in an alias group:
+// it is then not graded). Where the part as planned cannot tell the effect from a look-alike (an alias
+// group, nothing false named), the experiment the diagnosis proposes is applied and named first counted
+// again: the table's second column.
 TEST_P(SingleEffect, IsNamedFirstWithItsParameterAndAHeldOutGain) {
   const std::string effect = GetParam();
   const sim::Effect* e = sim::FindEffect(effect);
   ASSERT_NE(e, nullptr);
-  int named_first = 0, grouped = 0, parameters = 0, in_interval = 0, gain_ok = 0;
+  int named_first = 0, grouped = 0, parameters = 0, in_interval = 0, gain_ok = 0, after_experiment = 0;
   const std::vector<std::string> all = InjectableEffects();
   std::uint64_t seed = 1000 + 100 * static_cast<std::uint64_t>(std::find(all.begin(), all.end(), effect) - all.begin());
   for (int k = 0; k < kPerEffect; ++k) {
@@ -34,8 +66,9 @@ TEST_P(SingleEffect, IsNamedFirstWithItsParameterAndAHeldOutGain) {
     const auto d = DiagnoseScenario(s);
     ASSERT_TRUE(d.ok()) << d.status().message();
     const sim::EffectInstance* truth = s.truth.Find(effect);
-    if (!d->causes.empty() && d->causes.front().effect == effect) {
+    if (NamedFirst(*d, effect)) {
       ++named_first;
+      ++after_experiment;
       const sim::Cause& c = d->causes.front();
       for (int j = 0; j < e->parameter_count(); ++j) {
         if (c.aliased[static_cast<std::size_t>(j)]) continue;  // no interval: the alias group carries it
@@ -51,19 +84,34 @@ TEST_P(SingleEffect, IsNamedFirstWithItsParameterAndAHeldOutGain) {
                   s.points, s.snr, d->causes.empty() ? "(none)" : d->causes.front().effect.c_str());
       for (const auto& g : d->alias_groups) std::printf("; %s", g.Message().c_str());
       std::printf("\n");
+      if (!d->alias_groups.empty()) {
+        std::string kind;
+        const auto after = AfterTheProposedExperiment(s, *d, seed, &kind);
+        const bool named = after.ok() && NamedFirst(*after, effect);
+        if (named) ++after_experiment;
+        std::printf("    after the proposed experiment (%s): %s\n", kind.empty() ? "none" : kind.c_str(),
+                    !after.ok()             ? after.status().message().c_str()
+                    : named                 ? "named first"
+                    : after->causes.empty() ? "nothing named"
+                                            : ("named first: " + after->causes.front().effect).c_str());
+      }
     }
     if (d->heldout_rms_before_um - d->heldout_rms_after_um >= 0.5 * s.effect_rms_um) ++gain_ok;
   }
   std::printf(
-      "%-16s scenarios %d  named first %.0f%%  only in an alias group %.0f%%  parameters in 95%% interval "
-      "%.0f%%  held-out gain >= 50%%: %.0f%%\n",
-      effect.c_str(), kPerEffect, 100.0 * named_first / kPerEffect, 100.0 * grouped / kPerEffect,
-      100.0 * in_interval / std::max(1, parameters), 100.0 * gain_ok / kPerEffect);
-  // Issue 20: an effect whose look-alike the design cannot exclude (wear and thermal drift at SNR 3–5,
-  // squareness and a rotation on a saddle) is reported as an alias group, not named. Named or so
-  // reported in ≥ 95 %; named first in ≥ 85 % (before issue 20 the bound was named first in ≥ 95 %).
+      "%-16s scenarios %d  named first %.0f%% (after the proposed experiment %.0f%%)  only in an alias group %.0f%%  "
+      "parameters in 95%% interval %.0f%%  held-out gain >= 50%%: %.0f%%\n",
+      effect.c_str(), kPerEffect, 100.0 * named_first / kPerEffect, 100.0 * after_experiment / kPerEffect,
+      100.0 * grouped / kPerEffect, 100.0 * in_interval / std::max(1, parameters), 100.0 * gain_ok / kPerEffect);
+  // Issue 20: an effect whose look-alike the part as planned cannot exclude (wear and a linear thermal
+  // drift at SNR 3–5, squareness_xy and a rotation about z on a saddle — the same columns —, a tool
+  // radius and a z offset on a near-flat part) is reported as an alias group, not named: named or so
+  // reported in ≥ 95 %, named first in ≥ 90 %. The experiment the diagnosis proposes (a tool setter and
+  // datum, a datum plane, the next part's raster turned) then names it first in ≥ 95 %, the bound the
+  // part as planned met before issue 20.
   EXPECT_GE(named_first + grouped, 0.95 * kPerEffect);
-  EXPECT_GE(named_first, 0.85 * kPerEffect);
+  EXPECT_GE(named_first, 0.90 * kPerEffect);
+  EXPECT_GE(after_experiment, 0.95 * kPerEffect);
   // 20 draws cannot pin a 95 % coverage per effect (P(≤ 17 of 20) is 7.5 % at exactly 95 %); this is
   // the per-effect sanity bound, the ≥ 90 % requirement is asserted pooled in ParametersLie... below.
   EXPECT_GE(in_interval, 0.75 * parameters);
@@ -207,6 +255,38 @@ TEST(DiscoveryTest, AModelLearnedOnOnePartPredictsAnother) {
   std::printf("part 2 (egg_box): prediction rms %.3f um with the baseline, %.3f um with the model learned on part 1\n",
               *before, *after);
   EXPECT_LE(*after, 0.5 * *before);
+}
+
+// A set-up offset on a sphere cap: a rotation about the part origin moves the cap like a shift
+// perpendicular to the line from the origin to the sphere's centre, so each of tx, ty, tz loses its
+// significance beside setup_rotation — but the shift along that line no rotation makes. The offset is
+// named (the data need it), none of its components printed, and they sit in a group with the rotation;
+// the rotation is not named.
+TEST(DiscoveryTest, AnOffsetOnASphereCapIsNamedWithItsComponentsGroupedWithARotation) {
+  sim::Model machine;
+  ASSERT_TRUE(machine.Set("setup_offset", {9.5, -20.9, 20.9}).ok());  // µm: 19.8 along the centre line
+  Rng rng(2218);
+  const Scenario s = MakeScenario(rng, "sphere_cap", 1200, 0, {}, false, &machine);
+  const auto d = DiagnoseScenario(s);
+  ASSERT_TRUE(d.ok()) << d.status().message();
+  std::printf("%s", d->Summary().c_str());
+  ASSERT_FALSE(d->causes.empty());
+  EXPECT_EQ(d->causes.front().effect, "setup_offset");
+  for (const auto& c : d->causes) EXPECT_NE(c.effect, "setup_rotation");
+  int aliased = 0;
+  for (bool a : d->causes.front().aliased) aliased += a;
+  EXPECT_GE(aliased, 2);  // at least the two components across the centre line
+  bool grouped_with_rotation = false;
+  for (const auto& g : d->alias_groups) {
+    const bool rotation = std::count(g.members.begin(), g.members.end(), "setup_rotation") == 1;
+    const bool component = std::any_of(g.members.begin(), g.members.end(),
+                                       [](const std::string& m) { return m.rfind("setup_offset(", 0) == 0; });
+    grouped_with_rotation = grouped_with_rotation || (rotation && component);
+  }
+  EXPECT_TRUE(grouped_with_rotation);
+  // Not also listed as a look-alike the data separate.
+  for (const auto& c : d->confounded) EXPECT_NE(c.other, "setup_rotation") << c.named;
+  EXPECT_LT(d->heldout_rms_after_um, 0.2 * d->heldout_rms_before_um);
 }
 
 // A rotation of a sphere about an axis through the origin is a translation of it: the two form one alias
