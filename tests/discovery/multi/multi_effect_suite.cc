@@ -80,6 +80,29 @@ bool Splits(const std::string& signature, const sim::Diagnosis& d) {
 // pooling table is then empty).
 bool PoolingWanted() { return std::getenv("FORMLOOP_MULTI_NO_POOLING") == nullptr; }
 
+const std::vector<sim::ExperimentProposal>& NoProposals() {
+  static const std::vector<sim::ExperimentProposal> none;
+  return none;
+}
+
+// The direct readings of the machine's shared effects (not a part's set-up) that `proposals` ask for,
+// each once, measured on the virtual machine (truth + the instrument's noise).
+std::vector<sim::DirectMeasurement> SharedReadings(const Scenario& part,
+                                                   const std::vector<sim::ExperimentProposal>& proposals,
+                                                   std::uint64_t seed) {
+  sim::ExperimentProposal all;
+  for (const auto& p : proposals) {
+    for (const auto& d : p.direct) {
+      const sim::Effect* effect = sim::FindEffect(d.effect);
+      if (effect == nullptr || effect->part_specific()) continue;
+      bool twice = false;
+      for (const auto& o : all.direct) twice = twice || (o.effect == d.effect && o.parameter == d.parameter);
+      if (!twice) all.direct.push_back(d);
+    }
+  }
+  return Measured(part, all, seed);
+}
+
 nlohmann::json RunScenario(int index, bool pool = PoolingWanted()) {
   const std::uint64_t seed = kSeedBase + static_cast<std::uint64_t>(index);
   Rng layout_rng(seed ^ 0x5bd1e995ULL);
@@ -117,13 +140,20 @@ nlohmann::json RunScenario(int index, bool pool = PoolingWanted()) {
     for (std::size_t p = 1; pool && p < s.parts.size(); ++p) {
       pipeline_parts.push_back(PartAsPipelinePlansIt(s, p, planned, seed + 9000000 + p));
     }
+    // ... and the direct readings of shared effects the proposals ask for (tool setter, reference sphere),
+    // taken once before the second part, as an engineer following the proposal would (`formloop run` does
+    // not take them yet: `diagnose --direct` does); a set-up datum measures the first part's clamping,
+    // gone by then, and is not taken.
+    sim::DiagnoseOptions pipeline_options = Options();
+    pipeline_options.direct = SharedReadings(s.parts[1], proposals.ok() ? *proposals : NoProposals(), seed + 9500000);
+    row["pipeline_readings"] = pipeline_options.direct.size();
     nlohmann::json pooled = nlohmann::json::object(), pooled_pipeline = nlohmann::json::object();
     for (std::size_t parts : {2, 3}) {
       if (!pool) break;
       for (const bool pipeline : {false, true}) {
         std::vector<sim::ProbeDataInput> inputs;
         for (std::size_t p = 0; p < parts; ++p) inputs.push_back(InputOf(pipeline ? pipeline_parts[p] : s.parts[p]));
-        const auto dp = sim::DiagnosePooled(inputs, s.parts[0].baseline, Options());
+        const auto dp = sim::DiagnosePooled(inputs, s.parts[0].baseline, pipeline ? pipeline_options : Options());
         EXPECT_TRUE(dp.ok()) << dp.status().message();
         if (!dp.ok()) continue;
         nlohmann::json split = nlohmann::json::object();
