@@ -365,6 +365,7 @@ Status PlanAndPostProbing(const ProbeArgs& args) {
   }
   nc::ProbeProgramOptions options = args.probe;
   options.post = args.machine.Post("formloop nc probe " + args.surface.surface);
+  FL_ASSIGN_OR_RETURN(options.part_surface, recon::FootPointProjector::Build(face.surface));
   FL_ASSIGN_OR_RETURN(const std::vector<std::string> programs,
                       nc::PostProbingBatches(plan, args.machine.dialect, options));
   // One program: --out. Batches (the controller cannot store every result at once): OUT_1.ext, OUT_2.ext, ...
@@ -532,6 +533,13 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
   probe->add_option("--search-mm", o.search_mm, "probe this far beyond Q, mm")->capture_default_str();
   probe->add_option("--probe-feed", o.probe_feed_mm_per_min, "probing feed, mm/min")->capture_default_str();
   probe->add_option("--safe-z-mm", o.safe_z_mm, "rapid height between points, mm")->capture_default_str();
+  probe
+      ->add_option("--min-gap-mm", o.min_gap_mm,
+                   "least gap between the probe and Q on the moves that do not probe (checked; a point that "
+                   "cannot keep it is refused), mm")
+      ->capture_default_str();
+  probe->add_option("--shank-radius-mm", o.shank_radius_mm, "stylus shank radius, kept clear of Q too; 0 = not checked")
+      ->capture_default_str();
   probe
       ->add_option("--fanuc-result-base", o.fanuc_result_base,
                    "Fanuc: first common variable of the results (#100-#199 or #500-#999); a plan that does not fit "

@@ -2,7 +2,8 @@
 // the first part of a machine whose tool radius and probe radius are both off cannot tell them apart and
 // proposes a tilted re-probe, which the case library keeps with its learned model; the next part (another
 // shape, same machine/tool/material) asking for the library's experiment is probed with the tilted points,
-// its probing program and log carry them, and its own diagnosis no longer holds the radii in one group.
+// its probing program and log carry them, and its own diagnosis no longer holds the radii in one group;
+// `formloop simulate --run` of that run probes its tilted points along their approaches.
 
 #include <algorithm>
 #include <cctype>
@@ -14,11 +15,14 @@
 
 #include <gtest/gtest.h>
 
+#include "app/model_jobs.h"
 #include "app/part.h"
 #include "app/pipeline.h"
+#include "app/run_folder.h"
 #include "core/json_io.h"
 #include "core/log.h"
 #include "kb/library.h"
+#include "metrology/probe.h"
 #include "tests/support/starter_library.h"
 #include "tests/support/test_dir.h"
 
@@ -148,6 +152,35 @@ TEST_F(SeparatingExperimentTest, TheNextPartIsProbedWithTheLibrarysTiltedReprobe
     EXPECT_LE(interval[0].get<double>(), t->second.second) << effect;
     EXPECT_GE(interval[1].get<double>(), t->second.second) << effect;
   }
+
+  // `formloop simulate --run` probes the run's tilted points along the approaches the run planned
+  // (toolpath/probing_plan.csv), as if the plan CSV were given with --probe-plan: the same log, byte for byte.
+  ASSERT_TRUE(WriteJsonFile(dir_ / "model.json",
+                            {{"format", "formloop-model"},
+                             {"version", 1},
+                             {"effects", {{{"name", "probe_radius"}, {"parameters", {{"delta_r_eff_um", 8.0}}}}}}})
+                  .ok());
+  SimulateArgs sim{.run = run2.string(), .model = (dir_ / "model.json").string(), .out = (dir_ / "sim.csv").string()};
+  ASSERT_TRUE(RunSimulate(sim).ok());
+  SimulateArgs given = sim;
+  given.probe_plan = (run2 / "toolpath" / "probing_plan.csv").string();
+  given.out = (dir_ / "sim_given.csv").string();
+  ASSERT_TRUE(RunSimulate(given).ok());
+  const auto simulated = metrology::ReadProbeLog(dir_ / "sim.csv");
+  const auto approaches = ReadPlanFile(run2 / "toolpath" / "probing_plan.csv");
+  ASSERT_TRUE(simulated.ok() && approaches.ok());
+  ASSERT_EQ(simulated->records.size(), approaches->approaches.size());
+  int tilted = 0;
+  for (std::size_t i = 0; i < simulated->records.size(); ++i) {
+    const auto& r = simulated->records[i];
+    EXPECT_LT((r.approach - approaches->approaches[i]).norm(), 1e-6) << "point " << r.id;
+    tilted += r.approach.dot(-approaches->plan.points[i].normal) < 0.99 ? 1 : 0;
+  }
+  EXPECT_EQ(tilted, added);
+  std::ifstream a(dir_ / "sim.csv"), b(dir_ / "sim_given.csv");
+  const std::string text_a((std::istreambuf_iterator<char>(a)), std::istreambuf_iterator<char>());
+  const std::string text_b((std::istreambuf_iterator<char>(b)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(text_a, text_b);
 }
 
 TEST_F(SeparatingExperimentTest, APartWithoutTheOptionWritesNothingNewAndBadValuesAreRefused) {
