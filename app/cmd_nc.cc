@@ -334,12 +334,17 @@ Status PlanAndPostProbing(const ProbeArgs& args) {
   } kProbeBounds[] = {{"--ball-radius-mm", args.probe.ball_radius_mm, 50},
                       {"--clearance-mm", args.probe.clearance_mm, 100},
                       {"--search-mm", args.probe.search_mm, 50},
-                      {"--safe-z-mm", args.probe.safe_z_mm, 10000}};
+                      {"--safe-z-mm", args.probe.safe_z_mm, 10000},
+                      {"--min-gap-mm", args.probe.min_gap_mm, 50}};
   for (const auto& b : kProbeBounds) {
     if (!(b.value > 0 && b.value <= b.max)) {
       return Status::BadInput(Where{.field = b.option}, "must lie in (0, " + FormatSignificant(b.max, 6) + "] mm",
                               "give the distance in mm");
     }
+  }
+  if (!(args.probe.shank_radius_mm >= 0 && args.probe.shank_radius_mm <= 50)) {
+    return Status::BadInput(Where{.field = "--shank-radius-mm"}, "must lie in [0, 50] mm",
+                            "give the stylus shank's radius in mm, or 0 not to check the shank");
   }
   FL_RETURN_IF_ERROR(args.machine.CheckFeed("--probe-feed", args.probe.probe_feed_mm_per_min));
   if (args.probe.probe_tool < 1 || args.probe.probe_tool > 9999) {

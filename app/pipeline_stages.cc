@@ -448,6 +448,8 @@ Result<Machined> MachineCycle(const Inputs& in, const Program& program, double t
     cnc::LinuxCncProbingOptions probing;
     probing.program.approaches = approaches;
     probing.program.part_surface = part_surface;
+    probing.program.min_gap_mm = in.part.probe_program.min_gap_mm;
+    probing.program.shank_radius_mm = in.part.probe_program.shank_radius_mm;
     FL_ASSIGN_OR_RETURN(const cnc::LinuxCncProbing probed,
                         cnc::ProbePlanOnLinuxCnc(config, plan, probing, folder.Path(loop_dir / "linuxcnc")));
     FL_RETURN_IF_ERROR(metrology::WriteProbeLog(folder.Path(loop_dir / "probe_log.csv"), probed.log));

@@ -114,8 +114,15 @@ std::string ProbeHeader(const ProbeProgramOptions& options, std::size_t points) 
 }  // namespace internal
 
 Status ProbeProgramOptions::Validate() const {
-  if (!(min_gap_mm > 0)) return Status::BadInput(Where{.field = "probe.min_gap_mm"}, "must be > 0");
-  if (!(shank_radius_mm >= 0)) return Status::BadInput(Where{.field = "probe.shank_radius_mm"}, "must be >= 0");
+  if (!(min_gap_mm > 0)) {
+    return Status::BadInput(Where{.field = "probe.min_gap_mm"}, "must be > 0, got " + FormatExact(min_gap_mm),
+                            "give the least gap between the probe and the part in mm (default 1)");
+  }
+  if (!(shank_radius_mm >= 0)) {
+    return Status::BadInput(Where{.field = "probe.shank_radius_mm"},
+                            "must be >= 0, got " + FormatExact(shank_radius_mm),
+                            "give the stylus shank's radius in mm, or 0 not to check the shank");
+  }
   if (!(ball_radius_mm > 0)) return Status::BadInput(Where{.field = "probe.ball_radius_mm"}, "must be > 0");
   if (!(clearance_mm > 0)) return Status::BadInput(Where{.field = "probe.clearance_mm"}, "must be > 0");
   if (!(search_mm > 0)) return Status::BadInput(Where{.field = "probe.search_mm"}, "must be > 0");

@@ -219,6 +219,30 @@ TEST_F(SeparatingExperimentTest, APartWithoutTheOptionWritesNothingNewAndBadValu
   ASSERT_TRUE(again.ok()) << again.status().ToString();
   EXPECT_EQ(again->proposals.size(), 1u);
   EXPECT_EQ(again->proposals[0].raster_turn_deg, 90.0);
+
+  // The probe's least gap and shank (the clearance check of the probing program): a resolved part keeps
+  // them only when the part set them (earlier runs' resolved parts stay as they were) and reads them back.
+  EXPECT_FALSE(ReadJsonFile(dir_ / "plain" / "inputs" / "part.json").value()["probing"].contains("min_gap_mm"));
+  Json gapped = PartJson("reg-dome-a", "gapped", nullptr);
+  gapped["probing"]["min_gap_mm"] = 2.5;
+  gapped["probing"]["shank_radius_mm"] = 0.75;
+  ASSERT_TRUE(WriteJsonFile(dir_ / "gapped.json", gapped).ok());
+  const auto with_gap = ReadPart(dir_ / "gapped.json");
+  ASSERT_TRUE(with_gap.ok()) << with_gap.status().ToString();
+  const auto gap_again = ParsePart(with_gap->ToJson(), "resolved");
+  ASSERT_TRUE(gap_again.ok()) << gap_again.status().ToString();
+  EXPECT_EQ(gap_again->probe_program.min_gap_mm, 2.5);
+  EXPECT_EQ(gap_again->probe_program.shank_radius_mm, 0.75);
+  for (const auto& [field, value] : std::vector<std::pair<std::string, double>>{
+           {"min_gap_mm", 0}, {"min_gap_mm", 60}, {"shank_radius_mm", -1}, {"shank_radius_mm", 51}}) {
+    Json bad = gapped;
+    bad["probing"][field] = value;
+    ASSERT_TRUE(WriteJsonFile(dir_ / "bad_gap.json", bad).ok());
+    const auto refused_part = ReadPart(dir_ / "bad_gap.json");
+    ASSERT_FALSE(refused_part.ok()) << field << " = " << value;
+    EXPECT_NE(refused_part.status().message().find("probing." + field), std::string::npos)
+        << refused_part.status().message();
+  }
 }
 
 }  // namespace
