@@ -19,6 +19,7 @@
 #include "app/part.h"
 #include "app/pipeline.h"
 #include "app/run_folder.h"
+#include "core/atomic_file.h"
 #include "core/json_io.h"
 #include "core/log.h"
 #include "kb/library.h"
@@ -181,6 +182,36 @@ TEST_F(SeparatingExperimentTest, TheNextPartIsProbedWithTheLibrarysTiltedReprobe
   const std::string text_a((std::istreambuf_iterator<char>(a)), std::istreambuf_iterator<char>());
   const std::string text_b((std::istreambuf_iterator<char>(b)), std::istreambuf_iterator<char>());
   EXPECT_EQ(text_a, text_b);
+
+  // `formloop diagnose --run` of that run reads the same folder, its approaches checked against the plan,
+  // and diagnoses every point of the simulated log; the probe radius is among its findings.
+  DiagnoseArgs da{.measured = (dir_ / "sim.csv").string(), .run = run2.string(), .out = (dir_ / "diag").string()};
+  da.propose = false;
+  const auto diagnosed = RunDiagnose(da);
+  ASSERT_TRUE(diagnosed.ok()) << diagnosed.status().ToString();
+  EXPECT_EQ((*diagnosed)["n"].get<std::size_t>(), simulated->records.size());
+  EXPECT_NE(((*diagnosed)["causes"].dump() + (*diagnosed)["alias_groups"].dump()).find("probe_radius"),
+            std::string::npos)
+      << diagnosed->dump();
+  // A run folder whose approach file is not of the JSON plan's points is refused naming the file and row.
+  const fs::path copied = dir_ / "copied";
+  fs::copy(run2, copied, fs::copy_options::recursive);
+  // The first two data rows (after the header) swapped: row 2 holds the plan's second point.
+  std::ifstream csv_in(copied / "toolpath" / "probing_plan.csv");
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(csv_in, line);) lines.push_back(line);
+  csv_in.close();
+  ASSERT_GE(lines.size(), 3u);
+  std::swap(lines[1], lines[2]);
+  std::string csv;
+  for (const auto& line : lines) csv += line + "\n";
+  ASSERT_TRUE(WriteFileAtomic(copied / "toolpath" / "probing_plan.csv", csv).ok());
+  const auto mismatched = ReadRunFolder(copied);
+  ASSERT_FALSE(mismatched.ok());
+  EXPECT_NE(mismatched.status().ToString().find("probing_plan.csv"), std::string::npos)
+      << mismatched.status().ToString();
+  EXPECT_NE(mismatched.status().ToString().find("is not the point of toolpath/probing_plan.json"), std::string::npos)
+      << mismatched.status().ToString();
 }
 
 TEST_F(SeparatingExperimentTest, APartWithoutTheOptionWritesNothingNewAndBadValuesAreRefused) {
