@@ -100,10 +100,9 @@ TEST_F(NcCliTest, LimitsAndBadOptionsAreRefusedWithNothingWritten) {
   EXPECT_NE(err_.find("haas"), std::string::npos) << err_;
   EXPECT_EQ(Run("nc probe --surface " + Path("Q.step") + " --out " + out + " --grid 4by3"), 2);
   // The probe's moves are checked clear of Q: a least gap of 50 mm, which the traverse at safe Z 50 cannot
-  // keep above the saddle, is refused naming the point, the move and the gap (the required gap carries the
-  // tracing's allowance, 0.025 mm).
+  // keep above the saddle, is refused naming the point, the move and the gap.
   EXPECT_EQ(Run("nc probe --surface " + Path("Q.step") + " --out " + out + " --grid 4x4 --min-gap-mm 50"), 1);
-  EXPECT_NE(err_.find("probe point 2: the stylus ball would come within 44.574 mm of the part (50.025 mm required) "
+  EXPECT_NE(err_.find("probe point 2: the stylus ball would come within 44.574 mm of the part (50.000 mm required) "
                       "on the traverse at safe Z from point 1"),
             std::string::npos)
       << err_;
