@@ -257,6 +257,15 @@ void AddMachineCommand(CLI::App& root, CommandAction* action) {
   probe->add_option("--clearance-mm", p.program.clearance_mm, "start this far from Q along n, mm")
       ->capture_default_str();
   probe->add_option("--search-mm", p.program.search_mm, "probe this far beyond Q, mm")->capture_default_str();
+  probe
+      ->add_option("--min-gap-mm", p.program.min_gap_mm,
+                   "least gap between the probe and Q on the moves that do not probe (checked; a point that "
+                   "cannot keep it is refused), mm")
+      ->capture_default_str();
+  probe
+      ->add_option("--shank-radius-mm", p.program.shank_radius_mm,
+                   "stylus shank radius, kept clear of Q too; 0 = not checked")
+      ->capture_default_str();
   probe->add_option("--safe-z-mm", p.program.safe_z_mm,
                     "rapid height between points, mm (default: 5 mm above the "
                     "highest start)");

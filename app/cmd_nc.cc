@@ -334,12 +334,17 @@ Status PlanAndPostProbing(const ProbeArgs& args) {
   } kProbeBounds[] = {{"--ball-radius-mm", args.probe.ball_radius_mm, 50},
                       {"--clearance-mm", args.probe.clearance_mm, 100},
                       {"--search-mm", args.probe.search_mm, 50},
-                      {"--safe-z-mm", args.probe.safe_z_mm, 10000}};
+                      {"--safe-z-mm", args.probe.safe_z_mm, 10000},
+                      {"--min-gap-mm", args.probe.min_gap_mm, 50}};
   for (const auto& b : kProbeBounds) {
     if (!(b.value > 0 && b.value <= b.max)) {
       return Status::BadInput(Where{.field = b.option}, "must lie in (0, " + FormatSignificant(b.max, 6) + "] mm",
                               "give the distance in mm");
     }
+  }
+  if (!(args.probe.shank_radius_mm >= 0 && args.probe.shank_radius_mm <= 50)) {
+    return Status::BadInput(Where{.field = "--shank-radius-mm"}, "must lie in [0, 50] mm",
+                            "give the stylus shank's radius in mm, or 0 not to check the shank");
   }
   FL_RETURN_IF_ERROR(args.machine.CheckFeed("--probe-feed", args.probe.probe_feed_mm_per_min));
   if (args.probe.probe_tool < 1 || args.probe.probe_tool > 9999) {
@@ -365,6 +370,7 @@ Status PlanAndPostProbing(const ProbeArgs& args) {
   }
   nc::ProbeProgramOptions options = args.probe;
   options.post = args.machine.Post("formloop nc probe " + args.surface.surface);
+  FL_ASSIGN_OR_RETURN(options.part_surface, recon::FootPointProjector::Build(face.surface));
   FL_ASSIGN_OR_RETURN(const std::vector<std::string> programs,
                       nc::PostProbingBatches(plan, args.machine.dialect, options));
   // One program: --out. Batches (the controller cannot store every result at once): OUT_1.ext, OUT_2.ext, ...
@@ -532,6 +538,13 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
   probe->add_option("--search-mm", o.search_mm, "probe this far beyond Q, mm")->capture_default_str();
   probe->add_option("--probe-feed", o.probe_feed_mm_per_min, "probing feed, mm/min")->capture_default_str();
   probe->add_option("--safe-z-mm", o.safe_z_mm, "rapid height between points, mm")->capture_default_str();
+  probe
+      ->add_option("--min-gap-mm", o.min_gap_mm,
+                   "least gap between the probe and Q on the moves that do not probe (checked; a point that "
+                   "cannot keep it is refused), mm")
+      ->capture_default_str();
+  probe->add_option("--shank-radius-mm", o.shank_radius_mm, "stylus shank radius, kept clear of Q too; 0 = not checked")
+      ->capture_default_str();
   probe
       ->add_option("--fanuc-result-base", o.fanuc_result_base,
                    "Fanuc: first common variable of the results (#100-#199 or #500-#999); a plan that does not fit "

@@ -20,7 +20,8 @@ void AddSimulateCommand(CLI::App& root, CommandAction* action) {
   cmd->add_option("--run", args->run, "a `formloop run` folder (Q, tool path, part)")->required();
   cmd->add_option("--model", args->model, "MODEL.json: effects and parameters (format: docs/formats.md)")->required();
   cmd->add_option("--probe-plan", args->probe_plan,
-                  "PLAN.json or PLAN.csv (id,u,v,x,y,z,nx,ny,nz[,ax,ay,az]); default: the run's plan");
+                  "PLAN.json or PLAN.csv (id,u,v,x,y,z,nx,ny,nz[,ax,ay,az]); default: the run's plan with the "
+                  "approaches it planned");
   cmd->add_option("--out", args->out, "probe log to write (CSV: id,x,y,z,ax,ay,az,t)")->required();
   cmd->add_option("--truth", args->truth, "also write what was injected at each point (JSON)");
   cmd->add_option("--seed", args->seed, "noise seed")->default_val(1);

@@ -35,7 +35,7 @@ Status CopyInto(const std::string& from, const fs::path& to) {
 }
 
 Result<PlanWithApproaches> PlanFor(const RunFolder& run, const std::string& plan_path) {
-  if (plan_path.empty()) return PlanWithApproaches{run.plan, {}};
+  if (plan_path.empty()) return PlanWithApproaches{run.plan, run.approaches};
   return ReadPlanFile(plan_path);
 }
 

@@ -303,9 +303,10 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
   FL_RETURN_IF_ERROR(top.Object("probing", &f));
   bool true_probe_given = json.contains("machine") && json["machine"].contains("probe");
   if (f) {
-    FL_RETURN_IF_ERROR(f->CheckKnown({"grid", "inset_fraction", "edge_margin_mm", "ball_radius_mm", "pretravel_mm",
-                                      "profile", "clearance_mm", "search_mm", "feed_mm_per_min", "tool",
-                                      "fanuc_result_base", "sinumerik_r_base", "sinumerik_r_last"}));
+    FL_RETURN_IF_ERROR(
+        f->CheckKnown({"grid", "inset_fraction", "edge_margin_mm", "ball_radius_mm", "pretravel_mm", "profile",
+                       "clearance_mm", "search_mm", "feed_mm_per_min", "tool", "fanuc_result_base", "sinumerik_r_base",
+                       "sinumerik_r_last", "min_gap_mm", "shank_radius_mm"}));
     FL_RETURN_IF_ERROR(ReadProbeProfileField(*f, source, &part.probe, &part.probe_profile_given));
     FL_RETURN_IF_ERROR(f->OptionalNumber("edge_margin_mm", &part.probe_edge_margin_mm, kNonNegative));
     FL_RETURN_IF_ERROR(ReadInt(*f, "tool", &part.probe_program.probe_tool, 1, 9999));
@@ -336,6 +337,11 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
     FL_RETURN_IF_ERROR(
         f->OptionalNumber("search_mm", &part.probe_program.search_mm, {.min = 0, .max = 50, .exclusive_min = true}));
     FL_RETURN_IF_ERROR(f->OptionalNumber("feed_mm_per_min", &part.probe_program.probe_feed_mm_per_min, kFeed));
+    // The probe's gap from the part on the moves that do not probe, and its shank (nc-gen/probe_program.h).
+    FL_RETURN_IF_ERROR(
+        f->OptionalNumber("min_gap_mm", &part.probe_program.min_gap_mm, {.min = 0, .max = 50, .exclusive_min = true}));
+    FL_RETURN_IF_ERROR(
+        f->OptionalNumber("shank_radius_mm", &part.probe_program.shank_radius_mm, {.min = 0, .max = 50}));
   }
   if (!true_probe_given) part.true_probe = part.probe;
   part.probe_program.ball_radius_mm = part.probe.ball_radius_mm;
@@ -497,6 +503,11 @@ nlohmann::json PartSpec::ToJson() const {
   // Only effects the part gave: without them `--machine virtual` takes the machine's profile, and a
   // resolved part read again must do the same.
   out["probing"]["edge_margin_mm"] = probe_edge_margin_mm;
+  // The probe's gap and shank only when not the defaults (resolved parts of earlier runs stay as they were).
+  if (probe_program.min_gap_mm != nc::ProbeProgramOptions{}.min_gap_mm) {
+    out["probing"]["min_gap_mm"] = probe_program.min_gap_mm;
+  }
+  if (probe_program.shank_radius_mm > 0) out["probing"]["shank_radius_mm"] = probe_program.shank_radius_mm;
   if (probe_profile_given) {
     out["probing"].erase("ball_radius_mm");
     out["probing"].erase("pretravel_mm");

@@ -90,7 +90,7 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
     FL_RETURN_IF_ERROR(folder.Begin(cycle + " machine"));
     FL_ASSIGN_OR_RETURN(stages::Machined machined,
                         stages::MachineCycle(in, *current, plan.tool.radius_mm, programs.probing_plan,
-                                             programs.probe_approaches, loop, folder));
+                                             programs.probe_approaches, programs.part_surface, loop, folder));
 
     FL_RETURN_IF_ERROR(folder.Begin(cycle + " analysis"));
     const bool another = loop + 1 < max_loops || !in.machine.virtual_machine;

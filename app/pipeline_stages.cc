@@ -350,6 +350,8 @@ Result<Programs> WritePrograms(const PartSpec& part, const recon::BSplineSurface
   }
   nc::ProbeProgramOptions probe_options = part.probe_program;
   probe_options.approaches = p.probe_approaches;
+  FL_ASSIGN_OR_RETURN(p.part_surface, recon::FootPointProjector::Build(q));
+  probe_options.part_surface = p.part_surface;
   probe_options.post = p.post;
   probe_options.post.title = "formloop " + std::string(kVersion) + " probing program for part " + part.name;
   probe_options.safe_z_mm = p.nominal.safe_z_mm + part.probe.ball_radius_mm + part.probe_program.clearance_mm;
@@ -418,7 +420,8 @@ Result<FirstCut> Precompensate(const PartSpec& part, const recon::BSplineSurface
 
 Result<Machined> MachineCycle(const Inputs& in, const Program& program, double tool_radius_mm,
                               const metrology::ProbingPlan& plan, const std::vector<Eigen::Vector3d>& approaches,
-                              int loop, const RunFolderWriter& folder) {
+                              const std::optional<recon::FootPointProjector>& part_surface, int loop,
+                              const RunFolderWriter& folder) {
   const fs::path loop_dir = RunFolderWriter::LoopDir(loop);
   FL_RETURN_IF_ERROR(folder.MakeFolder(loop_dir));
   Machined out;
@@ -444,6 +447,9 @@ Result<Machined> MachineCycle(const Inputs& in, const Program& program, double t
     FL_ASSIGN_OR_RETURN(const cnc::LinuxCncConfig config, cnc::ReadLinuxCncConfig(machine.linuxcnc));
     cnc::LinuxCncProbingOptions probing;
     probing.program.approaches = approaches;
+    probing.program.part_surface = part_surface;
+    probing.program.min_gap_mm = in.part.probe_program.min_gap_mm;
+    probing.program.shank_radius_mm = in.part.probe_program.shank_radius_mm;
     FL_ASSIGN_OR_RETURN(const cnc::LinuxCncProbing probed,
                         cnc::ProbePlanOnLinuxCnc(config, plan, probing, folder.Path(loop_dir / "linuxcnc")));
     FL_RETURN_IF_ERROR(metrology::WriteProbeLog(folder.Path(loop_dir / "probe_log.csv"), probed.log));

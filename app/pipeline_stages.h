@@ -117,6 +117,8 @@ struct Programs {
   metrology::ProbingPlan probing_plan;
   // Per plan point, its approach when the separating experiment added tilted points (else empty: −n).
   std::vector<Eigen::Vector3d> probe_approaches;
+  // Q for the probing programs' check that the probe keeps clear of the part (nc-gen/probe_program.h).
+  std::optional<recon::FootPointProjector> part_surface;
 };
 // With an experiment's proposals, their tilted re-probe points are appended to the probing plan and
 // carried by the probing program (toolpath/separating_experiment.json says what was applied).
@@ -153,7 +155,8 @@ struct Machined {
 };
 Result<Machined> MachineCycle(const Inputs& in, const Program& program, double tool_radius_mm,
                               const metrology::ProbingPlan& plan, const std::vector<Eigen::Vector3d>& approaches,
-                              int loop, const RunFolderWriter& folder);
+                              const std::optional<recon::FootPointProjector>& part_surface, int loop,
+                              const RunFolderWriter& folder);
 
 // 7b. The cycle's analysis (deviations.csv|.ply, analysis.json) and its compensation decision.
 struct Analysed {

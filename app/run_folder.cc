@@ -230,12 +230,44 @@ Result<PlanWithApproaches> ReadPlanFile(const fs::path& path) {
 namespace {
 constexpr const char* kRunFolderFiles[] = {"inputs/part.json", "surface/Q.step", "toolpath/toolpath.csv",
                                            "toolpath/probing_plan.json"};
+// Written by the pipeline only when the plan has tilted approaches (the same points, with ax, ay, az).
+constexpr const char* kApproachesFile = "toolpath/probing_plan.csv";
+
+// The approaches of the run's tilted plan, checked to be of the same points as the JSON plan.
+Result<std::vector<Eigen::Vector3d>> ReadRunApproaches(const fs::path& dir, const metrology::ProbingPlan& plan) {
+  if (!fs::exists(dir / kApproachesFile)) return std::vector<Eigen::Vector3d>{};
+  FL_ASSIGN_OR_RETURN(const PlanWithApproaches csv, ReadPlanCsv(dir / kApproachesFile));
+  const std::string source = (dir / kApproachesFile).string();
+  const std::string fix =
+      "give the run folder as `formloop run` wrote it (probing_plan.csv and probing_plan.json "
+      "are written together)";
+  if (csv.approaches.empty()) {
+    return Status::BadInput(Where{.file = source, .line = 1, .field = "ax,ay,az"}, "has no approach columns", fix);
+  }
+  if (csv.plan.points.size() != plan.points.size()) {
+    return Status::BadInput(Where{.file = source},
+                            "has " + std::to_string(csv.plan.points.size()) + " points, toolpath/probing_plan.json " +
+                                std::to_string(plan.points.size()),
+                            fix);
+  }
+  for (std::size_t i = 0; i < plan.points.size(); ++i) {
+    if (csv.plan.points[i].id != plan.points[i].id || (csv.plan.points[i].point - plan.points[i].point).norm() > 1e-6) {
+      return Status::BadInput(Where{.file = source, .line = static_cast<long>(i) + 2},
+                              "point id " + std::to_string(csv.plan.points[i].id) +
+                                  " is not the point of toolpath/probing_plan.json in that row (id " +
+                                  std::to_string(plan.points[i].id) + ")",
+                              fix);
+    }
+  }
+  return csv.approaches;
+}
 }  // namespace
 
 std::vector<NamedPath> RunFolderInputs(const std::string& option, const fs::path& dir) {
   std::vector<NamedPath> inputs;
   if (dir.empty()) return inputs;
   for (const char* file : kRunFolderFiles) inputs.push_back({option, dir / file});
+  if (fs::exists(dir / kApproachesFile)) inputs.push_back({option, dir / kApproachesFile});
   return inputs;
 }
 
@@ -261,6 +293,7 @@ Result<RunFolder> ReadRunFolder(const fs::path& dir) {
   run.part.toolpath.tool = run.toolpath.options.tool;
   FL_ASSIGN_OR_RETURN(const PlanWithApproaches plan, ReadPlanJson(dir / "toolpath" / "probing_plan.json"));
   run.plan = plan.plan;
+  FL_ASSIGN_OR_RETURN(run.approaches, ReadRunApproaches(dir, run.plan));
   return run;
 }
 

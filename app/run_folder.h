@@ -3,7 +3,8 @@
 // marker, stage timing, the relative paths the JSON files name, the rename when complete) and how other
 // commands (simulate, diagnose) read one back (ReadRunFolder: the resolved part, the ideal surface Q
 // (surface/Q.step), the tool path (toolpath/toolpath.csv) and the probing plan
-// (toolpath/probing_plan.json), each read with the error naming the file).
+// (toolpath/probing_plan.json, with the approaches of toolpath/probing_plan.csv when the run planned tilted
+// points), each read with the error naming the file).
 //
 // A run folder is built as "<out>.partial" with status.json {"state": "incomplete", "stage": ...} and
 // renamed to <out> (state "complete") only when every output is written; a failed run is renamed to
@@ -83,10 +84,14 @@ struct RunFolder {
   nc::Toolpath toolpath;
   std::vector<sim::CutterLocation> cutter_locations;  // nc::CutterLocationsOf(toolpath)
   metrology::ProbingPlan plan;
+  // The approach of each plan point when the run planned tilted ones (a separating experiment:
+  // toolpath/probing_plan.csv beside the JSON plan); empty: every point along −n.
+  std::vector<Eigen::Vector3d> approaches;
 };
 
 Result<RunFolder> ReadRunFolder(const std::filesystem::path& dir);
-// The files ReadRunFolder reads, named by `option` (e.g. "--run"), for CheckOutputsNotInputs.
+// The files ReadRunFolder reads (those present of the optional ones), named by `option` (e.g. "--run"),
+// for CheckOutputsNotInputs.
 std::vector<NamedPath> RunFolderInputs(const std::string& option, const std::filesystem::path& dir);
 
 // A probing plan with optional approach directions: formloop's JSON ({"points": [{"id", "u", "v",

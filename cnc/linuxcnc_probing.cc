@@ -76,7 +76,11 @@ Result<LinuxCncProbing> ProbeOnLinuxCnc(const LinuxCncConfig& config, const reco
   FL_RETURN_IF_ERROR(options.Validate());
   FL_ASSIGN_OR_RETURN(const metrology::ProbingPlan plan,
                       metrology::PlanProbingGrid(q, options.nu, options.nv, options.inset_fraction));
-  return ProbePlanOnLinuxCnc(config, plan, options, out);
+  LinuxCncProbingOptions checked = options;
+  if (!checked.program.part_surface) {
+    FL_ASSIGN_OR_RETURN(checked.program.part_surface, recon::FootPointProjector::Build(q));
+  }
+  return ProbePlanOnLinuxCnc(config, plan, checked, out);
 }
 
 Result<LinuxCncProbing> ProbePlanOnLinuxCnc(const LinuxCncConfig& config, const metrology::ProbingPlan& plan,
@@ -115,8 +119,11 @@ Result<LinuxCncProbing> ProbePlanOnLinuxCnc(const LinuxCncConfig& config, const 
   if (program.post.title.empty()) program.post.title = "formloop probing on LinuxCNC, " + config.Get("EMC", "MACHINE");
   if (std::isnan(program.safe_z_mm)) {
     double top = -std::numeric_limits<double>::infinity();
-    for (const auto& p : result.plan.points) {
-      const Eigen::Vector3d start = p.point + (program.ball_radius_mm + program.clearance_mm) * p.normal;
+    for (std::size_t i = 0; i < result.plan.points.size(); ++i) {
+      const auto& p = result.plan.points[i];
+      const bool tilted = program.approaches.size() == result.plan.points.size();
+      const Eigen::Vector3d a = tilted ? program.approaches[i] : Eigen::Vector3d(-p.normal);
+      const Eigen::Vector3d start = p.point + program.ball_radius_mm * p.normal - program.clearance_mm * a;
       top = std::max(top, start.z() + program.backoff_mm);
     }
     program.safe_z_mm = std::ceil(top + 5.0);

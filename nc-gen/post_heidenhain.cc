@@ -225,7 +225,7 @@ class HeidenhainPost : public PostDialect {
       w.Continuation("Q581=" + unit(s.normal.x()) + " ;NORMAL VECTOR 1ST AXIS ~");
       w.Continuation("Q582=" + unit(s.normal.y()) + " ;NORMAL VECTOR 2ND AXIS ~");
       w.Continuation("Q583=" + unit(s.normal.z()) + " ;NORMAL VECTOR 3RD AXIS ~");
-      w.Continuation("Q320=" + num(options.clearance_mm) + " ;SET-UP CLEARANCE ~");
+      w.Continuation("Q320=" + num(s.clearance_mm) + " ;SET-UP CLEARANCE ~");
       w.Continuation("Q260=" + num(options.safe_z_mm) + " ;CLEARANCE HEIGHT ~");
       w.Continuation("Q281=+1 ;MEASURING LOG");
       // M30 (program end) rides on the last positioning block, as in the cutting post.

@@ -170,7 +170,7 @@ struct ProbeStation {
 };
 // Every station of the plan, each position checked against the limits (SafetyLimit names the point id),
 // after the options and the probe feed; with options.part_surface, each point's moves against the part
-// (nc-gen/probe_clearance.h), a tilted point's clearance shortened when that clears it.
+// (nc-gen/probe_clearance.h), a point's clearance shortened when that clears it.
 Result<std::vector<ProbeStation>> ProbeStations(const metrology::ProbingPlan& plan, const ProbeProgramOptions& options);
 // "stylus ball radius R mm; programmed point = ball centre; N points".
 std::string ProbeHeader(const ProbeProgramOptions& options, std::size_t points);

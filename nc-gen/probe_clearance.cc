@@ -12,10 +12,11 @@ namespace formloop::nc::internal {
 namespace {
 
 // The gap between a ball of `radius` centred at x and the part: the signed foot-point distance minus
-// the radius (negative: the ball overlaps the part).
+// the radius (negative: the ball overlaps the part); beyond Q's edge the unsigned distance (header).
 Result<double> BallGap(const recon::FootPointProjector& part, const Eigen::Vector3d& x, double radius) {
   FL_ASSIGN_OR_RETURN(const recon::FootPoint f, part.Project(x));
-  return (f.deviation_mm < 0 ? -f.distance_mm : f.distance_mm) - radius;
+  const bool inside = f.deviation_mm < 0 && !f.on_boundary;
+  return (inside ? -f.distance_mm : f.distance_mm) - radius;
 }
 
 // The sample of a traced segment with the least margin (gap − required).
@@ -29,23 +30,36 @@ struct Shortfall {
 using GapAt = std::function<Result<double>(const Eigen::Vector3d&)>;
 
 // Sphere tracing from → to (header comment); the requirement runs linearly from req_from to req_to.
-// Stops at the first sample short of its requirement (with the sampling allowance where it steps short).
+// Clear: a Shortfall that is not short of it. Otherwise, from the first sample short of its requirement
+// (with the sampling allowance where it steps short) the rest of the move is sampled every
+// kProbeReportStepMm for the least gap, which the refusal reports.
 Result<Shortfall> Trace(const Eigen::Vector3d& from, const Eigen::Vector3d& to, double req_from, double req_to,
                         const GapAt& gap) {
   const double length = (to - from).norm();
   const double slope = length > 0 ? std::abs(req_to - req_from) / length : 0;
+  const auto at = [&](double t) { return from + (length > 0 ? t / length : 0.0) * (to - from); };
+  const auto required_at = [&](double t) { return req_from + (length > 0 ? t / length : 0.0) * (req_to - req_from); };
+  double t = 0;
   Shortfall worst;
-  for (double t = 0;;) {
-    const double f = length > 0 ? t / length : 0;
-    const Eigen::Vector3d x = from + f * (to - from);
-    FL_ASSIGN_OR_RETURN(const double g, gap(x));
-    double required = req_from + f * (req_to - req_from);
-    const double reach = (g - required) / (1 + slope);  // clear within this distance of x
-    // A short step: this sample answers for half of it, so it must clear half a step's change more.
-    if (reach < kProbeTraceStepMm) required += 0.5 * (1 + slope) * kProbeTraceStepMm;
-    if (g - required < worst.margin) worst = {g - required, g, required, x};
-    if (worst.short_of_it() || t >= length) break;
-    t = std::min(length, t + std::max(reach, kProbeTraceStepMm));
+  for (;;) {
+    FL_ASSIGN_OR_RETURN(const double g, gap(at(t)));
+    const double required = required_at(t);
+    const double reach = (g - required) / (1 + slope);  // clear within this distance of the sample
+    // The least step beyond the reach: this sample answers for half of it, so it must clear half a
+    // step's change more.
+    const double allowance = reach < kProbeTraceFineStepMm ? 0.5 * (1 + slope) * kProbeTraceFineStepMm : 0.0;
+    if (g - required - allowance < 0) {
+      worst = {g - required - allowance, g, required, at(t)};
+      break;
+    }
+    if (t >= length) return worst;
+    t = std::min(length, t + std::max(reach, kProbeTraceFineStepMm));
+  }
+  for (double s = t; s < length;) {
+    s = std::min(length, s + kProbeReportStepMm);
+    FL_ASSIGN_OR_RETURN(const double g, gap(at(s)));
+    const double required = required_at(s);
+    if (g - required < worst.margin) worst = {g - required, g, required, at(s)};
   }
   return worst;
 }

@@ -15,14 +15,21 @@
 // move down to the contact itself.
 //
 // Method. The distance from a point to the part is the foot-point distance of FootPointProjector::
-// Project (reconstruction/foot_point.h, with its global check), negative on the material's side. It is
+// Project (reconstruction/foot_point.h, with its global check), negative on the material's side. Beyond
+// Q's edge (a foot point the parameter domain's edge holds back, FootPoint::on_boundary) the side is not
+// defined — the edge's normal can point either way, e.g. a steep face whose start points lie out past its
+// edge — and the unsigned distance is taken: every move is traced from the previous one's end, from safe
+// Z, so reaching Q's material side means passing within the required gap of Q, which is refused; the
+// part's other faces beyond Q's edge are not known to the check. The distance is
 // 1-Lipschitz, so a segment is followed by sphere tracing (J. C. Hart, "Sphere tracing: a geometric
 // method for the antialiased ray tracing of implicit surfaces", The Visual Computer 12(10):527-545,
 // 1996): a sample whose gap exceeds the requirement by m clears everything within m/(1 + k) of it (k the
-// slope of the requirement along the segment), and the next sample is taken there, but never closer
-// than kProbeTraceStepMm; a sample followed by such a short step must clear half a step's worth more
-// ((1 + k)·kProbeTraceStepMm/2, at most 0.0375 mm), so the check never passes a move that comes closer
-// than required; it may refuse one whose least gap is within that allowance above the requirement. The
+// slope of the requirement along the segment), and the next sample is taken there. Near the
+// requirement the steps shrink with the margin down to kProbeTraceFineStepMm; a sample followed by that
+// least step must clear half of it more ((1 + k)·kProbeTraceFineStepMm/2, at most 0.75 µm), so the check
+// never passes a move that comes closer than required and refuses one only when its least gap is within
+// that allowance above the requirement. A refusal reports the least gap of the move (sampled every
+// kProbeReportStepMm from the first sample short of it). The
 // shank's vertical lines along the probing move are taken every kProbeShankSpacingMm and each must clear
 // the requirement plus half that spacing (a line moved by δ is within δ of the one before).
 //
@@ -39,9 +46,10 @@
 
 namespace formloop::nc::internal {
 
-inline constexpr double kProbeTouchZone = 0.1;        // of the clearance, before the contact: not checked (ball)
-inline constexpr double kProbeTraceStepMm = 0.05;     // the least step of the sphere tracing
-inline constexpr double kProbeShankSpacingMm = 0.25;  // between the shank's lines along the probing move
+inline constexpr double kProbeTouchZone = 0.1;          // of the clearance, before the contact: not checked (ball)
+inline constexpr double kProbeTraceFineStepMm = 0.001;  // the least step of the sphere tracing
+inline constexpr double kProbeReportStepMm = 0.05;      // a refused move's least gap: sampled this often
+inline constexpr double kProbeShankSpacingMm = 0.25;    // between the shank's lines along the probing move
 
 // OK when station s keeps its gaps (header comment); `previous` is the station probed before it (its
 // position above starts the traverse), null for the first. SafetyLimit otherwise, naming the probe

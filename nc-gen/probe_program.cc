@@ -27,7 +27,7 @@ void Place(const ProbeProgramOptions& options, ProbeStation* s) {
   s->above.z() = options.safe_z_mm;
 }
 
-// A tilted point that is not clear of the part: tries the clearance halved, then quartered (above the
+// A point that is not clear of the part: tries the clearance halved, then quartered (above the
 // two-touch back-off), and keeps the first that clears; false when none does (s unchanged).
 bool Shorten(const recon::FootPointProjector& part, const ProbeStation* previous, const ProbeProgramOptions& options,
              ProbeStation* s) {
@@ -38,7 +38,7 @@ bool Shorten(const recon::FootPointProjector& part, const ProbeStation* previous
     Place(options, &shorter);
     if (CheckProbeClearance(part, shorter, previous, options).ok()) {
       log::Warn(
-          "[nc] probe point {}: its tilted approach starts {} mm from the contact instead of {} mm, to keep "
+          "[nc] probe point {}: its probing move starts {} mm from the contact instead of {} mm, to keep "
           "the probe clear of the part",
           s->id, FormatExact(shorter.clearance_mm), FormatExact(options.clearance_mm));
       *s = shorter;
@@ -86,7 +86,7 @@ Result<std::vector<ProbeStation>> ProbeStations(const metrology::ProbingPlan& pl
     if (options.part_surface) {
       const ProbeStation* previous = stations.empty() ? nullptr : &stations.back();
       const Status clear = CheckProbeClearance(*options.part_surface, s, previous, options);
-      if (!clear.ok() && !(s.tilted && Shorten(*options.part_surface, previous, options, &s))) return clear;
+      if (!clear.ok() && !Shorten(*options.part_surface, previous, options, &s)) return clear;
     }
     FL_RETURN_IF_ERROR(CheckTravel(options.post.limits, s.above, what));
     FL_RETURN_IF_ERROR(CheckTravel(options.post.limits, s.start, what));
@@ -114,8 +114,15 @@ std::string ProbeHeader(const ProbeProgramOptions& options, std::size_t points) 
 }  // namespace internal
 
 Status ProbeProgramOptions::Validate() const {
-  if (!(min_gap_mm > 0)) return Status::BadInput(Where{.field = "probe.min_gap_mm"}, "must be > 0");
-  if (!(shank_radius_mm >= 0)) return Status::BadInput(Where{.field = "probe.shank_radius_mm"}, "must be >= 0");
+  if (!(min_gap_mm > 0)) {
+    return Status::BadInput(Where{.field = "probe.min_gap_mm"}, "must be > 0, got " + FormatExact(min_gap_mm),
+                            "give the least gap between the probe and the part in mm (default 1)");
+  }
+  if (!(shank_radius_mm >= 0)) {
+    return Status::BadInput(Where{.field = "probe.shank_radius_mm"},
+                            "must be >= 0, got " + FormatExact(shank_radius_mm),
+                            "give the stylus shank's radius in mm, or 0 not to check the shank");
+  }
   if (!(ball_radius_mm > 0)) return Status::BadInput(Where{.field = "probe.ball_radius_mm"}, "must be > 0");
   if (!(clearance_mm > 0)) return Status::BadInput(Where{.field = "probe.clearance_mm"}, "must be > 0");
   if (!(search_mm > 0)) return Status::BadInput(Where{.field = "probe.search_mm"}, "must be > 0");

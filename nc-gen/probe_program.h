@@ -74,10 +74,10 @@ struct ProbeProgramOptions {
   // against it before any text is written (nc-gen/probe_clearance.h): the stylus ball keeps min_gap_mm
   // from the part on the traverse at safe Z, min(min_gap_mm, ½·clearance·cos tilt) on the vertical
   // descent to the start, and that gap shrinking towards the contact on the probing move; the shank too
-  // when shank_radius_mm > 0. A tilted point that fails is tried again with the clearance halved, then
-  // quartered (above backoff_mm with two touches): the first that clears is programmed (a warning names
-  // the point and the clearance); otherwise, and for a point along −n, the program is refused naming
-  // the point, the move and the gap (SafetyLimit). Not given: nothing is checked against the part.
+  // when shank_radius_mm > 0. A point that fails (tilted or along −n) is tried again with the clearance
+  // halved, then quartered (above backoff_mm with two touches): the first that clears is programmed (a
+  // warning names the point and the clearance); otherwise the program is refused naming the point, the
+  // move and the least gap on it (SafetyLimit). Not given: nothing is checked against the part.
   std::optional<recon::FootPointProjector> part_surface;
   double min_gap_mm = 1.0;
   double shank_radius_mm = 0;  // the stylus shank, a vertical cylinder above the ball centre; 0 = not checked

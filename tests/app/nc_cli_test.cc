@@ -99,6 +99,17 @@ TEST_F(NcCliTest, LimitsAndBadOptionsAreRefusedWithNothingWritten) {
   EXPECT_EQ(Run("nc path --surface " + Path("Q.step") + " --out " + out + " --dialect haas"), 2);
   EXPECT_NE(err_.find("haas"), std::string::npos) << err_;
   EXPECT_EQ(Run("nc probe --surface " + Path("Q.step") + " --out " + out + " --grid 4by3"), 2);
+  // The probe's moves are checked clear of Q: a least gap of 50 mm, which the traverse at safe Z 50 cannot
+  // keep above the saddle, is refused naming the point, the move and the gap.
+  EXPECT_EQ(Run("nc probe --surface " + Path("Q.step") + " --out " + out + " --grid 4x4 --min-gap-mm 50"), 1);
+  EXPECT_NE(err_.find("probe point 2: the stylus ball would come within 44.574 mm of the part (50.000 mm required) "
+                      "on the traverse at safe Z from point 1"),
+            std::string::npos)
+      << err_;
+  EXPECT_EQ(Run("nc probe --surface " + Path("Q.step") + " --out " + out + " --min-gap-mm 0"), 2);
+  EXPECT_NE(err_.find("--min-gap-mm"), std::string::npos) << err_;
+  EXPECT_EQ(Run("nc probe --surface " + Path("Q.step") + " --out " + out + " --shank-radius-mm -1"), 2);
+  EXPECT_NE(err_.find("--shank-radius-mm"), std::string::npos) << err_;
   EXPECT_EQ(Run("nc path --surface " + Path("missing.step") + " --out " + out), 2);
   EXPECT_FALSE(fs::exists(out));
 }

@@ -2,7 +2,8 @@
 // the first part of a machine whose tool radius and probe radius are both off cannot tell them apart and
 // proposes a tilted re-probe, which the case library keeps with its learned model; the next part (another
 // shape, same machine/tool/material) asking for the library's experiment is probed with the tilted points,
-// its probing program and log carry them, and its own diagnosis no longer holds the radii in one group.
+// its probing program and log carry them, and its own diagnosis no longer holds the radii in one group;
+// `formloop simulate --run` of that run probes its tilted points along their approaches.
 
 #include <algorithm>
 #include <cctype>
@@ -14,11 +15,15 @@
 
 #include <gtest/gtest.h>
 
+#include "app/model_jobs.h"
 #include "app/part.h"
 #include "app/pipeline.h"
+#include "app/run_folder.h"
+#include "core/atomic_file.h"
 #include "core/json_io.h"
 #include "core/log.h"
 #include "kb/library.h"
+#include "metrology/probe.h"
 #include "tests/support/starter_library.h"
 #include "tests/support/test_dir.h"
 
@@ -148,6 +153,65 @@ TEST_F(SeparatingExperimentTest, TheNextPartIsProbedWithTheLibrarysTiltedReprobe
     EXPECT_LE(interval[0].get<double>(), t->second.second) << effect;
     EXPECT_GE(interval[1].get<double>(), t->second.second) << effect;
   }
+
+  // `formloop simulate --run` probes the run's tilted points along the approaches the run planned
+  // (toolpath/probing_plan.csv), as if the plan CSV were given with --probe-plan: the same log, byte for byte.
+  ASSERT_TRUE(WriteJsonFile(dir_ / "model.json",
+                            {{"format", "formloop-model"},
+                             {"version", 1},
+                             {"effects", {{{"name", "probe_radius"}, {"parameters", {{"delta_r_eff_um", 8.0}}}}}}})
+                  .ok());
+  SimulateArgs sim{.run = run2.string(), .model = (dir_ / "model.json").string(), .out = (dir_ / "sim.csv").string()};
+  ASSERT_TRUE(RunSimulate(sim).ok());
+  SimulateArgs given = sim;
+  given.probe_plan = (run2 / "toolpath" / "probing_plan.csv").string();
+  given.out = (dir_ / "sim_given.csv").string();
+  ASSERT_TRUE(RunSimulate(given).ok());
+  const auto simulated = metrology::ReadProbeLog(dir_ / "sim.csv");
+  const auto approaches = ReadPlanFile(run2 / "toolpath" / "probing_plan.csv");
+  ASSERT_TRUE(simulated.ok() && approaches.ok());
+  ASSERT_EQ(simulated->records.size(), approaches->approaches.size());
+  int tilted = 0;
+  for (std::size_t i = 0; i < simulated->records.size(); ++i) {
+    const auto& r = simulated->records[i];
+    EXPECT_LT((r.approach - approaches->approaches[i]).norm(), 1e-6) << "point " << r.id;
+    tilted += r.approach.dot(-approaches->plan.points[i].normal) < 0.99 ? 1 : 0;
+  }
+  EXPECT_EQ(tilted, added);
+  std::ifstream a(dir_ / "sim.csv"), b(dir_ / "sim_given.csv");
+  const std::string text_a((std::istreambuf_iterator<char>(a)), std::istreambuf_iterator<char>());
+  const std::string text_b((std::istreambuf_iterator<char>(b)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(text_a, text_b);
+
+  // `formloop diagnose --run` of that run reads the same folder, its approaches checked against the plan,
+  // and diagnoses every point of the simulated log; the probe radius is among its findings.
+  DiagnoseArgs da{.measured = (dir_ / "sim.csv").string(), .run = run2.string(), .out = (dir_ / "diag").string()};
+  da.propose = false;
+  const auto diagnosed = RunDiagnose(da);
+  ASSERT_TRUE(diagnosed.ok()) << diagnosed.status().ToString();
+  EXPECT_EQ((*diagnosed)["n"].get<std::size_t>(), simulated->records.size());
+  EXPECT_NE(((*diagnosed)["causes"].dump() + (*diagnosed)["alias_groups"].dump()).find("probe_radius"),
+            std::string::npos)
+      << diagnosed->dump();
+  // A run folder whose approach file is not of the JSON plan's points is refused naming the file and row.
+  const fs::path copied = dir_ / "copied";
+  fs::copy(run2, copied, fs::copy_options::recursive);
+  // The first two data rows (after the header) swapped: row 2 holds the plan's second point.
+  std::ifstream csv_in(copied / "toolpath" / "probing_plan.csv");
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(csv_in, line);) lines.push_back(line);
+  csv_in.close();
+  ASSERT_GE(lines.size(), 3u);
+  std::swap(lines[1], lines[2]);
+  std::string csv;
+  for (const auto& line : lines) csv += line + "\n";
+  ASSERT_TRUE(WriteFileAtomic(copied / "toolpath" / "probing_plan.csv", csv).ok());
+  const auto mismatched = ReadRunFolder(copied);
+  ASSERT_FALSE(mismatched.ok());
+  EXPECT_NE(mismatched.status().ToString().find("probing_plan.csv"), std::string::npos)
+      << mismatched.status().ToString();
+  EXPECT_NE(mismatched.status().ToString().find("is not the point of toolpath/probing_plan.json"), std::string::npos)
+      << mismatched.status().ToString();
 }
 
 TEST_F(SeparatingExperimentTest, APartWithoutTheOptionWritesNothingNewAndBadValuesAreRefused) {
@@ -186,6 +250,30 @@ TEST_F(SeparatingExperimentTest, APartWithoutTheOptionWritesNothingNewAndBadValu
   ASSERT_TRUE(again.ok()) << again.status().ToString();
   EXPECT_EQ(again->proposals.size(), 1u);
   EXPECT_EQ(again->proposals[0].raster_turn_deg, 90.0);
+
+  // The probe's least gap and shank (the clearance check of the probing program): a resolved part keeps
+  // them only when the part set them (earlier runs' resolved parts stay as they were) and reads them back.
+  EXPECT_FALSE(ReadJsonFile(dir_ / "plain" / "inputs" / "part.json").value()["probing"].contains("min_gap_mm"));
+  Json gapped = PartJson("reg-dome-a", "gapped", nullptr);
+  gapped["probing"]["min_gap_mm"] = 2.5;
+  gapped["probing"]["shank_radius_mm"] = 0.75;
+  ASSERT_TRUE(WriteJsonFile(dir_ / "gapped.json", gapped).ok());
+  const auto with_gap = ReadPart(dir_ / "gapped.json");
+  ASSERT_TRUE(with_gap.ok()) << with_gap.status().ToString();
+  const auto gap_again = ParsePart(with_gap->ToJson(), "resolved");
+  ASSERT_TRUE(gap_again.ok()) << gap_again.status().ToString();
+  EXPECT_EQ(gap_again->probe_program.min_gap_mm, 2.5);
+  EXPECT_EQ(gap_again->probe_program.shank_radius_mm, 0.75);
+  for (const auto& [field, value] : std::vector<std::pair<std::string, double>>{
+           {"min_gap_mm", 0}, {"min_gap_mm", 60}, {"shank_radius_mm", -1}, {"shank_radius_mm", 51}}) {
+    Json bad = gapped;
+    bad["probing"][field] = value;
+    ASSERT_TRUE(WriteJsonFile(dir_ / "bad_gap.json", bad).ok());
+    const auto refused_part = ReadPart(dir_ / "bad_gap.json");
+    ASSERT_FALSE(refused_part.ok()) << field << " = " << value;
+    EXPECT_NE(refused_part.status().message().find("probing." + field), std::string::npos)
+        << refused_part.status().message();
+  }
 }
 
 }  // namespace

@@ -388,6 +388,10 @@ inline std::vector<Case> AllCases() {
           .File("p.json", PartWith("/probing/search_mm", 500)),
       C("part_probe_clearance_huge", "part JSON", "run p.json --out r", 2, {"p.json", "probing.clearance_mm"})
           .File("p.json", PartWith("/probing/clearance_mm", 10000)),
+      C("part_probe_min_gap_zero", "part JSON", "run p.json --out r", 2, {"p.json", "probing.min_gap_mm"})
+          .File("p.json", PartWith("/probing/min_gap_mm", 0)),
+      C("part_probe_shank_negative", "part JSON", "run p.json --out r", 2, {"p.json", "probing.shank_radius_mm"})
+          .File("p.json", PartWith("/probing/shank_radius_mm", -1)),
       C("part_probe_grid_huge", "part JSON", "run p.json --out r", 2, {"p.json", "probing.grid"})
           .File("p.json", PartWith("/probing/grid", nlohmann::json::array({1000, 1000}))),
       C("part_probe_feed_above_machine", "part JSON", "run p.json --out r", 2, {"p.json", "probing.feed_mm_per_min"})
@@ -744,6 +748,10 @@ inline std::vector<Case> AllCases() {
       C("nc_probe_count_huge", "options", "nc probe --surface {F}/Q.step --count 2000000000 --out p.ngc", 2,
         {"--count"}),
       C("nc_probe_search_zero", "options", "nc probe --surface {F}/Q.step --search-mm 0 --out p.ngc", 2, {"search"}),
+      C("nc_probe_min_gap_zero", "options", "nc probe --surface {F}/Q.step --min-gap-mm 0 --out p.ngc", 2,
+        {"--min-gap-mm"}),
+      C("nc_probe_shank_negative", "options", "nc probe --surface {F}/Q.step --shank-radius-mm -1 --out p.ngc", 2,
+        {"--shank-radius-mm"}),
       C("nc_probe_clearance_huge", "options", "nc probe --surface {F}/Q.step --clearance-mm 1e6 --out p.ngc", 2,
         {"clearance"}),
       C("moran_knn_zero", "options", "analyse moran --points t.csv --value v --knn 0 --style W", 2, {"--knn"})

@@ -25,12 +25,17 @@
 #include <thread>
 
 #include "cnc/linuxcnc_link.h"
+#include "cnc/linuxcnc_probe_log.h"
+#include "cnc/linuxcnc_probing.h"
 #include "cnc/linuxcnc_run.h"
 #include "core/atomic_file.h"
 #include "core/json_io.h"
 #include "nc-gen/moves.h"
 #include "nc-gen/post.h"
+#include "nc-gen/probe_program.h"
 #include "nc-gen/toolpath.h"
+#include "reconstruction/analytic_surface.h"
+#include "reconstruction/foot_point.h"
 #include "tests/support/run_binary.h"
 #include "tests/support/test_dir.h"
 
@@ -252,6 +257,83 @@ TEST_F(LinuxCncMachineTest, TinyCuttingProgramFromNcGenRunsToItsEnd) {
   std::printf("[linuxcnc] tiny cutting program (%zu lines): %.2f s on the controller, %.1f s in all\n",
               std::count(program->begin(), program->end(), '\n'), report["seconds"]["run"].get<double>(),
               report["seconds"]["total"].get<double>());
+}
+
+// Tilted probing (a separating experiment, issue 20; nc-gen/probe_program.h) on the controller: formloop's
+// LinuxCNC probing program with approaches tilted 30°, 45° and 60° from −n (and one along −n), checked
+// clear of the part (the saddle, ProbeProgramOptions::part_surface), runs on LinuxCNC; each point's
+// start lies off its normal line, so the ball reaches the surface where the program expects only when
+// the controller moves it along the approach. LinuxCNC's trip positions (the LOG's #5061..#5063, checked
+// against PROBEOPEN) are the ball centre at contact, nominal point + R·n, to the trigger quantisation of
+// the slow touch (F6, 1 ms: 0.1 µm), and the LOG carries each approach.
+TEST_F(LinuxCncMachineTest, TiltedProbingProgramTripsAtTheContactAlongEachApproach) {
+  Config("machine", "");
+  const auto config = cnc::ReadLinuxCncConfig(dir_ / "machine");
+  ASSERT_TRUE(config.ok()) << config.status().message();
+  const auto saddle = recon::MakeReferenceSurface("saddle");
+  ASSERT_TRUE(saddle.ok());
+  const auto part = recon::FootPointProjector::Build(**saddle);
+  ASSERT_TRUE(part.ok());
+  nc::ProbeProgramOptions o = cnc::LinuxCncProbingOptions::DefaultProgram();  // F600, back off, F6
+  o.ball_radius_mm = std::stod(config->Get("FORMLOOP", "PROBE_BALL_RADIUS_MM"));
+  const auto limits = cnc::LimitsOf(*config);
+  ASSERT_TRUE(limits.ok());
+  o.post.limits = *limits;
+  o.post.title = "formloop tilted probing on LinuxCNC";
+  o.safe_z_mm = 10;
+  o.part_surface = *part;
+  // (x, y, tilt from −n in degrees, azimuth of the tilt about +z in degrees).
+  const double rows[4][4] = {{-10, 5, 0, 0}, {5, -8, 30, 0}, {12, 10, 45, 135}, {-6, -12, 60, 270}};
+  metrology::ProbingPlan plan;
+  for (int i = 0; i < 4; ++i) {
+    metrology::ProbePoint p;
+    p.id = i + 1;
+    p.u = rows[i][0];
+    p.v = rows[i][1];
+    p.point = (*saddle)->Point(p.u, p.v);
+    p.normal = (*saddle)->Normal(p.u, p.v);
+    plan.points.push_back(p);
+    const double tilt = rows[i][2] * std::numbers::pi / 180, azimuth = rows[i][3] * std::numbers::pi / 180;
+    const Eigen::Vector3d toward(std::cos(azimuth), std::sin(azimuth), 0);
+    const Eigen::Vector3d d = (toward - toward.dot(p.normal) * p.normal).normalized();
+    o.approaches.push_back((-std::cos(tilt) * p.normal + std::sin(tilt) * d).normalized());
+  }
+  const auto program = nc::PostProbing(plan, "linuxcnc", o);
+  ASSERT_TRUE(program.ok()) << program.status().message();
+  ASSERT_TRUE(WriteFileAtomic(dir_ / "tilted.ngc", *program).ok());
+  json report;
+  ASSERT_EQ(Run("tilted.ngc", "session", &report), 0) << report.dump(2);
+  fs::path log_file, results_file;
+  for (const auto& entry : fs::recursive_directory_iterator(dir_ / "session")) {
+    if (entry.path().filename() == o.linuxcnc_log_file) log_file = entry.path();
+    if (entry.path().filename() == o.results_file) results_file = entry.path();
+  }
+  ASSERT_FALSE(log_file.empty()) << "no " << o.linuxcnc_log_file << " in the session";
+  const auto log = cnc::ReadLinuxCncProbeLog(log_file, results_file, 2);
+  ASSERT_TRUE(log.ok()) << log.status().message();
+  ASSERT_EQ(log->records.size(), plan.points.size());
+  for (std::size_t i = 0; i < plan.points.size(); ++i) {
+    const auto& p = plan.points[i];
+    const auto& r = log->records[i];
+    const Eigen::Vector3d& a = o.approaches[i];
+    const Eigen::Vector3d contact = p.point + o.ball_radius_mm * p.normal;
+    const Eigen::Vector3d start = contact - o.clearance_mm * a;
+    EXPECT_EQ(r.id, p.id);
+    EXPECT_LT((r.approach - a).norm(), 1e-8) << "point " << p.id;
+    const Eigen::Vector3d off = r.centre - contact;
+    const double along = off.dot(a), across = (off - along * a).norm();
+    // The start is off the normal line by clearance × sin(tilt): moving along −n from it would miss c.
+    const double off_normal = ((start - contact) - (start - contact).dot(p.normal) * p.normal).norm();
+    std::printf(
+        "[linuxcnc] tilted probing, point %lld: tilt %.0f deg, start %.3f mm off the normal line; trip - contact: "
+        "%.4f um along the approach, %.4f um across\n",
+        static_cast<long long>(p.id), rows[i][2], off_normal, 1e3 * along, 1e3 * across);
+    EXPECT_LT(off.norm(), 0.5e-3) << "point " << p.id << ": LinuxCNC tripped " << 1e3 * off.norm()
+                                  << " um from the expected contact position";
+    if (rows[i][2] > 0) {
+      EXPECT_GT(off_normal, 0.9) << "point " << p.id;
+    }
+  }
 }
 
 // `formloop run --machine linuxcnc:CONFIG`: the pipeline's machining-and-probing step on the controller. Its

@@ -187,8 +187,9 @@ TEST(ProbeClearanceTest, APointThatCannotBeClearedIsRefusedNamingItAndTheGap) {
   ProbeProgramOptions o = Options(&*part);
   o.approaches = {-plan.points[0].normal, Tilted(plan.points[1].normal, -45)};
   // Even along −n the ball descends between the valley's rims, 2 mm from its centre, and walls about
-  // 1.6 mm from it at z = 4: a gap near 0.6 mm against the 1 mm required. Every dialect refuses, naming
-  // the point and the first gap short of the requirement met coming down (at the rims).
+  // 1.6 mm from it at z = 4: a gap near 0.6 mm against the 1 mm required, with the clearance halved or
+  // quartered too. Every dialect refuses, naming the point and the least gap coming down (0.613 mm, at
+  // z = 4).
   for (const std::string& dialect : ProbingDialectNames()) {
     ProbeProgramOptions untilted = Options(&*part);
     metrology::ProbingPlan first;
@@ -197,7 +198,9 @@ TEST(ProbeClearanceTest, APointThatCannotBeClearedIsRefusedNamingItAndTheGap) {
     ASSERT_FALSE(refused.ok()) << dialect;
     EXPECT_EQ(refused.status().code(), StatusCode::kSafetyLimit) << dialect;
     const std::string& m = refused.status().message();
-    EXPECT_NE(m.find("probe point 7: the stylus ball would come within 1.0"), std::string::npos) << m;
+    EXPECT_NE(m.find("probe point 7: the stylus ball would come within 0.613 mm of the part (1.000 mm required)"),
+              std::string::npos)
+        << m;
     EXPECT_NE(m.find("mm required) on the descent from safe Z"), std::string::npos) << m;
   }
   // A 0.5 mm gap is enough for point 7; point 8, tilted 45° under the wall, is refused even with the
