@@ -134,6 +134,18 @@ Result<PooledCases> FindPooledCases(kb::Library& library, const std::string& mac
   return out;
 }
 
+Result<std::vector<std::string>> PartRecordProblems(kb::Library& library) {
+  FL_ASSIGN_OR_RETURN(const std::vector<kb::PartRecordRow> rows, library.AllPartRecords());
+  std::vector<std::string> problems;
+  for (const kb::PartRecordRow& row : rows) {
+    const auto record =
+        sim::PartRecord::FromJson(row.record, "part record of case " + row.case_uid + " (" + row.machine + " / " +
+                                                  row.tool + " / " + row.material + ")");
+    if (!record.ok()) problems.push_back(std::string(record.status().message()));
+  }
+  return problems;
+}
+
 retrieval::PartDescription DescriptionOf(const PartSpec& part, const nc::ToolpathOptions& plan) {
   retrieval::PartDescription d;
   d.family_tag = part.name;

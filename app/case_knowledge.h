@@ -55,6 +55,9 @@ struct PooledCases {
 };
 Result<PooledCases> FindPooledCases(kb::Library& library, const std::string& machine, const std::string& tool,
                                     const std::string& material, const std::string& own_uid, int limit);
+// What a pooled run would trip on (`kb check`): every part record of the library read as FindPooledCases
+// reads it; one line per record it cannot read, naming the case, its machine/tool/material and the field.
+Result<std::vector<std::string>> PartRecordProblems(kb::Library& library);
 
 // The retrieval description of a part (retrieval::PartDescription) from its part file.
 retrieval::PartDescription DescriptionOf(const PartSpec& part, const nc::ToolpathOptions& plan);

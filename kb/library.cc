@@ -339,6 +339,29 @@ Result<std::vector<PartRecordRow>> Library::PartRecords(const std::string& machi
   return out;
 }
 
+Result<std::vector<PartRecordRow>> Library::AllPartRecords() {
+  FL_ASSIGN_OR_RETURN(Statement s, db_->Prepare("SELECT c.uid, r.machine, r.tool, r.material, r.record_json FROM "
+                                                "case_part_records r JOIN cases c ON c.id = r.case_id ORDER BY "
+                                                "c.uid, r.machine, r.tool, r.material;"));
+  std::vector<PartRecordRow> out;
+  while (true) {
+    FL_ASSIGN_OR_RETURN(bool row, s.Step());
+    if (!row) break;
+    PartRecordRow r{s.ColumnText(0),
+                    s.ColumnText(1),
+                    s.ColumnText(2),
+                    s.ColumnText(3),
+                    json::parse(s.ColumnText(4), nullptr, /*allow_exceptions=*/false),
+                    ""};
+    if (r.record.is_discarded()) {
+      return Status::Failed("case library '" + db_->name() + "': the part record of case " + r.case_uid +
+                            " is not JSON");
+    }
+    out.push_back(std::move(r));
+  }
+  return out;
+}
+
 Status Library::RemoveCase(const std::string& uid) {
   return db_->RunInTransaction([&]() -> Status {
     FL_ASSIGN_OR_RETURN(Statement del, db_->Prepare("DELETE FROM cases WHERE uid = ?1;"));
@@ -653,24 +676,8 @@ Status Library::ExportSnapshot(std::string* text) {
   out += header.dump() + "\n";
   for (const CaseRecord& c : cases) out += json{{"type", "case"}, {"case", c.ToJson()}}.dump() + "\n";
   {
-    FL_ASSIGN_OR_RETURN(Statement s, db_->Prepare("SELECT c.uid, r.machine, r.tool, r.material, r.record_json FROM "
-                                                  "case_part_records r JOIN cases c ON c.id = r.case_id ORDER BY "
-                                                  "c.uid, r.machine, r.tool, r.material;"));
-    while (true) {
-      FL_ASSIGN_OR_RETURN(bool row, s.Step());
-      if (!row) break;
-      PartRecordRow r{s.ColumnText(0),
-                      s.ColumnText(1),
-                      s.ColumnText(2),
-                      s.ColumnText(3),
-                      json::parse(s.ColumnText(4), nullptr, /*allow_exceptions=*/false),
-                      ""};
-      if (r.record.is_discarded()) {
-        return Status::Failed("case library '" + db_->name() + "': the part record of case " + r.case_uid +
-                              " is not JSON");
-      }
-      out += r.ToJson().dump() + "\n";
-    }
+    FL_ASSIGN_OR_RETURN(const std::vector<PartRecordRow> records, AllPartRecords());
+    for (const PartRecordRow& r : records) out += r.ToJson().dump() + "\n";
   }
   {
     FL_ASSIGN_OR_RETURN(Statement s, db_->Prepare("SELECT version, name, condition_json, choice_json, active FROM "

@@ -222,6 +222,8 @@ class Library {
   // The part records of a machine/tool/material, the newest case first (its updated_at, then uid).
   Result<std::vector<PartRecordRow>> PartRecords(const std::string& machine, const std::string& tool,
                                                  const std::string& material);
+  // Every part record, by case uid, machine, tool, material (export; `kb check`).
+  Result<std::vector<PartRecordRow>> AllPartRecords();
 
   Result<LibraryStats> Stats();
   Result<CheckReport> Check();

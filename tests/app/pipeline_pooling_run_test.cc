@@ -196,6 +196,19 @@ TEST_F(PipelinePoolingRunTest, TheSecondPartPoolsTheFirstAndSplitsWhatNeitherCan
                     ->Execute("UPDATE case_part_records SET record_json = json_remove(record_json, '$.d_radius');")
                     .ok());
   }
+  {
+    // `kb check` finds it first (PartRecordProblems); the good library has none.
+    auto library = kb::Library::Open(bad_kb.string());
+    ASSERT_TRUE(library.ok());
+    const auto problems = PartRecordProblems(**library);
+    ASSERT_TRUE(problems.ok()) << problems.status().ToString();
+    ASSERT_EQ(problems->size(), 1u);
+    EXPECT_NE((*problems)[0].find("case warm-dome (vm-warm / ball r3 / H13)"), std::string::npos) << (*problems)[0];
+    EXPECT_NE((*problems)[0].find("d_radius"), std::string::npos) << (*problems)[0];
+    auto good = kb::Library::Open(kb_.string());
+    ASSERT_TRUE(good.ok());
+    EXPECT_TRUE(PartRecordProblems(**good)->empty());
+  }
   const auto bad = Run(second_part, "bad", bad_kb, 2, false);
   ASSERT_FALSE(bad.ok());
   const std::string message = bad.status().ToString();

@@ -162,7 +162,10 @@ TEST(PartRecordTest, TheRecordGivesTheChainsResidualsAgainstAnyBaselineAndPoolsA
   ASSERT_EQ(stored.residual_um.size(), direct->residual_um.size());
   const double moved_um = (stored.residual_um - back->residual_um).cwiseAbs().maxCoeff();
   EXPECT_GT(moved_um, 5.0) << "the baseline moves the residuals";
-  EXPECT_LT((stored.residual_um - direct->residual_um).cwiseAbs().maxCoeff(), 0.01);
+  const double linearised_um = (stored.residual_um - direct->residual_um).cwiseAbs().maxCoeff();
+  std::printf("baseline moves the residuals by up to %.2f um; the record's linearised chain differs by %.2e um\n",
+              moved_um, linearised_um);
+  EXPECT_LT(linearised_um, 0.01);
   for (std::size_t i = 0; i < stored.contexts.size(); ++i) {
     ASSERT_EQ(stored.contexts[i].id, direct->contexts[i].id);
     EXPECT_EQ(stored.contexts[i].cut_time_s, direct->contexts[i].cut_time_s);
