@@ -106,15 +106,38 @@ INSTANTIATE_TEST_SUITE_P(Backends, PartRecordTest, ::testing::Values(Backend::kS
                          testing::BackendName);
 
 TEST_F(KbLibraryTest, AVersion2LibraryMigratesToVersion3WithItsCasesAndNoPartRecords) {
+  // A v2 library with two cases: v3 only adds case_part_records, so a current library without it, at
+  // user_version 2, is what formloop before v3 wrote.
   const fs::path path = dir_ / "v2.db";
   {
-    auto db = Database::Open(path, Database::Mode::kCreate);
-    ASSERT_TRUE(db.ok());
-    const std::vector<Migration> v2(SchemaMigrations().begin(), SchemaMigrations().begin() + 2);
-    ASSERT_TRUE(Migrate(db->get(), v2).ok());
-    ASSERT_EQ(*(*db)->QueryInt("PRAGMA user_version;"), 2);
+    auto lib = NewLibrary("v2.db");
+    ASSERT_NE(lib, nullptr);
+    ASSERT_TRUE(lib->AddCase(SyntheticCase(3)).ok());
+    ASSERT_TRUE(lib->AddCase(SyntheticCase(4)).ok());
   }
-  // A v2 library is refused until migrated.
+  {
+    auto db = Database::Open(path, Database::Mode::kOpenExisting);
+    ASSERT_TRUE(db.ok());
+    ASSERT_TRUE((*db)->Execute("DROP TABLE case_part_records; PRAGMA user_version = 2;").ok());
+  }
+  // A migration that fails half-way (an object already holds the index's name) changes nothing: the
+  // library stays at v2 without the new table.
+  const fs::path blocked = dir_ / "blocked.db";
+  fs::copy_file(path, blocked);
+  {
+    auto db = Database::Open(blocked, Database::Mode::kOpenExisting);
+    ASSERT_TRUE(db.ok());
+    ASSERT_TRUE((*db)->Execute("CREATE TABLE case_part_records_by_key(x INTEGER);").ok());
+  }
+  EXPECT_FALSE(InitLibrary(blocked.string()).ok());
+  {
+    auto db = Database::Open(blocked, Database::Mode::kOpenExisting);
+    ASSERT_TRUE(db.ok());
+    EXPECT_EQ(*(*db)->QueryInt("PRAGMA user_version;"), 2);
+    EXPECT_EQ(*(*db)->QueryInt("SELECT count(*) FROM sqlite_master WHERE name = 'case_part_records';"), 0);
+  }
+
+  // A v2 library is refused until migrated; migrated, it keeps its cases and has no part records.
   EXPECT_FALSE(Library::Open(path.string()).ok());
   const auto init = InitLibrary(path.string());
   ASSERT_TRUE(init.ok()) << init.status().message();
@@ -123,8 +146,13 @@ TEST_F(KbLibraryTest, AVersion2LibraryMigratesToVersion3WithItsCasesAndNoPartRec
   EXPECT_NE(std::find(init->tables.begin(), init->tables.end(), "case_part_records"), init->tables.end());
   auto lib = Library::Open(path.string());
   ASSERT_TRUE(lib.ok()) << lib.status().message();
-  ASSERT_TRUE((*lib)->AddCase(SyntheticCase(3)).ok());
-  EXPECT_TRUE((*lib)->PartRecords("vm-1", "ball r3", "H13")->empty());
+  const auto cases = (*lib)->ListCases();
+  ASSERT_TRUE(cases.ok());
+  EXPECT_EQ(cases->size(), 2u);
+  EXPECT_TRUE((*lib)->AllPartRecords()->empty());
+  // and takes records from now on.
+  ASSERT_TRUE((*lib)->SetPartRecord(Row((*cases)[0].uid, "vm-1", Record(2, 1.0))).ok());
+  EXPECT_EQ((*lib)->PartRecords("vm-1", "ball r3", "H13")->size(), 1u);
 }
 
 }  // namespace
