@@ -561,11 +561,15 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
   input.plan = &plan;
   input.measured = &used;
   input.probe = part.probe;
-  const sim::Model baseline = choice.learned ? *choice.learned : sim::Model{};
+  const sim::Model learned = choice.learned ? *choice.learned : sim::Model{};
   sim::DiagnoseOptions options;
   options.plausible = plausible;
   const bool pooled =
       machined.cut && pooling != nullptr && pooling->earlier != nullptr && !pooling->earlier->records.empty();
+  // Pooled, every part is fitted from no effects: a learned model fitted on fewer parts (an alias group
+  // carried by some of its members) would leave on each part the same misfit of the carriers, which the
+  // pooled data then name as an effect of their own.
+  const sim::Model baseline = pooled ? sim::Model{} : learned;
   if (machined.cut && pooling != nullptr) {
     FL_ASSIGN_OR_RETURN(pooling->record, sim::PartRecord::Of(input));
   }
@@ -598,7 +602,9 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
                 part.machine_name, json(pooling->earlier->uids).dump());
     }
   }
-  dj["baseline"] = choice.learned ? "learned model of case " + case_uid : "no effects (no learned model)";
+  dj["baseline"] = pooled           ? "no effects (pooled: every part fitted from no effects)"
+                   : choice.learned ? "learned model of case " + case_uid
+                                    : "no effects (no learned model)";
   dj["baseline_model"] = baseline.ToJson();
   FL_RETURN_IF_ERROR(folder.WriteJson(dir / "diagnosis.json", dj));
   FL_RETURN_IF_ERROR(sim::WriteModel(folder.Path(dir / "model.json"), d.extended));
@@ -618,9 +624,9 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
     // Pooled: the experiment for the next part is designed on this part's own data and diagnosis.
     sim::Diagnosis alone;
     if (pooled) {
-      FL_ASSIGN_OR_RETURN(alone, sim::Diagnose(input, baseline, options));
+      FL_ASSIGN_OR_RETURN(alone, sim::Diagnose(input, learned, options));
     }
-    FL_ASSIGN_OR_RETURN(const auto found, sim::ProposeExperiments({input}, pooled ? alone : d, baseline, eo));
+    FL_ASSIGN_OR_RETURN(const auto found, sim::ProposeExperiments({input}, pooled ? alone : d, learned, eo));
     json list = json::array();
     for (const auto& p : found) {
       proposals->push_back(sim::PlannedProposal::Of(p, q.domain()));

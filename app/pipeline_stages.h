@@ -174,8 +174,9 @@ Result<Analysed> AnalyseCycle(const PartSpec& part, const recon::BSplineSurface&
 // nc-gen) is proposed, written to loop-0/diagnosis/proposals.json and returned for the case library.
 // Pooling (issue 20): with earlier cases of the same machine/tool/material (RunOptions::pool_cases,
 // FindPooledCases) the diagnosis is sim::DiagnosePooledResiduals over this part (label: its name, first,
-// so the learned model keeps its set-up) and theirs (labels: their uids), every part's residual against
-// the same baseline (a pre-compensated cut's offsets are in its own simulated cut: simulation/part_record.h);
+// so the learned model keeps its set-up) and theirs (labels: their uids), every part fitted from no
+// effects (a learned model of fewer parts would leave the same misfit of its alias-group carriers on
+// every part; a pre-compensated cut's offsets are in its own simulated cut: simulation/part_record.h);
 // diagnosis.json's "pooled" says which cases were pooled and why others were not. Proposals are then
 // made on the part's own diagnosis (the experiment for the next part of this machine). A part that was
 // cut gets its own record in `pooling->record`, for the library.
