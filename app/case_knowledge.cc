@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <vector>
 
+#include "core/file_hash.h"
 #include "planning/case_plan.h"
 #include "retrieval/starter.h"
 
@@ -80,6 +81,71 @@ Result<std::vector<sim::PlannedProposal>> StoredSeparatingExperiments(kb::Librar
   return std::vector<sim::PlannedProposal>{};
 }
 
+Result<PooledCases> FindPooledCases(kb::Library& library, const std::string& machine, const std::string& tool,
+                                    const std::string& material, const std::string& own_uid, int limit) {
+  PooledCases out;
+  nlohmann::json not_pooled = nlohmann::json::array();
+  std::vector<std::string> with_record;
+  FL_ASSIGN_OR_RETURN(const std::vector<kb::PartRecordRow> rows, library.PartRecords(machine, tool, material));
+  for (const kb::PartRecordRow& row : rows) {
+    if (row.case_uid == own_uid) continue;
+    with_record.push_back(row.case_uid);
+    if (static_cast<int>(out.uids.size()) >= limit) {
+      not_pooled.push_back(
+          {{"case", row.case_uid}, {"why", "beyond the limit of " + std::to_string(limit) + " cases (newest first)"}});
+      continue;
+    }
+    auto record = sim::PartRecord::FromJson(row.record, "part record of case " + row.case_uid);
+    if (!record.ok()) {
+      // A record the library holds but this formloop cannot read is the library's fault, not the part's:
+      // refuse rather than diagnose without it and leave the user to wonder why.
+      return Status::BadInput(
+          Where{.file = library.db()->name(), .field = "case_part_records (case " + row.case_uid + ")"},
+          "the part record of case " + row.case_uid + " (" + machine + " / " + tool + " / " + material +
+              ") cannot be pooled: " + std::string(record.status().message()),
+          "run that part again (its run replaces the record), remove the case (formloop kb remove), or run with "
+          "--pool-cases 0");
+    }
+    out.uids.push_back(row.case_uid);
+    out.records.push_back(std::move(record).value());
+    out.inputs.push_back({{"case", row.case_uid},
+                          {"updated_at", row.case_updated_at},
+                          {"points", out.records.back().points()},
+                          {"record_sha256", Sha256Hex(row.record.dump())}});
+  }
+  // Cases with a learned model of this key but no record.
+  FL_ASSIGN_OR_RETURN(const std::vector<kb::CaseRecord> cases, library.ListCases());
+  for (const kb::CaseRecord& c : cases) {
+    if (c.uid == own_uid || std::find(with_record.begin(), with_record.end(), c.uid) != with_record.end()) continue;
+    const nlohmann::json models = c.simulation.value("effect_models", nlohmann::json::array());
+    bool same_key = false;
+    for (const nlohmann::json& m : models.is_array() ? models : nlohmann::json::array()) {
+      same_key = same_key || (m.is_object() && m.value("machine", "") == machine && m.value("tool", "") == tool &&
+                              m.value("material", "") == material);
+    }
+    if (same_key) {
+      not_pooled.push_back({{"case", c.uid},
+                            {"why",
+                             "no part record (stored before case library v3, or by a run that did not cut the part "
+                             "with formloop's program): run the part again to pool it"}});
+    }
+  }
+  out.report = {{"limit", limit}, {"cases", out.uids}, {"not_pooled", not_pooled}};
+  return out;
+}
+
+Result<std::vector<std::string>> PartRecordProblems(kb::Library& library) {
+  FL_ASSIGN_OR_RETURN(const std::vector<kb::PartRecordRow> rows, library.AllPartRecords());
+  std::vector<std::string> problems;
+  for (const kb::PartRecordRow& row : rows) {
+    const auto record =
+        sim::PartRecord::FromJson(row.record, "part record of case " + row.case_uid + " (" + row.machine + " / " +
+                                                  row.tool + " / " + row.material + ")");
+    if (!record.ok()) problems.push_back(std::string(record.status().message()));
+  }
+  return problems;
+}
+
 retrieval::PartDescription DescriptionOf(const PartSpec& part, const nc::ToolpathOptions& plan) {
   retrieval::PartDescription d;
   d.family_tag = part.name;
@@ -93,6 +159,17 @@ retrieval::PartDescription DescriptionOf(const PartSpec& part, const nc::Toolpat
   d.strategy = plan.zigzag ? "raster zig-zag" : "raster one-way";
   d.raster_angle_deg = plan.raster_angle_deg;
   return d;
+}
+
+std::optional<kb::PartRecordRow> MakePartRecordRow(const RetainInput& in) {
+  if (in.part_record == nullptr) return std::nullopt;
+  kb::PartRecordRow row;
+  row.case_uid = in.part->name;
+  row.machine = in.part->machine_name;
+  row.tool = planning::ToolKey(in.plan.tool.radius_mm);
+  row.material = in.part->material;
+  row.record = in.part_record->ToJson();
+  return row;
 }
 
 Result<kb::CaseRecord> MakeRetainedCase(const RetainInput& in) {

@@ -24,7 +24,8 @@
 //   formloop kb stats   PATH                        counts per family and facet concept, GHSOM status
 //   formloop kb check   PATH                        JSON report; exit 1 when the library is not clean, including
 //                                                   whatever retrieval would trip on (bad concepts/descriptors,
-//                                                   a stored model that does not load)
+//                                                   a stored model that does not load) and a part record a
+//                                                   pooled run could not read
 //   formloop kb rules   PATH [--set RULES.json]     print the active rule base, or write a new version
 //
 // Machine-readable output goes to stdout (JSON unless `list` without --json); logs go to stderr.
@@ -310,7 +311,8 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
 
   CLI::App* check = PathCommand(
       kb, "check",
-      "Integrity, foreign keys, orphan concepts, descriptors, rule-base sanity, GHSOM staleness. JSON report; "
+      "Integrity, foreign keys, orphan concepts, descriptors, rule-base sanity, GHSOM staleness, part records a "
+      "pooled run cannot read. JSON report; "
       "exit 1 when not clean.",
       args.get());
   check->add_option("--data", args->data, "data folder whose taxonomies/ the concepts are checked against");
@@ -324,8 +326,12 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
       FL_ASSIGN_OR_RETURN(const std::vector<std::string> retrieval_problems,
                           retrieval::RetrievalProblems(*library, tax));
       for (const std::string& p : retrieval_problems) report.problems.push_back("retrieval: " + p);
+      // What a pooled `formloop run` would trip on: the part records as it reads them.
+      FL_ASSIGN_OR_RETURN(const std::vector<std::string> record_problems, PartRecordProblems(*library));
+      for (const std::string& p : record_problems) report.problems.push_back("pooling: " + p);
       nlohmann::json out = report.ToJson();
       out["retrieval_problems"] = retrieval_problems;
+      out["part_record_problems"] = record_problems;
       Print(out);
       if (!report.clean()) {
         return Status::Failed(

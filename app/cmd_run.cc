@@ -44,6 +44,7 @@ struct RunArgs {
   bool no_learn = false;
   bool no_report = false;
   int jobs = 1;
+  int pool_cases = 2;
 };
 
 // Part files of the arguments: files as given, folders expanded to their *.json files in name order.
@@ -79,6 +80,7 @@ RunOptions OptionsOf(const RunArgs& args) {
   run.retain = !args.no_retain;
   run.learn = !args.no_learn;
   run.report = !args.no_report;
+  run.pool_cases = args.pool_cases;
   return run;
 }
 
@@ -279,6 +281,12 @@ void AddRunCommand(CLI::App& root, CommandAction* action) {
   cmd->add_flag("--no-retain", args->no_retain, "do not store the outcome in the case library");
   cmd->add_flag("--no-learn", args->no_learn, "do not pre-compensate with the case's learned model");
   cmd->add_flag("--no-report", args->no_report, "do not write report.html");
+  cmd->add_option("--pool-cases", args->pool_cases,
+                  "diagnose the first cycle together with up to N earlier cases of the library that share the "
+                  "machine, tool and material (newest first; the shared effects fitted jointly, each part's set-up "
+                  "on its own); 0: the part alone")
+      ->check(CLI::Range(0, 16))
+      ->capture_default_str();
   cmd->add_option("--jobs,-j", args->jobs,
                   "batch: run N parts at once, each in a process of its own, against the same case library (the "
                   "table and batch_summary.json keep the file order; parts running at the same time do not learn "

@@ -22,7 +22,7 @@ namespace {
 
 // Everything the run produces, staged in the .partial folder, one stage after another.
 Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolderWriter& folder, RunSummary* summary,
-                 std::optional<kb::CaseRecord>* retained) {
+                 std::optional<stages::Retained>* retained) {
   const fs::path data_dir = options.data_dir.empty() ? retrieval::DefaultDataDir() : options.data_dir;
   summary->part = given_part.name;
   summary->surface = given_part.SurfaceName();
@@ -81,6 +81,8 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
                                                        : static_cast<int>(in.machine.measured.size());
   std::optional<sim::Diagnosis> diagnosis;
   std::vector<sim::PlannedProposal> proposals;  // for the next part (the part asks for a separating experiment)
+  stages::FirstCyclePooling pooling;            // the earlier cases pooled; this part's record
+  PooledCases earlier;
   stages::CompensatedField& field = cut.field;
   // The program each cycle cuts: the pre-compensated or the nominal one, then the compensated one (no copies).
   stages::Program compensated;
@@ -109,10 +111,27 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
         FL_ASSIGN_OR_RETURN(library, kb::Library::Open(options.kb));
       }
       FL_ASSIGN_OR_RETURN(const sim::PlausibleRanges plausible, PlausibleRangesFor(library.get(), data_dir));
+      if (library && options.pool_cases > 0) {
+        FL_ASSIGN_OR_RETURN(
+            earlier, FindPooledCases(*library, part.machine_name, planning::ToolKey(plan.tool.radius_mm), part.material,
+                                     part.name, options.pool_cases));
+        pooling.earlier = &earlier;
+        // The library's records this diagnosis used are inputs of the run: the same part, options and
+        // records give the same bytes.
+        FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("inputs") / "pooled_cases.json",
+                                            {{"library", options.kb},
+                                             {"key",
+                                              {{"machine", part.machine_name},
+                                               {"tool", planning::ToolKey(plan.tool.radius_mm)},
+                                               {"material", part.material}}},
+                                             {"limit", options.pool_cases},
+                                             {"cases", earlier.inputs}}));
+      }
       FL_ASSIGN_OR_RETURN(sim::Diagnosis d,
                           stages::DiagnoseFirstCycle(part, q, machined, analysed.flagged_ids, plan.tool.radius_mm,
                                                      programs.probing_plan, choice, summary->case_uid, plausible,
-                                                     folder, experiment.asked ? &proposals : nullptr));
+                                                     folder, experiment.asked ? &proposals : nullptr, &pooling));
+      summary->pooled_cases = earlier.uids;
       for (const auto& c : d.causes) summary->causes.push_back(c.effect);
       diagnosis = std::move(d);
     }
@@ -130,8 +149,8 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
   summary->within_tolerance = summary->loops.back().within_tolerance;
 
   FL_RETURN_IF_ERROR(folder.Begin("8/9: retain"));
-  FL_ASSIGN_OR_RETURN(*retained,
-                      stages::PrepareRetain(part, options, retrieved, plan, diagnosis, summary, folder, proposals));
+  FL_ASSIGN_OR_RETURN(*retained, stages::PrepareRetain(part, options, retrieved, plan, diagnosis, summary, folder,
+                                                       proposals, pooling.record ? &*pooling.record : nullptr));
 
   FL_RETURN_IF_ERROR(folder.Begin("9/9: report"));
   json summary_json = summary->ToJson();
@@ -169,6 +188,7 @@ json RunSummary::ToJson() const {
           {"precompensated", precompensated},
           {"precompensation_scale", precompensation_scale},
           {"causes", causes},
+          {"pooled_cases", pooled_cases},
           {"loops", loops_json},
           {"within_tolerance", within_tolerance},
           {"loops_to_tolerance", to_tolerance >= 0 ? json(to_tolerance) : json(nullptr)},
@@ -223,7 +243,7 @@ Result<RunSummary> RunPart(const PartSpec& part, const RunOptions& options) {
 
   RunSummary summary;
   summary.out = options.out;
-  std::optional<kb::CaseRecord> retained;
+  std::optional<stages::Retained> retained;
   // Whatever goes wrong inside (std::bad_alloc included) ends as DIR.failed with the error, never as a
   // DIR.partial that looks like a killed run.
   Status status;

@@ -39,7 +39,10 @@ struct RunOptions {
   bool retain = true;                 // store the outcome in the case library (needs kb)
   bool learn = true;                  // pre-compensate with the case's learned model
   bool report = true;                 // write report.html
-  std::filesystem::path data_dir;     // taxonomies, machines (default: retrieval::DefaultDataDir())
+  // The first cycle's diagnosis pools the part with at most this many earlier cases of the library that
+  // share its machine/tool/material and hold a part record (newest first); 0: the part alone.
+  int pool_cases = 2;
+  std::filesystem::path data_dir;  // taxonomies, machines (default: retrieval::DefaultDataDir())
   // Retrieve with this model instead of the library's stored GHSOM (the leave-one-out rerun of
   // app/route_calibration.h: a model trained without the part's own case); the cases are still read from kb.
   std::shared_ptr<const retrieval::RetrievalModel> retrieval_model;
@@ -82,8 +85,9 @@ struct RunSummary {
   std::string plan_source;  // "case X", "case X, simulation-corrected", "default plan"
   bool precompensated = false;
   double precompensation_scale = 0;
-  std::vector<std::string> causes;  // named by the diagnosis of loop 0
-  std::string retained;             // "added <uid>", "updated <uid>", "" (not retained)
+  std::vector<std::string> causes;        // named by the diagnosis of loop 0
+  std::vector<std::string> pooled_cases;  // earlier cases that diagnosis pooled (RunOptions::pool_cases)
+  std::string retained;                   // "added <uid>", "updated <uid>", "" (not retained)
   std::vector<LoopSummary> loops;
   bool within_tolerance = false;
   std::filesystem::path out;

@@ -125,7 +125,8 @@ Result<Inputs> ResolveInputs(const PartSpec& given, const RunOptions& options, c
                                                                             {"machine", options.machine},
                                                                             {"measured", options.measured},
                                                                             {"retain", options.retain},
-                                                                            {"learn", options.learn}}));
+                                                                            {"learn", options.learn},
+                                                                            {"pool_cases", options.pool_cases}}));
   Rng seeds(in.part.seed);
   in.fit_seed = seeds.Fork();
   in.machine_seed = seeds.Fork();
@@ -553,7 +554,7 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
                                           double tool_radius_mm, const metrology::ProbingPlan& plan,
                                           const planning::PlanChoice& choice, const std::string& case_uid,
                                           const sim::PlausibleRanges& plausible, const RunFolderWriter& folder,
-                                          std::vector<sim::PlannedProposal>* proposals) {
+                                          std::vector<sim::PlannedProposal>* proposals, FirstCyclePooling* pooling) {
   metrology::ProbeLog used = machined.log;
   if (!excluded_ids.empty()) {
     const std::set<std::int64_t> excluded(excluded_ids.begin(), excluded_ids.end());
@@ -566,11 +567,29 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
   input.plan = &plan;
   input.measured = &used;
   input.probe = part.probe;
-  const sim::Model baseline = choice.learned ? *choice.learned : sim::Model{};
+  const sim::Model learned = choice.learned ? *choice.learned : sim::Model{};
   sim::DiagnoseOptions options;
   options.plausible = plausible;
+  const bool pooled =
+      machined.cut && pooling != nullptr && pooling->earlier != nullptr && !pooling->earlier->records.empty();
+  // Pooled, every part is fitted from no effects: a learned model fitted on fewer parts (an alias group
+  // carried by some of its members) would leave on each part the same misfit of the carriers, which the
+  // pooled data then name as an effect of their own.
+  const sim::Model baseline = pooled ? sim::Model{} : learned;
+  if (machined.cut && pooling != nullptr) {
+    FL_ASSIGN_OR_RETURN(pooling->record, sim::PartRecord::Of(input));
+  }
   sim::Diagnosis d;
-  if (machined.cut) {
+  if (pooled) {
+    FL_ASSIGN_OR_RETURN(sim::ProbeResidualData own, sim::ProbeResiduals(input, baseline));
+    std::vector<sim::ProbeResidualData> parts = {std::move(own)};
+    std::vector<std::string> labels = {part.name};
+    for (std::size_t k = 0; k < pooling->earlier->records.size(); ++k) {
+      parts.push_back(pooling->earlier->records[k].Against(baseline));
+      labels.push_back(pooling->earlier->uids[k]);
+    }
+    FL_ASSIGN_OR_RETURN(d, sim::DiagnosePooledResiduals(parts, baseline, options, labels));
+  } else if (machined.cut) {
     FL_ASSIGN_OR_RETURN(d, sim::Diagnose(input, baseline, options));
   } else {
     FL_ASSIGN_OR_RETURN(d, sim::DiagnosePlanOnly(plan, machined.log, part.probe, baseline, options));
@@ -579,7 +598,19 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
   json dj = d.ToJson();
   if (!machined.cut)
     dj["data"] = "probe data of a part the program did not cut: the tool-path effects are not screened";
-  dj["baseline"] = choice.learned ? "learned model of case " + case_uid : "no effects (no learned model)";
+  if (pooling != nullptr && pooling->earlier != nullptr) {
+    json pj = pooling->earlier->report;
+    pj["part"] = part.name;
+    if (!machined.cut) pj["why_alone"] = "the program did not cut the part: no tool-path covariates to pool with";
+    dj["pooled"] = pj;
+    if (pooled) {
+      log::Info("[diagnosis] pooled with {} earlier case(s) of {}: {}", pooling->earlier->uids.size(),
+                part.machine_name, json(pooling->earlier->uids).dump());
+    }
+  }
+  dj["baseline"] = pooled           ? "no effects (pooled: every part fitted from no effects)"
+                   : choice.learned ? "learned model of case " + case_uid
+                                    : "no effects (no learned model)";
   dj["baseline_model"] = baseline.ToJson();
   FL_RETURN_IF_ERROR(folder.WriteJson(dir / "diagnosis.json", dj));
   FL_RETURN_IF_ERROR(sim::WriteModel(folder.Path(dir / "model.json"), d.extended));
@@ -596,7 +627,12 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
       FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::PlanRaster(q, o));
       return nc::CutterLocationsOf(path);
     };
-    FL_ASSIGN_OR_RETURN(const auto found, sim::ProposeExperiments({input}, d, baseline, eo));
+    // Pooled: the experiment for the next part is designed on this part's own data and diagnosis.
+    sim::Diagnosis alone;
+    if (pooled) {
+      FL_ASSIGN_OR_RETURN(alone, sim::Diagnose(input, learned, options));
+    }
+    FL_ASSIGN_OR_RETURN(const auto found, sim::ProposeExperiments({input}, pooled ? alone : d, learned, eo));
     json list = json::array();
     for (const auto& p : found) {
       proposals->push_back(sim::PlannedProposal::Of(p, q.domain()));
@@ -635,12 +671,13 @@ Result<Program> CompensateCycle(const PartSpec& part, const Programs& programs, 
   return Program{path, std::move(compensation.program_moves)};
 }
 
-Result<std::optional<kb::CaseRecord>> PrepareRetain(const PartSpec& part, const RunOptions& options,
-                                                    const Retrieved& retrieved, const nc::ToolpathOptions& plan,
-                                                    const std::optional<sim::Diagnosis>& diagnosis, RunSummary* summary,
-                                                    const RunFolderWriter& folder,
-                                                    const std::vector<sim::PlannedProposal>& proposals) {
-  if (options.kb.empty() || !options.retain) return std::optional<kb::CaseRecord>();
+Result<std::optional<Retained>> PrepareRetain(const PartSpec& part, const RunOptions& options,
+                                              const Retrieved& retrieved, const nc::ToolpathOptions& plan,
+                                              const std::optional<sim::Diagnosis>& diagnosis, RunSummary* summary,
+                                              const RunFolderWriter& folder,
+                                              const std::vector<sim::PlannedProposal>& proposals,
+                                              const sim::PartRecord* part_record) {
+  if (options.kb.empty() || !options.retain) return std::optional<Retained>();
   RetainInput in;
   in.part = &part;
   in.features = &*retrieved.features;
@@ -679,21 +716,36 @@ Result<std::optional<kb::CaseRecord>> PrepareRetain(const PartSpec& part, const 
   if (options.measured.empty() && options.machine.rfind("linuxcnc:", 0) != 0) {
     in.rerun = {{"part", part.ToJson()}, {"machine", options.machine}};
   }
-  FL_ASSIGN_OR_RETURN(kb::CaseRecord record, MakeRetainedCase(in));
-  FL_RETURN_IF_ERROR(
-      folder.WriteJson("retain.json", {{"library", fs::path(options.kb).filename().string()},
-                                       {"action", retrieved.own ? "update" : "add"},
-                                       {"uid", record.uid},
-                                       {"learned_model", in.learned ? in.learned->ToJson() : json(nullptr)},
-                                       {"case", record.ToJson()}}));
-  summary->retained = (retrieved.own ? "updated " : "added ") + record.uid;
-  return std::optional<kb::CaseRecord>(std::move(record));
+  in.part_record = part_record;
+  Retained out;
+  FL_ASSIGN_OR_RETURN(out.record, MakeRetainedCase(in));
+  out.part_record = MakePartRecordRow(in);
+  json retain = {{"library", fs::path(options.kb).filename().string()},
+                 {"action", retrieved.own ? "update" : "add"},
+                 {"uid", out.record.uid},
+                 {"learned_model", in.learned ? in.learned->ToJson() : json(nullptr)},
+                 {"case", out.record.ToJson()}};
+  // The record itself is large (a few hundred bytes a point): its key and size here.
+  retain["part_record"] = out.part_record ? json{{"machine", out.part_record->machine},
+                                                 {"tool", out.part_record->tool},
+                                                 {"material", out.part_record->material},
+                                                 {"points", part_record->points()}}
+                                          : json(nullptr);
+  FL_RETURN_IF_ERROR(folder.WriteJson("retain.json", retain));
+  summary->retained = (retrieved.own ? "updated " : "added ") + out.record.uid;
+  return std::optional<Retained>(std::move(out));
 }
 
-Status CommitRetained(const std::string& kb_path, const kb::CaseRecord& record) {
+Status CommitRetained(const std::string& kb_path, const Retained& retained) {
   FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(kb_path));
-  FL_RETURN_IF_ERROR(retrieval::AddCaseAndGrowGhsom(*library, record, /*replace=*/true).status());
-  log::Info("[retain] case {} stored in {}", record.uid, kb_path);
+  // The case and its part record in one transaction.
+  const Status committed = library->RunInTransaction([&]() -> Status {
+    FL_RETURN_IF_ERROR(retrieval::AddCaseAndGrowGhsom(*library, retained.record, /*replace=*/true).status());
+    return retained.part_record ? library->SetPartRecord(*retained.part_record) : Status::Ok();
+  });
+  FL_RETURN_IF_ERROR(committed);
+  log::Info("[retain] case {} stored in {}{}", retained.record.uid, kb_path,
+            retained.part_record ? " with its part record" : "");
   return Status::Ok();
 }
 

@@ -13,6 +13,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "app/case_knowledge.h"
 #include "app/part.h"
 #include "app/pipeline.h"
 #include "app/run_folder.h"
@@ -174,12 +175,25 @@ Result<Analysed> AnalyseCycle(const PartSpec& part, const recon::BSplineSurface&
 // (the part asks for a separating experiment) and alias groups on a part that was cut, the experiment
 // that would separate each group on the next part (sim::ProposeExperiments, the path re-planned by
 // nc-gen) is proposed, written to loop-0/diagnosis/proposals.json and returned for the case library.
+// Pooling (issue 20): with earlier cases of the same machine/tool/material (RunOptions::pool_cases,
+// FindPooledCases) the diagnosis is sim::DiagnosePooledResiduals over this part (label: its name, first,
+// so the learned model keeps its set-up) and theirs (labels: their uids), every part fitted from no
+// effects (a learned model of fewer parts would leave the same misfit of its alias-group carriers on
+// every part; a pre-compensated cut's offsets are in its own simulated cut: simulation/part_record.h);
+// diagnosis.json's "pooled" says which cases were pooled and why others were not. Proposals are then
+// made on the part's own diagnosis (the experiment for the next part of this machine). A part that was
+// cut gets its own record in `pooling->record`, for the library.
+struct FirstCyclePooling {
+  const PooledCases* earlier = nullptr;   // null or empty: the part alone
+  std::optional<sim::PartRecord> record;  // out
+};
 Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSplineSurface& q,
                                           const Machined& machined, const std::vector<std::int64_t>& excluded_ids,
                                           double tool_radius_mm, const metrology::ProbingPlan& plan,
                                           const planning::PlanChoice& choice, const std::string& case_uid,
                                           const sim::PlausibleRanges& plausible, const RunFolderWriter& folder,
-                                          std::vector<sim::PlannedProposal>* proposals = nullptr);
+                                          std::vector<sim::PlannedProposal>* proposals = nullptr,
+                                          FirstCyclePooling* pooling = nullptr);
 
 // 7d. The mirror-compensated program of the next cycle from the sum of the fields so far
 // (loop-K/program_compensated.*, compensation_side.bin, compensation.json).
@@ -187,14 +201,20 @@ Result<Program> CompensateCycle(const PartSpec& part, const Programs& programs, 
                                 const RunFolderWriter& folder);
 
 // 8. The case the library will hold (retain.json); committed by RunPart after everything else is written.
-Result<std::optional<kb::CaseRecord>> PrepareRetain(const PartSpec& part, const RunOptions& options,
-                                                    const Retrieved& retrieved, const nc::ToolpathOptions& plan,
-                                                    const std::optional<sim::Diagnosis>& diagnosis, RunSummary* summary,
-                                                    const RunFolderWriter& folder,
-                                                    const std::vector<sim::PlannedProposal>& proposals = {});
+// With it, the part's record for later pooled diagnoses (FirstCyclePooling::record), when there is one.
+struct Retained {
+  kb::CaseRecord record;
+  std::optional<kb::PartRecordRow> part_record;
+};
+Result<std::optional<Retained>> PrepareRetain(const PartSpec& part, const RunOptions& options,
+                                              const Retrieved& retrieved, const nc::ToolpathOptions& plan,
+                                              const std::optional<sim::Diagnosis>& diagnosis, RunSummary* summary,
+                                              const RunFolderWriter& folder,
+                                              const std::vector<sim::PlannedProposal>& proposals = {},
+                                              const sim::PartRecord* part_record = nullptr);
 
 // One transaction for the case, then the GHSOM insertion (a failure there leaves it stale, not wrong).
-Status CommitRetained(const std::string& kb_path, const kb::CaseRecord& record);
+Status CommitRetained(const std::string& kb_path, const Retained& retained);
 
 // A cycle as summary.json gives it.
 nlohmann::json LoopJson(const LoopSummary& loop);

@@ -246,6 +246,29 @@ void LookAlikes(std::string& html, const Json& d) {
   }
 }
 
+// The earlier cases the diagnosis pooled with this part (diagnosis.json "pooled"), and the others of the
+// same machine/tool/material with why they were not.
+void PooledParts(std::string& html, const Json& d) {
+  const Json& pooled = Member(d, "pooled");
+  if (!pooled.is_object()) return;
+  const Json& cases = Member(pooled, "cases");
+  const bool any = cases.is_array() && !cases.empty();
+  html += "<h3>Parts pooled</h3>\n<p>" +
+          (any ? "Diagnosed together with the earlier case(s) " + Esc(Scalar(cases)) +
+                     " of the same machine, tool and material (the shared effects fitted jointly, each part's "
+                     "set-up on its own; at most " +
+                     Esc(Scalar(Member(pooled, "limit"))) + ", newest first)."
+               : std::string("Diagnosed alone: the case library holds no earlier part of this machine, tool and "
+                             "material to pool with.")) +
+          "</p>\n";
+  const Json& others = Member(pooled, "not_pooled");
+  if (others.is_array() && !others.empty()) {
+    std::vector<std::vector<std::string>> rows;
+    for (const Json& o : others) rows.push_back({Esc(Scalar(Member(o, "case"))), Esc(Scalar(Member(o, "why")))});
+    html += Table({"Case", "Why not"}, rows, "Cases of this machine, tool and material not pooled");
+  }
+}
+
 // Alias groups (the several-causes diagnosis): from diagnosis.json, else from the learned model.json.
 void AliasGroups(std::string& html, const Json& d, const OptionalJson& model) {
   const Json& groups = Member(d, "alias_groups");
@@ -388,6 +411,7 @@ void DiagnosisSection(std::string& html, const RunData& run) {
         "error.</p>\n";
   }
   LookAlikes(html, d);
+  PooledParts(html, d);
   AliasGroups(html, d, run.diagnosis_model);
   Residual(html, d);
   CloseSection(html);

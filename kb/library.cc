@@ -241,6 +241,127 @@ Result<std::vector<CaseRecord>> Library::ListCases(const std::string& family) {
   return cases;
 }
 
+namespace {
+
+Status InsertPartRecord(Database* db, const PartRecordRow& row) {
+  FL_ASSIGN_OR_RETURN(Statement find, db->Prepare("SELECT id FROM cases WHERE uid = ?1;"));
+  FL_RETURN_IF_ERROR(find.Bind(1, row.case_uid));
+  FL_ASSIGN_OR_RETURN(const bool exists, find.Step());
+  if (!exists) {
+    return Status::NotFound("case library '" + db->name() + "' has no case with uid '" + row.case_uid +
+                            "' to hold a part record");
+  }
+  const long long id = find.ColumnInt(0);
+  FL_RETURN_IF_ERROR(find.Reset());
+  FL_ASSIGN_OR_RETURN(Statement del, db->Prepare("DELETE FROM case_part_records WHERE case_id = ?1 AND machine = ?2 "
+                                                 "AND tool = ?3 AND material = ?4;"));
+  FL_ASSIGN_OR_RETURN(Statement ins, db->Prepare("INSERT INTO case_part_records(case_id, machine, tool, material, "
+                                                 "points, record_json) VALUES (?1, ?2, ?3, ?4, ?5, ?6);"));
+  for (Statement* s : {&del, &ins}) {
+    FL_RETURN_IF_ERROR(s->Bind(1, id));
+    FL_RETURN_IF_ERROR(s->Bind(2, row.machine));
+    FL_RETURN_IF_ERROR(s->Bind(3, row.tool));
+    FL_RETURN_IF_ERROR(s->Bind(4, row.material));
+  }
+  FL_RETURN_IF_ERROR(ins.Bind(5, row.record.value("points", 0LL)));
+  FL_RETURN_IF_ERROR(ins.Bind(6, row.record.dump()));
+  FL_RETURN_IF_ERROR(del.Step().status());
+  return ins.Step().status();
+}
+
+}  // namespace
+
+json PartRecordRow::ToJson() const {
+  return {{"type", "part_record"}, {"case", case_uid},     {"machine", machine},
+          {"tool", tool},          {"material", material}, {"record", record}};
+}
+
+Result<PartRecordRow> PartRecordRow::FromJson(const json& j, const Where& source) {
+  PartRecordRow row;
+  for (const char* key : {"case", "machine", "tool", "material"}) {
+    if (!j.contains(key) || !j[key].is_string() || j[key].get<std::string>().empty()) {
+      Where at = source;
+      at.field = key;
+      return Status::BadInput(at, "missing or not a non-empty string");
+    }
+  }
+  if (!j.contains("record") || !j["record"].is_object() || !j["record"].contains("points") ||
+      !j["record"]["points"].is_number_integer() || j["record"]["points"].get<long long>() < 1) {
+    Where at = source;
+    at.field = "record";
+    return Status::BadInput(at, "missing, not an object, or without a positive \"points\"");
+  }
+  row.case_uid = j["case"].get<std::string>();
+  row.machine = j["machine"].get<std::string>();
+  row.tool = j["tool"].get<std::string>();
+  row.material = j["material"].get<std::string>();
+  row.record = j["record"];
+  return row;
+}
+
+Status Library::SetPartRecord(const PartRecordRow& row) {
+  FL_RETURN_IF_ERROR(
+      PartRecordRow::FromJson(row.ToJson(), Where{.file = "part record of case " + row.case_uid}).status());
+  return db_->RunInTransaction([&]() -> Status {
+    FL_RETURN_IF_ERROR(InsertPartRecord(db_.get(), row));
+    return AuditRow("part_record", row.case_uid,
+                    row.machine + " / " + row.tool + " / " + row.material + ": " +
+                        std::to_string(row.record.value("points", 0LL)) + " points");
+  });
+}
+
+Result<std::vector<PartRecordRow>> Library::PartRecords(const std::string& machine, const std::string& tool,
+                                                        const std::string& material) {
+  FL_ASSIGN_OR_RETURN(Statement s,
+                      db_->Prepare("SELECT c.uid, c.updated_at, r.record_json FROM case_part_records r JOIN cases c "
+                                   "ON c.id = r.case_id WHERE r.machine = ?1 AND r.tool = ?2 AND r.material = ?3 "
+                                   "ORDER BY c.updated_at DESC, c.uid;"));
+  FL_RETURN_IF_ERROR(s.Bind(1, machine));
+  FL_RETURN_IF_ERROR(s.Bind(2, tool));
+  FL_RETURN_IF_ERROR(s.Bind(3, material));
+  std::vector<PartRecordRow> out;
+  while (true) {
+    FL_ASSIGN_OR_RETURN(bool more, s.Step());
+    if (!more) break;
+    PartRecordRow row;
+    row.case_uid = s.ColumnText(0);
+    row.case_updated_at = s.ColumnText(1);
+    row.machine = machine;
+    row.tool = tool;
+    row.material = material;
+    row.record = json::parse(s.ColumnText(2), nullptr, /*allow_exceptions=*/false);
+    if (row.record.is_discarded()) {
+      return Status::Failed("case library '" + db_->name() + "': the part record of case " + row.case_uid +
+                            " is not JSON. Fix: formloop kb check, then run the part again");
+    }
+    out.push_back(std::move(row));
+  }
+  return out;
+}
+
+Result<std::vector<PartRecordRow>> Library::AllPartRecords() {
+  FL_ASSIGN_OR_RETURN(Statement s, db_->Prepare("SELECT c.uid, r.machine, r.tool, r.material, r.record_json FROM "
+                                                "case_part_records r JOIN cases c ON c.id = r.case_id ORDER BY "
+                                                "c.uid, r.machine, r.tool, r.material;"));
+  std::vector<PartRecordRow> out;
+  while (true) {
+    FL_ASSIGN_OR_RETURN(bool row, s.Step());
+    if (!row) break;
+    PartRecordRow r{s.ColumnText(0),
+                    s.ColumnText(1),
+                    s.ColumnText(2),
+                    s.ColumnText(3),
+                    json::parse(s.ColumnText(4), nullptr, /*allow_exceptions=*/false),
+                    ""};
+    if (r.record.is_discarded()) {
+      return Status::Failed("case library '" + db_->name() + "': the part record of case " + r.case_uid +
+                            " is not JSON");
+    }
+    out.push_back(std::move(r));
+  }
+  return out;
+}
+
 Status Library::RemoveCase(const std::string& uid) {
   return db_->RunInTransaction([&]() -> Status {
     FL_ASSIGN_OR_RETURN(Statement del, db_->Prepare("DELETE FROM cases WHERE uid = ?1;"));
@@ -555,6 +676,10 @@ Status Library::ExportSnapshot(std::string* text) {
   out += header.dump() + "\n";
   for (const CaseRecord& c : cases) out += json{{"type", "case"}, {"case", c.ToJson()}}.dump() + "\n";
   {
+    FL_ASSIGN_OR_RETURN(const std::vector<PartRecordRow> records, AllPartRecords());
+    for (const PartRecordRow& r : records) out += r.ToJson().dump() + "\n";
+  }
+  {
     FL_ASSIGN_OR_RETURN(Statement s, db_->Prepare("SELECT version, name, condition_json, choice_json, active FROM "
                                                   "rules ORDER BY version, name;"));
     while (true) {
@@ -591,6 +716,7 @@ Result<ImportReport> Library::ImportText(const std::string& text, const std::str
   std::vector<std::pair<long, CaseRecord>> cases;
   std::vector<Rule> rules;
   std::vector<TaxonomyNode> nodes;
+  std::vector<std::pair<long, PartRecordRow>> part_records;
   std::istringstream in(text);
   std::string line;
   long line_no = 0;
@@ -657,9 +783,12 @@ Result<ImportReport> Library::ImportText(const std::string& text, const std::str
       TaxonomyNode n{j["taxonomy"].get<std::string>(), j["node"].get<std::string>(), std::nullopt};
       if (j.contains("parent") && j["parent"].is_string()) n.parent = j["parent"].get<std::string>();
       nodes.push_back(std::move(n));
+    } else if (type == "part_record") {
+      FL_ASSIGN_OR_RETURN(PartRecordRow row, PartRecordRow::FromJson(j, where));
+      part_records.emplace_back(line_no, std::move(row));
     } else {
       return Status::BadInput(Where{.file = source, .line = line_no, .field = "type"},
-                              "unknown line type '" + type + "'", "expected case, rule or taxonomy");
+                              "unknown line type '" + type + "'", "expected case, part_record, rule or taxonomy");
     }
   }
   if (!have_header) return Status::BadInput(Where{.file = source}, "is empty", "give a `formloop kb export` file");
@@ -686,6 +815,10 @@ Result<ImportReport> Library::ImportText(const std::string& text, const std::str
       (replaced ? report.cases_replaced : report.cases_added) += 1;
       if (options.on_case) options.on_case(report.cases_added + report.cases_replaced);
     }
+    for (const auto& [record_line, row] : part_records) {
+      FL_RETURN_IF_ERROR(InsertPartRecord(db_.get(), row).WithContext(source + ":" + std::to_string(record_line)));
+    }
+    report.part_records = part_records.size();
     if (!rules.empty()) {
       FL_RETURN_IF_ERROR(db_->Execute("DELETE FROM rules;"));
       FL_ASSIGN_OR_RETURN(Statement ins, db_->Prepare("INSERT INTO rules(version, name, condition_json, choice_json, "

@@ -1,7 +1,7 @@
 #pragma once
 // The case library (spec/case-library.md §1, §2 storage, §4–§5 rule base): typed access to cases,
 // their facet concepts, the facet taxonomies, the versioned rule base, stored GHSOM trees and the audit
-// trail, over the schema of kb/schema.h (version 2) on SQLite or PostgreSQL (kb/database.h).
+// trail, over the schema of kb/schema.h (version 3) on SQLite or PostgreSQL (kb/database.h).
 //
 // Every write runs in one transaction (Database::RunInTransaction: SQLite BEGIN IMMEDIATE, PostgreSQL
 // SERIALIZABLE behind the library's writer lock) together with its audit row, so a crash or a lost
@@ -72,6 +72,22 @@ struct CaseRecord {
 
 // Reads and validates one case file.
 Result<CaseRecord> ReadCaseFile(const std::filesystem::path& path);
+
+// A case's part record for one machine/tool/material (schema v3, table case_part_records): what a later
+// pooled diagnosis of the same machine/tool/material needs of the part (the JSON of
+// simulation/part_record.h; the library checks only that it is an object with a positive "points").
+// In the export file, one line {"type": "part_record", "case": uid, "machine", "tool", "material",
+// "record"} per row, after the cases.
+struct PartRecordRow {
+  std::string case_uid;
+  std::string machine, tool, material;
+  nlohmann::json record = nlohmann::json::object();
+  std::string case_updated_at;  // read back: the case's updated_at (newest first)
+  // The export line (without the case's timestamp).
+  nlohmann::json ToJson() const;
+  // An export line; errors name `source`.
+  static Result<PartRecordRow> FromJson(const nlohmann::json& json, const Where& source);
+};
 
 struct RouteThresholds {
   double low = 0.80;   // below: no adequate case (default plan)
@@ -172,6 +188,7 @@ struct ImportReport {
   std::size_t cases_replaced = 0;
   std::size_t rules = 0;
   std::size_t taxonomy_nodes = 0;
+  std::size_t part_records = 0;  // in the JSON only when the file had some
   nlohmann::json ToJson() const;
 };
 
@@ -198,6 +215,15 @@ class Library {
   // Sorted by uid; all families when `family` is empty.
   Result<std::vector<CaseRecord>> ListCases(const std::string& family = "");
   Status RemoveCase(const std::string& uid);
+
+  // Stores (or replaces) the part record of case row.case_uid for row's machine/tool/material, in one
+  // transaction with its audit row (joining an enclosing RunInTransaction). NotFound when the case is absent.
+  Status SetPartRecord(const PartRecordRow& row);
+  // The part records of a machine/tool/material, the newest case first (its updated_at, then uid).
+  Result<std::vector<PartRecordRow>> PartRecords(const std::string& machine, const std::string& tool,
+                                                 const std::string& material);
+  // Every part record, by case uid, machine, tool, material (export; `kb check`).
+  Result<std::vector<PartRecordRow>> AllPartRecords();
 
   Result<LibraryStats> Stats();
   Result<CheckReport> Check();

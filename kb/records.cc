@@ -308,10 +308,12 @@ json CheckReport::ToJson() const {
 }
 
 json ImportReport::ToJson() const {
-  return {{"cases_added", cases_added},
-          {"cases_replaced", cases_replaced},
-          {"rules", rules},
-          {"taxonomy_nodes", taxonomy_nodes}};
+  json j = {{"cases_added", cases_added},
+            {"cases_replaced", cases_replaced},
+            {"rules", rules},
+            {"taxonomy_nodes", taxonomy_nodes}};
+  if (part_records > 0) j["part_records"] = part_records;
+  return j;
 }
 
 // ---------------------------------------------------------------------------------------------- rule base input

@@ -362,6 +362,34 @@ CREATE TABLE audit (
 CREATE INDEX audit_by_case ON audit(case_uid);
 INSERT INTO library_info(key, value) VALUES ('case_changes', '0');
 )sql" + std::string(kV2SeedRows)},
+      {3, "case library v3: each case's probe record per machine/tool/material, for pooled diagnoses of later parts",
+       R"sql(
+-- What a later pooled diagnosis needs of a case's part (simulation/part_record.h: per probe point its
+-- context, the deviation against no effects and the probe chain's sensitivities), one row per
+-- machine/tool/material the case was cut with. Cases of v2 libraries have none: they are not pooled.
+CREATE TABLE case_part_records (
+  case_id      INTEGER NOT NULL REFERENCES cases(id) ON DELETE CASCADE,
+  machine      TEXT NOT NULL CHECK (length(machine) > 0),
+  tool         TEXT NOT NULL CHECK (length(tool) > 0),
+  material     TEXT NOT NULL CHECK (length(material) > 0),
+  points       INTEGER NOT NULL CHECK (points > 0),
+  record_json  TEXT NOT NULL CHECK (json_valid(record_json) AND json_type(record_json) = 'object'),
+  PRIMARY KEY (case_id, machine, tool, material)
+);
+CREATE INDEX case_part_records_by_key ON case_part_records(machine, tool, material);
+)sql",
+       R"sql(
+CREATE TABLE case_part_records (
+  case_id      BIGINT NOT NULL REFERENCES cases(id) ON DELETE CASCADE DEFERRABLE,
+  machine      TEXT COLLATE "C" NOT NULL CHECK (length(machine) > 0),
+  tool         TEXT COLLATE "C" NOT NULL CHECK (length(tool) > 0),
+  material     TEXT COLLATE "C" NOT NULL CHECK (length(material) > 0),
+  points       BIGINT NOT NULL CHECK (points > 0),
+  record_json  TEXT NOT NULL CHECK (jsonb_typeof(record_json::jsonb) = 'object'),
+  PRIMARY KEY (case_id, machine, tool, material)
+);
+CREATE INDEX case_part_records_by_key ON case_part_records(machine, tool, material);
+)sql"},
   };
   return kMigrations;
 }

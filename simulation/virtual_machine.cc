@@ -18,6 +18,8 @@ Eigen::Vector3d ReportedCentre(const PointContext& c, double surface_mm, double 
   return c.point + probe.ball_radius_mm * c.normal + (t_touch + pretravel) * a;
 }
 
+}  // namespace
+
 double MeasurementEffectsMm(const PointContext& c, const Model& model) {
   // The model's measurement effects are written as δ = ΔR·c_a; the probe needs ΔR itself.
   const double ca = std::max(1e-6, -c.approach.dot(c.normal));
@@ -27,8 +29,6 @@ double MeasurementEffectsMm(const PointContext& c, const Model& model) {
   }
   return 1e-3 * sum_um / ca;
 }
-
-}  // namespace
 
 Status MachineEffects::Validate() const {
   if (!(thermal_tau_s > 0)) return Status::BadInput(Where{.field = "machine.effects.thermal_tau_s"}, "must be > 0");

@@ -78,6 +78,10 @@ std::vector<MeasuredPoint> MeasuredPointsOf(const metrology::ProbingPlan& plan,
 Result<VirtualMachineResult> MachineAndProbe(const std::vector<CutterLocation>& cutter_locations,
                                              const metrology::ProbingPlan& plan, const VirtualMachineOptions& options);
 
+// The effective-radius change ΔR (mm) the model's measurement effects give the probe at c (they are
+// written as δ = ΔR·c_a, c_a = −approach·n).
+double MeasurementEffectsMm(const PointContext& c, const Model& model);
+
 // The probe log a model predicts for given contexts (no noise): the same physics as MachineAndProbe.
 // `extra_surface_um` / `extra_radius_um` (per context, optional) add a surface offset along n and an
 // effective-radius change on top of the model (diagnose's measurement sensitivities).

@@ -472,6 +472,16 @@ inline std::vector<Case> AllCases() {
       C("run_kb_missing", "case library", "run {F}/part.json --kb nokb.sqlite --out r", 2, {"nokb.sqlite"}),
       C("run_kb_not_sqlite", "case library", "run {F}/part.json --kb kb.sqlite --out r", 2, {"kb.sqlite"})
           .File("kb.sqlite", "this is not a database\n"),
+      // A part record the library holds but a pooled run cannot read (issue 20): refused naming the case and field.
+      C("run_kb_part_record_damaged", "case library", "run b.json --kb kb.sqlite --out r --no-report", 2,
+        {"kb.sqlite", "case lean-a", "d_radius", "--pool-cases 0"})
+          .File("a.json", PartWith("/name", "lean-a"))
+          .File("b.json", PartWith("/name", "lean-b"))
+          .Copy("kb.sqlite")
+          .Setup("'" FORMLOOP_BINARY "' -q run a.json --kb kb.sqlite --out ra --no-report && rm -rf ra && sqlite3 "
+                 "kb.sqlite \"UPDATE case_part_records SET record_json = json_remove(record_json, '$.d_radius');\"")
+          .FailedFolder("r.failed"),
+      C("run_pool_cases_negative", "options", "run {F}/part.json --pool-cases -1 --out r", 2, {"--pool-cases"}),
 
       // ---- probe logs
       C("log_missing_ax", "probe log", kAnalyse + "l.csv", 2, {"l.csv:1", "ax"})

@@ -4,12 +4,14 @@
 
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <numbers>
 #include <string>
 #include <vector>
 
 #include <gtest/gtest.h>
 
+#include "simulation/part_record.h"
 #include "tests/support/multi_effect.h"
 
 namespace formloop::testing {
@@ -131,6 +133,69 @@ TEST(PipelinePoolingTest, TheProposalAppliedOnTheNextPartSplitsWhatPlainPoolingC
         << effect << " = " << truth << " outside [" << cause->lower[0] << ", " << cause->upper[0] << "]";
   }
   for (const auto& c : pooled->causes) EXPECT_NE(s.machine.Find(c.effect), nullptr) << c.effect << " named falsely";
+}
+
+// A part record (simulation/part_record.h), what the case library keeps of a part for the later parts of
+// the same machine: through its JSON (the same bytes back), against a baseline with surface and measurement
+// effects it gives the residuals the probe chain gives (the linearised chain: within 0.01 µm), and a pooled
+// diagnosis over a record is the one over the probe data, byte for byte.
+TEST(PartRecordTest, TheRecordGivesTheChainsResidualsAgainstAnyBaselineAndPoolsAsTheProbeDataDo) {
+  const sim::Model truth =
+      MachineWithNoise({{"thermal_drift_z", {12.0, 900.0}}, {"tool_wear", {2.5}}, {"probe_radius", {1.5}}});
+  const Scenario a = ProbePart({"egg_box", 0, 16}, truth, 11);
+  const Scenario b = ProbePart({"sphere_cap", 45, 16, 3000}, truth, 12);
+  const auto record = sim::PartRecord::Of(InputOf(a));
+  ASSERT_TRUE(record.ok()) << record.status().message();
+  ASSERT_EQ(record->points(), 256);
+  const std::string bytes = record->ToJson().dump();
+  const auto back = sim::PartRecord::FromJson(nlohmann::json::parse(bytes), "record");
+  ASSERT_TRUE(back.ok()) << back.status().message();
+  EXPECT_EQ(back->ToJson().dump(), bytes);
+
+  sim::Model baseline;
+  ASSERT_TRUE(baseline.Set("thermal_drift_z", {8.0, 600.0}).ok());
+  ASSERT_TRUE(baseline.Set("tool_radius", {-3.0}).ok());
+  ASSERT_TRUE(baseline.Set("probe_radius", {2.0}).ok());
+  const auto direct = sim::ProbeResiduals(InputOf(a), baseline);
+  ASSERT_TRUE(direct.ok()) << direct.status().message();
+  const sim::ProbeResidualData stored = back->Against(baseline);
+  ASSERT_EQ(stored.residual_um.size(), direct->residual_um.size());
+  const double moved_um = (stored.residual_um - back->residual_um).cwiseAbs().maxCoeff();
+  EXPECT_GT(moved_um, 5.0) << "the baseline moves the residuals";
+  const double linearised_um = (stored.residual_um - direct->residual_um).cwiseAbs().maxCoeff();
+  std::printf("baseline moves the residuals by up to %.2f um; the record's linearised chain differs by %.2e um\n",
+              moved_um, linearised_um);
+  EXPECT_LT(linearised_um, 0.01);
+  for (std::size_t i = 0; i < stored.contexts.size(); ++i) {
+    ASSERT_EQ(stored.contexts[i].id, direct->contexts[i].id);
+    EXPECT_EQ(stored.contexts[i].cut_time_s, direct->contexts[i].cut_time_s);
+    EXPECT_EQ(stored.contexts[i].scallop_um, direct->contexts[i].scallop_um);
+  }
+
+  const auto over_data =
+      sim::DiagnosePooled({InputOf(b), InputOf(a)}, sim::Model{}, StarterDiagnoseOptions(), {"b", "a"});
+  ASSERT_TRUE(over_data.ok()) << over_data.status().message();
+  const auto b_residuals = sim::ProbeResiduals(InputOf(b), sim::Model{});
+  ASSERT_TRUE(b_residuals.ok());
+  const auto over_record = sim::DiagnosePooledResiduals({*b_residuals, back->Against(sim::Model{})}, sim::Model{},
+                                                        StarterDiagnoseOptions(), {"b", "a"});
+  ASSERT_TRUE(over_record.ok()) << over_record.status().message();
+  EXPECT_EQ(over_record->ToJson().dump(), over_data->ToJson().dump());
+
+  // A damaged record is refused naming the field.
+  for (const auto& [field, damage] : std::vector<std::pair<std::string, std::function<void(nlohmann::json&)>>>{
+           {"d_radius", [](nlohmann::json& j) { j.erase("d_radius"); }},
+           {"residual_um[3]", [](nlohmann::json& j) { j["residual_um"][3] = "x"; }},
+           {"nx..nz[0]", [](nlohmann::json& j) { j["nx"][0] = 0.5; }},
+           {"points", [](nlohmann::json& j) { j["points"] = 0; }},
+           {"version", [](nlohmann::json& j) { j["version"] = 2; }}}) {
+    nlohmann::json j = nlohmann::json::parse(bytes);
+    damage(j);
+    const auto refused = sim::PartRecord::FromJson(j, "case 7's record");
+    ASSERT_FALSE(refused.ok()) << field;
+    EXPECT_NE(refused.status().message().find("case 7's record"), std::string::npos) << refused.status().message();
+    EXPECT_NE(refused.status().message().find(field), std::string::npos) << refused.status().message();
+  }
 }
 
 }  // namespace

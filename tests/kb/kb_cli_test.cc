@@ -71,7 +71,7 @@ class KbCliBackendTest : public testing::KbBackendTest {
 
 TEST_P(KbCliBackendTest, InitAddListShowExportImportCheckRemove) {
   ASSERT_EQ(Run("kb init " + L("a.db")), 0) << err_;
-  EXPECT_EQ(Out()["schema_version"], 2);
+  EXPECT_EQ(Out()["schema_version"], 3);
   // The starter library (252 cases, GHSOM trained) is tested in kb_train_cli_test.cc.
   for (int i = 0; i < 4; ++i) {
     WriteBytes(dir_ / "case.json", RetrievableCase(i).ToJson().dump(2));

@@ -1,4 +1,4 @@
-// The case library API: migration 1 -> 2, round trips, validation, export/import, check, refusals.
+// The case library API: migrations 1 -> 2 -> 3, round trips, validation, export/import, check, refusals.
 
 #include <algorithm>
 #include <filesystem>
@@ -47,7 +47,7 @@ TEST_F(KbLibraryTest, MigratesAVersion1LibraryWithItsCasesAndLoops) {
   const auto init = InitLibrary(path);
   ASSERT_TRUE(init.ok()) << init.status().message();
   EXPECT_EQ(init->migration.from_version, 1);
-  EXPECT_EQ(init->migration.to_version, 2);
+  EXPECT_EQ(init->migration.to_version, LatestSchemaVersion());
   auto lib = Library::Open(path);
   ASSERT_TRUE(lib.ok()) << lib.status().message();
 
@@ -404,7 +404,7 @@ TEST_F(KbLibraryTest, RefusedFilesAreNamedAndLeftUnchanged) {
                                    {"image.png", "not a formloop case library"},
                                    {"foreign.db", "not a formloop case library"},
                                    {"foreign_versioned.db", "without formloop's tables"},
-                                   {"newer.db", "schema version 9, newer than this formloop understands (2)"}};
+                                   {"newer.db", "schema version 9, newer than this formloop understands (3)"}};
   for (const auto& c : cases) {
     const fs::path path = dir_ / c.file;
     const std::string before = ReadBytes(path);
