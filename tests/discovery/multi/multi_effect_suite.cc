@@ -85,22 +85,28 @@ const std::vector<sim::ExperimentProposal>& NoProposals() {
   return none;
 }
 
-// The direct readings of the machine's shared effects (not a part's set-up) that `proposals` ask for,
-// each once, measured on the virtual machine (truth + the instrument's noise).
-std::vector<sim::DirectMeasurement> SharedReadings(const Scenario& part,
-                                                   const std::vector<sim::ExperimentProposal>& proposals,
-                                                   std::uint64_t seed) {
+// The direct readings `proposals` ask for, each once: those of the machine's shared effects, or those of
+// a part's set-up (`part_specific`).
+sim::ExperimentProposal ReadingsAsked(const std::vector<sim::ExperimentProposal>& proposals, bool part_specific) {
   sim::ExperimentProposal all;
   for (const auto& p : proposals) {
     for (const auto& d : p.direct) {
       const sim::Effect* effect = sim::FindEffect(d.effect);
-      if (effect == nullptr || effect->part_specific()) continue;
+      if (effect == nullptr || effect->part_specific() != part_specific) continue;
       bool twice = false;
       for (const auto& o : all.direct) twice = twice || (o.effect == d.effect && o.parameter == d.parameter);
       if (!twice) all.direct.push_back(d);
     }
   }
-  return Measured(part, all, seed);
+  return all;
+}
+
+// The shared effects' readings (tool setter, reference sphere), measured on the virtual machine (truth +
+// the instrument's noise).
+std::vector<sim::DirectMeasurement> SharedReadings(const Scenario& part,
+                                                   const std::vector<sim::ExperimentProposal>& proposals,
+                                                   std::uint64_t seed) {
+  return Measured(part, ReadingsAsked(proposals, false), seed);
 }
 
 // The later part's own set-up readings (a datum, a datum's rotation) when `proposals` ask for them on
@@ -109,17 +115,7 @@ std::vector<sim::DirectMeasurement> SharedReadings(const Scenario& part,
 std::vector<sim::DirectMeasurement> OwnSetupReadings(const Scenario& part, const std::string& label,
                                                      const std::vector<sim::ExperimentProposal>& proposals,
                                                      std::uint64_t seed) {
-  sim::ExperimentProposal all;
-  for (const auto& p : proposals) {
-    for (const auto& d : p.direct) {
-      const sim::Effect* effect = sim::FindEffect(d.effect);
-      if (effect == nullptr || !effect->part_specific()) continue;
-      bool twice = false;
-      for (const auto& o : all.direct) twice = twice || (o.effect == d.effect && o.parameter == d.parameter);
-      if (!twice) all.direct.push_back(d);
-    }
-  }
-  std::vector<sim::DirectMeasurement> out = Measured(part, all, seed);
+  std::vector<sim::DirectMeasurement> out = Measured(part, ReadingsAsked(proposals, true), seed);
   for (auto& d : out) d.part = label;
   return out;
 }
