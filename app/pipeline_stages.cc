@@ -108,6 +108,41 @@ Result<Machine> ResolveMachine(const PartSpec& part, const RunOptions& options, 
   return m;
 }
 
+// The plan points a 3-axis probe cannot reach clear of the part (nc::ReachableProbePoints: under an
+// overhang or a fold) are left out of p's plan and approaches before any program is written; a warning and
+// toolpath/probing_left_out.json name them, the move and the gap. Nothing is written when none is.
+Status LeaveOutUnreachable(const nc::ProbeProgramOptions& options, const RunFolderWriter& folder, Programs* p) {
+  const std::size_t planned = p->probing_plan.points.size();
+  FL_ASSIGN_OR_RETURN(nc::ReachableProbePlan reachable, nc::ReachableProbePoints(p->probing_plan, options));
+  if (reachable.left_out.empty()) return Status::Ok();
+  json points = json::array();
+  std::string ids;
+  for (const nc::UnreachableProbePoint& u : reachable.left_out) {
+    const metrology::ProbePoint& pt = p->probing_plan.points[u.index];
+    points.push_back({{"id", u.id}, {"u", pt.u}, {"v", pt.v}, {"reason", u.reason}});
+    ids += (ids.empty() ? "" : ", ") + std::to_string(u.id);
+    log::Warn("[nc] probe point {} (u {:.4f}, v {:.4f}) left out: {}", u.id, pt.u, pt.v, u.reason);
+  }
+  log::Warn(
+      "[nc] {} of {} probe points left out of the plan: a 3-axis probe cannot reach them clear of the part "
+      "(points {}; toolpath/probing_left_out.json)",
+      reachable.left_out.size(), planned, ids);
+  FL_RETURN_IF_ERROR(folder.WriteJson(
+      fs::path("toolpath") / "probing_left_out.json",
+      {{"rule",
+        "a point is left out when no clearance (full, halved, quartered) keeps the probe min_gap_mm clear of the "
+        "part on its traverse, descent and probing move; the plan is refused when fewer than min_share remain"},
+       {"min_gap_mm", options.min_gap_mm},
+       {"min_share", nc::kMinReachableShare},
+       {"planned", planned},
+       {"kept", reachable.plan.points.size()},
+       {"left_out", points}}));
+  p->unreachable = std::move(reachable.left_out);
+  p->probing_plan = std::move(reachable.plan);
+  p->probe_approaches = std::move(reachable.approaches);
+  return Status::Ok();
+}
+
 }  // namespace
 
 Result<Inputs> ResolveInputs(const PartSpec& given, const RunOptions& options, const fs::path& data_dir,
@@ -326,6 +361,15 @@ Result<Programs> WritePrograms(const PartSpec& part, const recon::BSplineSurface
       p.probe_approaches = applied.approaches;
     }
   }
+  nc::ProbeProgramOptions probe_options = part.probe_program;
+  probe_options.approaches = p.probe_approaches;
+  FL_ASSIGN_OR_RETURN(p.part_surface, recon::FootPointProjector::Build(q));
+  probe_options.part_surface = p.part_surface;
+  probe_options.post = p.post;
+  probe_options.post.title = "formloop " + std::string(kVersion) + " probing program for part " + part.name;
+  probe_options.safe_z_mm = p.nominal.safe_z_mm + part.probe.ball_radius_mm + part.probe_program.clearance_mm;
+  FL_RETURN_IF_ERROR(LeaveOutUnreachable(probe_options, folder, &p));
+  probe_options.approaches = p.probe_approaches;
   FL_RETURN_IF_ERROR(folder.WriteJson(fs::path("toolpath") / "probing_plan.json", p.probing_plan.ToJson()));
   if (!p.probe_approaches.empty()) {
     // The approaches beside the plan (formloop's plan CSV with ax, ay, az: app/run_folder.h ReadPlanFile).
@@ -349,13 +393,6 @@ Result<Programs> WritePrograms(const PartSpec& part, const recon::BSplineSurface
     rows.SetScalar("az", az);
     FL_RETURN_IF_ERROR(WritePoints(folder.Path(fs::path("toolpath") / "probing_plan.csv"), rows, {.precision = 9}));
   }
-  nc::ProbeProgramOptions probe_options = part.probe_program;
-  probe_options.approaches = p.probe_approaches;
-  FL_ASSIGN_OR_RETURN(p.part_surface, recon::FootPointProjector::Build(q));
-  probe_options.part_surface = p.part_surface;
-  probe_options.post = p.post;
-  probe_options.post.title = "formloop " + std::string(kVersion) + " probing program for part " + part.name;
-  probe_options.safe_z_mm = p.nominal.safe_z_mm + part.probe.ball_radius_mm + part.probe_program.clearance_mm;
   // Split into batches when the controller cannot store every result at once (probe_1, probe_2, ...).
   FL_ASSIGN_OR_RETURN(const std::vector<std::string> probe_programs,
                       nc::PostProbingBatches(p.probing_plan, part.dialect, probe_options));

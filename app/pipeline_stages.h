@@ -23,6 +23,7 @@
 #include "metrology/probe.h"
 #include "nc-gen/compensation.h"
 #include "nc-gen/post.h"
+#include "nc-gen/probe_reach.h"
 #include "nc-gen/toolpath.h"
 #include "planning/case_plan.h"
 #include "reconstruction/bspline_surface.h"
@@ -120,9 +121,12 @@ struct Programs {
   std::vector<Eigen::Vector3d> probe_approaches;
   // Q for the probing programs' check that the probe keeps clear of the part (nc-gen/probe_program.h).
   std::optional<recon::FootPointProjector> part_surface;
+  // The grid's points left out because the probe cannot reach them clear of the part (not in probing_plan).
+  std::vector<nc::UnreachableProbePoint> unreachable;
 };
 // With an experiment's proposals, their tilted re-probe points are appended to the probing plan and
-// carried by the probing program (toolpath/separating_experiment.json says what was applied).
+// carried by the probing program (toolpath/separating_experiment.json says what was applied). Points the
+// probe cannot reach clear of the part are then left out of the plan (toolpath/probing_left_out.json).
 Result<Programs> WritePrograms(const PartSpec& part, const recon::BSplineSurface& q, const nc::ToolpathOptions& plan,
                                std::shared_ptr<nc::Toolpath> planned, const Experiment& experiment,
                                const RunFolderWriter& folder);

@@ -68,19 +68,23 @@ std::string Point(const Eigen::Vector3d& p) {
   return "(" + FormatFixed(p.x(), 3) + ", " + FormatFixed(p.y(), 3) + ", " + FormatFixed(p.z(), 3) + ")";
 }
 
-Status Refusal(const ProbeStation& s, const std::string& body, const std::string& move, const Shortfall& w) {
+Status Refusal(const ProbeStation& s, const std::string& body, const std::string& move, const Shortfall& w,
+               std::string* finding) {
   const std::string how = w.gap < 0 ? "would enter the part by " + FormatFixed(-w.gap, 3) + " mm"
                                     : "would come within " + FormatFixed(w.gap, 3) + " mm of the part";
-  return Status::SafetyLimit("probe point " + std::to_string(s.id) + ": the " + body + " " + how + " (" +
-                             FormatFixed(w.required, 3) + " mm required) " + move + ", at " + Point(w.where) +
-                             "; the part is in the way; no probing program was written. Fix: leave the point out of "
-                             "the plan or probe it with a smaller tilt");
+  std::string found = "the " + body + " " + how + " (" + FormatFixed(w.required, 3) + " mm required) " + move +
+                      ", at " + Point(w.where);
+  const std::string message = "probe point " + std::to_string(s.id) + ": " + found +
+                              "; the part is in the way; no probing program was written. Fix: leave the point out of "
+                              "the plan or probe it with a smaller tilt";
+  if (finding != nullptr) *finding = std::move(found);
+  return Status::SafetyLimit(message);
 }
 
 }  // namespace
 
 Status CheckProbeClearance(const recon::FootPointProjector& part, const ProbeStation& s, const ProbeStation* previous,
-                           const ProbeProgramOptions& options) {
+                           const ProbeProgramOptions& options, std::string* finding) {
   const double clearance = s.clearance_mm;
   const double g = options.min_gap_mm;
   const double g_probe = std::min(g, 0.5 * clearance * -s.approach.dot(s.normal));
@@ -89,17 +93,19 @@ Status CheckProbeClearance(const recon::FootPointProjector& part, const ProbeSta
   if (previous != nullptr) {
     FL_ASSIGN_OR_RETURN(const Shortfall w, Trace(previous->above, s.above, g, g, ball));
     if (w.short_of_it()) {
-      return Refusal(s, "stylus ball", "on the traverse at safe Z from point " + std::to_string(previous->id), w);
+      return Refusal(s, "stylus ball", "on the traverse at safe Z from point " + std::to_string(previous->id), w,
+                     finding);
     }
   }
   {
     FL_ASSIGN_OR_RETURN(const Shortfall w, Trace(s.above, s.start, g_probe, g_probe, ball));
-    if (w.short_of_it()) return Refusal(s, "stylus ball", "on the descent from safe Z to its start point", w);
+    if (w.short_of_it()) return Refusal(s, "stylus ball", "on the descent from safe Z to its start point", w, finding);
   }
   {
     const Eigen::Vector3d touch_zone = contact - kProbeTouchZone * clearance * s.approach;
     FL_ASSIGN_OR_RETURN(const Shortfall w, Trace(s.start, touch_zone, g_probe, kProbeTouchZone * g_probe, ball));
-    if (w.short_of_it()) return Refusal(s, "stylus ball", "on the probing move before it reaches the surface", w);
+    if (w.short_of_it())
+      return Refusal(s, "stylus ball", "on the probing move before it reaches the surface", w, finding);
   }
   if (options.shank_radius_mm <= 0) return Status::Ok();
   const GapAt shank_ball = [&part, &options](const Eigen::Vector3d& x) {
@@ -112,7 +118,7 @@ Status CheckProbeClearance(const recon::FootPointProjector& part, const ProbeSta
   };
   {
     FL_ASSIGN_OR_RETURN(const Shortfall w, shank(s.start, g_probe));
-    if (w.short_of_it()) return Refusal(s, "stylus shank", "on the descent from safe Z to its start point", w);
+    if (w.short_of_it()) return Refusal(s, "stylus shank", "on the descent from safe Z to its start point", w, finding);
   }
   const int lines = std::max(1, static_cast<int>(std::ceil(clearance / kProbeShankSpacingMm)));
   const double spacing = clearance / lines;
@@ -120,7 +126,7 @@ Status CheckProbeClearance(const recon::FootPointProjector& part, const ProbeSta
     const double to_go = clearance - i * spacing;
     FL_ASSIGN_OR_RETURN(const Shortfall w,
                         shank(contact - to_go * s.approach, g_probe * to_go / clearance + 0.5 * spacing));
-    if (w.short_of_it()) return Refusal(s, "stylus shank", "on the probing move", w);
+    if (w.short_of_it()) return Refusal(s, "stylus shank", "on the probing move", w, finding);
   }
   return Status::Ok();
 }

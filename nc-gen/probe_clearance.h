@@ -40,6 +40,8 @@
 // beyond a trim edge or over a hole counts as part, which can only refuse a safe point, never pass an
 // unsafe one.
 
+#include <string>
+
 #include "core/status.h"
 #include "nc-gen/post_text.h"
 #include "reconstruction/foot_point.h"
@@ -53,8 +55,9 @@ inline constexpr double kProbeShankSpacingMm = 0.25;    // between the shank's l
 
 // OK when station s keeps its gaps (header comment); `previous` is the station probed before it (its
 // position above starts the traverse), null for the first. SafetyLimit otherwise, naming the probe
-// point, the move, the gap found and the one required.
+// point, the move, the gap found and the one required; `finding` (when given) then receives that finding
+// without the point and the fix ("the stylus ball would come within ... on the descent ..., at (x, y, z)").
 Status CheckProbeClearance(const recon::FootPointProjector& part, const ProbeStation& s, const ProbeStation* previous,
-                           const ProbeProgramOptions& options);
+                           const ProbeProgramOptions& options, std::string* finding = nullptr);
 
 }  // namespace formloop::nc::internal

@@ -12,6 +12,7 @@
 #include "core/number_text.h"
 #include "nc-gen/post_text.h"
 #include "nc-gen/probe_clearance.h"
+#include "nc-gen/probe_reach.h"
 
 namespace formloop::nc {
 namespace internal {
@@ -29,18 +30,21 @@ void Place(const ProbeProgramOptions& options, ProbeStation* s) {
 
 // A point that is not clear of the part: tries the clearance halved, then quartered (above the
 // two-touch back-off), and keeps the first that clears; false when none does (s unchanged).
+// `warn`: log the shortened clearance (not when only asking which points are reachable).
 bool Shorten(const recon::FootPointProjector& part, const ProbeStation* previous, const ProbeProgramOptions& options,
-             ProbeStation* s) {
+             bool warn, ProbeStation* s) {
   for (const double fraction : {0.5, 0.25}) {
     ProbeStation shorter = *s;
     shorter.clearance_mm = fraction * options.clearance_mm;
     if (options.touch_feed_mm_per_min > 0 && !(shorter.clearance_mm > options.backoff_mm)) break;
     Place(options, &shorter);
     if (CheckProbeClearance(part, shorter, previous, options).ok()) {
-      log::Warn(
-          "[nc] probe point {}: its probing move starts {} mm from the contact instead of {} mm, to keep "
-          "the probe clear of the part",
-          s->id, FormatExact(shorter.clearance_mm), FormatExact(options.clearance_mm));
+      if (warn) {
+        log::Warn(
+            "[nc] probe point {}: its probing move starts {} mm from the contact instead of {} mm, to keep "
+            "the probe clear of the part",
+            s->id, FormatExact(shorter.clearance_mm), FormatExact(options.clearance_mm));
+      }
       *s = shorter;
       return true;
     }
@@ -48,10 +52,10 @@ bool Shorten(const recon::FootPointProjector& part, const ProbeStation* previous
   return false;
 }
 
-}  // namespace
-
-Result<std::vector<ProbeStation>> ProbeStations(const metrology::ProbingPlan& plan,
-                                                const ProbeProgramOptions& options) {
+// The stations of ProbeStations; with `left_out`, a point the part is in the way of is recorded there
+// and skipped (the next traverse starts above the last station kept) instead of refusing the plan.
+Result<std::vector<ProbeStation>> Stations(const metrology::ProbingPlan& plan, const ProbeProgramOptions& options,
+                                           std::vector<UnreachableProbePoint>* left_out) {
   FL_RETURN_IF_ERROR(options.Validate());
   if (plan.points.empty()) return Status::BadInput("the probing plan has no points");
   if (options.probe_feed_mm_per_min > options.post.limits.max_feed_mm_per_min) {
@@ -85,8 +89,13 @@ Result<std::vector<ProbeStation>> ProbeStations(const metrology::ProbingPlan& pl
     Place(options, &s);
     if (options.part_surface) {
       const ProbeStation* previous = stations.empty() ? nullptr : &stations.back();
-      const Status clear = CheckProbeClearance(*options.part_surface, s, previous, options);
-      if (!clear.ok() && !Shorten(*options.part_surface, previous, options, &s)) return clear;
+      std::string finding;
+      const Status clear = CheckProbeClearance(*options.part_surface, s, previous, options, &finding);
+      if (!clear.ok() && !Shorten(*options.part_surface, previous, options, left_out == nullptr, &s)) {
+        if (left_out == nullptr || clear.code() != StatusCode::kSafetyLimit) return clear;
+        left_out->push_back({i, p.id, finding});
+        continue;
+      }
     }
     FL_RETURN_IF_ERROR(CheckTravel(options.post.limits, s.above, what));
     FL_RETURN_IF_ERROR(CheckTravel(options.post.limits, s.start, what));
@@ -98,6 +107,13 @@ Result<std::vector<ProbeStation>> ProbeStations(const metrology::ProbingPlan& pl
     stations.push_back(s);
   }
   return stations;
+}
+
+}  // namespace
+
+Result<std::vector<ProbeStation>> ProbeStations(const metrology::ProbingPlan& plan,
+                                                const ProbeProgramOptions& options) {
+  return Stations(plan, options, nullptr);
 }
 
 std::string XyzWords(const ProgramText& w, const Eigen::Vector3d& p) {
@@ -190,6 +206,37 @@ Result<std::vector<std::string>> PostProbingBatches(const metrology::ProbingPlan
     programs.push_back(std::move(text));
   }
   return programs;
+}
+
+Result<ReachableProbePlan> ReachableProbePoints(const metrology::ProbingPlan& plan,
+                                                const ProbeProgramOptions& options) {
+  ReachableProbePlan out;
+  FL_RETURN_IF_ERROR(internal::Stations(plan, options, &out.left_out).status());
+  out.plan = plan;
+  out.approaches = options.approaches;
+  if (out.left_out.empty()) return out;
+  const std::size_t n = plan.points.size(), kept = n - out.left_out.size();
+  if (static_cast<double>(kept) < std::ceil(kMinReachableShare * static_cast<double>(n))) {
+    const UnreachableProbePoint& first = out.left_out.front();
+    return Status::SafetyLimit(
+        "the probe reaches only " + std::to_string(kept) + " of the plan's " + std::to_string(n) +
+        " points clear of the part (at least " + FormatExact(100 * kMinReachableShare) +
+        " % needed for the analysis); e.g. probe point " + std::to_string(first.id) + ": " + first.reason +
+        "; no probing program was written. Fix: set the part up so the probe comes down onto the face from "
+        "above (no overhang over it), or give a smaller gap (probing.min_gap_mm) or clearance (probing.clearance_mm)");
+  }
+  out.plan.points.clear();
+  out.approaches.clear();
+  std::size_t next = 0;  // of left_out, in plan order
+  for (std::size_t i = 0; i < n; ++i) {
+    if (next < out.left_out.size() && out.left_out[next].index == i) {
+      ++next;
+      continue;
+    }
+    out.plan.points.push_back(plan.points[i]);
+    if (!options.approaches.empty()) out.approaches.push_back(options.approaches[i]);
+  }
+  return out;
 }
 
 Result<std::string> PostLinuxCncProbing(const metrology::ProbingPlan& plan, const ProbeProgramOptions& options) {

@@ -15,6 +15,7 @@
 
 #include "metrology/probe.h"
 #include "nc-gen/probe_program.h"
+#include "nc-gen/probe_reach.h"
 #include "reconstruction/analytic_surface.h"
 #include "reconstruction/foot_point.h"
 
@@ -216,6 +217,78 @@ TEST(ProbeClearanceTest, APointThatCannotBeClearedIsRefusedNamingItAndTheGap) {
   // Without the tilt point 8 is fine.
   o.approaches[1] = -plan.points[1].normal;
   EXPECT_TRUE(PostProbing(plan, "linuxcnc", o).ok());
+}
+
+// `formloop run`'s grid plans: a point no clearance clears is left out of the plan (ReachableProbePoints)
+// instead of refusing the program, the rest is programmed with the same checks; too few left: refused.
+TEST(ProbeClearanceTest, UnreachablePointsAreLeftOutOfThePlanAndTheRestIsProgrammedClear) {
+  const Valley q(1.2, 2.0);  // the narrow valley above: along −n only with a 0.5 mm gap, tilted 45° never
+  const auto part = recon::FootPointProjector::Build(q);
+  ASSERT_TRUE(part.ok());
+  metrology::ProbingPlan plan;
+  plan.points = {PointAt(q, 1, 0.0, -4.0), PointAt(q, 2, 0.0, -2.0), PointAt(q, 3, 0.0, 0.0), PointAt(q, 4, 0.0, 2.0),
+                 PointAt(q, 5, 0.0, 4.0)};
+  ProbeProgramOptions o = Options(&*part);
+  o.min_gap_mm = 0.5;
+  for (const auto& p : plan.points) o.approaches.push_back(-p.normal);
+  o.approaches[1] = Tilted(plan.points[1].normal, -45);
+  o.approaches[3] = Tilted(plan.points[3].normal, 45);
+  ASSERT_FALSE(PostProbing(plan, "linuxcnc", o).ok())
+      << "the whole plan must be refused for this test to mean anything";
+  const auto reachable = ReachableProbePoints(plan, o);
+  ASSERT_TRUE(reachable.ok()) << reachable.status().message();
+  ASSERT_EQ(reachable->left_out.size(), 2u);
+  EXPECT_EQ(reachable->left_out[0].id, 2);
+  EXPECT_EQ(reachable->left_out[0].index, 1u);
+  EXPECT_EQ(reachable->left_out[1].id, 4);
+  for (const auto& u : reachable->left_out) {
+    EXPECT_EQ(u.reason.rfind("the stylus ball would enter the part by ", 0), 0u) << u.reason;
+    EXPECT_EQ(u.reason.find("Fix"), std::string::npos) << u.reason;
+    std::printf("[clearance] left out: point %lld: %s\n", static_cast<long long>(u.id), u.reason.c_str());
+  }
+  ASSERT_EQ(reachable->plan.points.size(), 3u);
+  ASSERT_EQ(reachable->approaches.size(), 3u);
+  const std::int64_t kept_ids[] = {1, 3, 5};
+  for (std::size_t k = 0; k < 3; ++k) {
+    EXPECT_EQ(reachable->plan.points[k].id, kept_ids[k]);
+    EXPECT_EQ(reachable->approaches[k], o.approaches[2 * k]);
+  }
+  // The rest is programmed in every dialect with the check on (each traverse from above the last point
+  // kept), and every move of the program keeps the gap (dense samples on the exact surface).
+  ProbeProgramOptions kept = o;
+  kept.approaches = reachable->approaches;
+  for (const char* dialect : {"linuxcnc", "fanuc", "sinumerik"}) {
+    EXPECT_TRUE(PostProbing(reachable->plan, dialect, kept).ok()) << dialect;
+  }
+  const auto text = PostProbing(reachable->plan, "linuxcnc", kept);
+  ASSERT_TRUE(text.ok());
+  EXPECT_EQ(text->find("(point 2)"), std::string::npos);
+  EXPECT_EQ(text->find("(point 4)"), std::string::npos);
+  for (const auto& p : reachable->plan.points) {
+    const Eigen::Vector3d contact = p.point + o.ball_radius_mm * p.normal;
+    const Eigen::Vector3d start = contact + o.clearance_mm * p.normal;
+    EXPECT_NEAR(StartZ(*text, p.id), start.z(), 0.6e-4) << p.id;
+    const Eigen::Vector3d above(start.x(), start.y(), o.safe_z_mm);
+    EXPECT_GE(LeastMargin(*part, above, start, 0.5, 0.5, 1.0), -0.006) << p.id;
+  }
+  // Nothing is left out of a plan whose points all clear, nor without the part's surface.
+  ProbeProgramOptions unchecked = Options(nullptr);
+  unchecked.approaches = o.approaches;
+  const auto all = ReachableProbePoints(plan, unchecked);
+  ASSERT_TRUE(all.ok());
+  EXPECT_TRUE(all->left_out.empty());
+  EXPECT_EQ(all->plan.points.size(), plan.points.size());
+  // With the default 1 mm gap no point of the valley's bottom clears: fewer than half remain, refused.
+  const auto refused = ReachableProbePoints(plan, Options(&*part));
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.status().code(), StatusCode::kSafetyLimit);
+  const std::string& m = refused.status().message();
+  EXPECT_NE(m.find("the probe reaches only 0 of the plan's 5 points clear of the part (at least 50 % needed"),
+            std::string::npos)
+      << m;
+  EXPECT_NE(m.find("e.g. probe point 1: the stylus ball would come within 0.61"), std::string::npos) << m;
+  EXPECT_NE(m.find("Fix: "), std::string::npos) << m;
+  std::printf("[clearance] %s\n", m.c_str());
 }
 
 TEST(ProbeClearanceTest, AConfiguredShankIsKeptClearOfTheWalls) {
