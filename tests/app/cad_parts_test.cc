@@ -462,6 +462,7 @@ TEST_F(CadPartsTest, APublicFaceThatFoldsOverRunsWithoutThePointsUnderTheFoldAnd
       "written probing program %.4f mm\n",
       shortened, least);
   EXPECT_GE(least, -0.006);  // the samples' spacing: within 5 µm of the check's own
+  EXPECT_EQ(shortened, 8);
 
   // A dome of the starter library's "dome" family (sphere_cap, size 90 mm, radius ratio 1.4), exported as a
   // STEP face and described like the family's parts, but with no shape family given.
