@@ -236,6 +236,7 @@ double LogDetInformation(const GroupDesign& g) {
 }
 
 // min over members of λ_m (see the header), on the rows of `g`, θ_m fitted on the first `fit_rows`.
+constexpr double kMinorShare = 0.1;
 double Separation(const GroupDesign& g, Eigen::Index fit_rows) {
   const double total = g.combined.head(fit_rows).squaredNorm();
   if (!(total > 0)) return 0;
@@ -244,8 +245,13 @@ double Separation(const GroupDesign& g, Eigen::Index fit_rows) {
     const Eigen::MatrixXd a = Concat(g.others, g.members[m]);
     const detail::Fit fit = detail::LeastSquares(a.topRows(fit_rows), g.combined.head(fit_rows));
     if (fit.beta.size() == 0) continue;
-    const Eigen::VectorXd h = g.members[m] * fit.beta.tail(g.members[m].cols());
-    if (h.head(fit_rows).squaredNorm() < 0.1 * total) continue;  // m cannot stand for the group alone
+    Eigen::VectorXd h = g.members[m] * fit.beta.tail(g.members[m].cols());
+    // A member that cannot stand for the group alone may still carry a part of it (a probe radius beside
+    // a set-up shift): it must be told from the others at a tenth of the group's size, else it stays
+    // grouped with its look-alike after the change.
+    const double own = h.head(fit_rows).squaredNorm();
+    if (!(own > 0)) continue;
+    if (own < kMinorShare * total) h *= std::sqrt(kMinorShare * total / own);
     Eigen::MatrixXd rest = g.others;
     for (std::size_t o = 0; o < g.members.size(); ++o) {
       if (o != m) rest = Concat(rest, g.members[o]);

@@ -23,8 +23,10 @@
 // one member's columns and the others' after O is projected out (1: inseparable). The separation
 // predicted: for each member m, the part of what m alone would predict for the group's combined
 // prediction that the other members cannot reproduce, λ_m = ‖(I − P_{O,G∖m}) G_m θ_m‖² / σ² (θ_m m's
-// least-squares fit of the combined prediction); the change is predicted to split the group when every
-// member's λ_m reaches `required_noncentrality` (≈ 90 % power of a 1-df test at α = 0.01: 15).
+// least-squares fit of the combined prediction, scaled up to a tenth of the combined prediction when it
+// is smaller: a minor member, a probe radius beside a set-up shift, must still be told from its
+// look-alikes, or the two stay grouped after the change); the change is predicted to split the group
+// when every member's λ_m reaches `required_noncentrality` (≈ 90 % power of a 1-df test at α = 0.01: 15).
 // Among the changes predicted to split, the cheapest is proposed; when none is, the one with the
 // largest λ per second, marked as not enough on its own.
 
