@@ -68,6 +68,8 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
   FL_RETURN_IF_ERROR(folder.Begin("5/9: nc"));
   FL_ASSIGN_OR_RETURN(const stages::Programs programs,
                       stages::WritePrograms(part, q, plan, std::move(choice.path), experiment, folder));
+  summary->probe_points_planned = programs.probing_plan.points.size() + programs.unreachable.size();
+  for (const nc::UnreachableProbePoint& u : programs.unreachable) summary->probe_points_left_out.push_back(u.id);
 
   FL_RETURN_IF_ERROR(folder.Begin("6/9: precompensation"));
   FL_ASSIGN_OR_RETURN(stages::FirstCut cut,
@@ -90,9 +92,10 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
   for (int loop = 0; loop < max_loops; ++loop) {
     const std::string cycle = "7/9: loop " + std::to_string(loop);
     FL_RETURN_IF_ERROR(folder.Begin(cycle + " machine"));
-    FL_ASSIGN_OR_RETURN(stages::Machined machined,
-                        stages::MachineCycle(in, *current, plan.tool.radius_mm, programs.probing_plan,
-                                             programs.probe_approaches, programs.part_surface, loop, folder));
+    FL_ASSIGN_OR_RETURN(
+        stages::Machined machined,
+        stages::MachineCycle(in, *current, plan.tool.radius_mm, programs.probing_plan, programs.probe_approaches,
+                             programs.part_surface, programs.unreachable, loop, folder));
 
     FL_RETURN_IF_ERROR(folder.Begin(cycle + " analysis"));
     const bool another = loop + 1 < max_loops || !in.machine.virtual_machine;
@@ -189,6 +192,7 @@ json RunSummary::ToJson() const {
           {"precompensation_scale", precompensation_scale},
           {"causes", causes},
           {"pooled_cases", pooled_cases},
+          {"probing", {{"planned", probe_points_planned}, {"left_out", probe_points_left_out}}},
           {"loops", loops_json},
           {"within_tolerance", within_tolerance},
           {"loops_to_tolerance", to_tolerance >= 0 ? json(to_tolerance) : json(nullptr)},

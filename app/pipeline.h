@@ -14,6 +14,7 @@
 // has been updated; a killed run leaves "<out>.partial" marked incomplete and the library untouched
 // (the library changes in one transaction at the very end). A failed run leaves "<out>.failed".
 
+#include <cstdint>
 #include <filesystem>
 #include <functional>
 #include <memory>
@@ -85,9 +86,11 @@ struct RunSummary {
   std::string plan_source;  // "case X", "case X, simulation-corrected", "default plan"
   bool precompensated = false;
   double precompensation_scale = 0;
-  std::vector<std::string> causes;        // named by the diagnosis of loop 0
-  std::vector<std::string> pooled_cases;  // earlier cases that diagnosis pooled (RunOptions::pool_cases)
-  std::string retained;                   // "added <uid>", "updated <uid>", "" (not retained)
+  std::vector<std::string> causes;                  // named by the diagnosis of loop 0
+  std::vector<std::string> pooled_cases;            // earlier cases that diagnosis pooled (RunOptions::pool_cases)
+  std::size_t probe_points_planned = 0;             // the probing grid's points before the reach check
+  std::vector<std::int64_t> probe_points_left_out;  // ids the probe cannot reach clear of the part
+  std::string retained;                             // "added <uid>", "updated <uid>", "" (not retained)
   std::vector<LoopSummary> loops;
   bool within_tolerance = false;
   std::filesystem::path out;

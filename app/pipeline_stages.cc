@@ -1,5 +1,6 @@
 #include "app/pipeline_stages.h"
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <set>
@@ -51,6 +52,7 @@ Result<Machine> ResolveMachine(const PartSpec& part, const RunOptions& options, 
       const fs::path copy = fs::path("inputs") / "measured" / ("loop-" + std::to_string(k) + ".csv");
       FL_RETURN_IF_ERROR(folder.WriteText(copy, text));
       m.measured.push_back(folder.Path(copy).string());
+      m.measured_given.push_back(options.measured[k]);
     }
     return m;
   }
@@ -458,7 +460,8 @@ Result<FirstCut> Precompensate(const PartSpec& part, const recon::BSplineSurface
 
 Result<Machined> MachineCycle(const Inputs& in, const Program& program, double tool_radius_mm,
                               const metrology::ProbingPlan& plan, const std::vector<Eigen::Vector3d>& approaches,
-                              const std::optional<recon::FootPointProjector>& part_surface, int loop,
+                              const std::optional<recon::FootPointProjector>& part_surface,
+                              const std::vector<nc::UnreachableProbePoint>& left_out, int loop,
                               const RunFolderWriter& folder) {
   const fs::path loop_dir = RunFolderWriter::LoopDir(loop);
   FL_RETURN_IF_ERROR(folder.MakeFolder(loop_dir));
@@ -502,6 +505,21 @@ Result<Machined> MachineCycle(const Inputs& in, const Program& program, double t
                                          {"controller_seconds", probed.run.total_s}}));
   } else {
     const std::string& measured = machine.measured[static_cast<std::size_t>(loop)];
+    // Checked in the file the user gave (its lines; the copy in inputs/ is gone when the run fails): a point
+    // this run left out of the plan is named as such rather than as a point of another plan.
+    const std::string& given_path = machine.measured_given[static_cast<std::size_t>(loop)];
+    FL_ASSIGN_OR_RETURN(const metrology::ProbeLog given, metrology::ReadProbeLog(given_path));
+    for (const metrology::ProbeRecord& r : given.records) {
+      const auto u = std::find_if(left_out.begin(), left_out.end(),
+                                  [&](const nc::UnreachableProbePoint& p) { return p.id == r.id; });
+      if (u != left_out.end()) {
+        return Status::BadInput(
+            Where{.file = given_path, .line = r.line, .field = "id"},
+            fmt::format("point {} was left out of this run's probing plan: {}", r.id, u->reason),
+            "measure the part with the probing program this run writes (toolpath/probe.*, without that point; "
+            "toolpath/probing_left_out.json lists the points left out), or delete the row");
+      }
+    }
     FL_ASSIGN_OR_RETURN(std::string text, ReadFile(measured));
     FL_RETURN_IF_ERROR(folder.WriteText(loop_dir / "probe_log.csv", text));
     FL_RETURN_IF_ERROR(

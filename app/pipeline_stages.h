@@ -43,9 +43,10 @@ extern const char* const kVersion;
 struct Machine {
   bool virtual_machine = true;
   std::string name;
-  sim::Model model;                   // the profile's true effects (virtual)
-  metrology::ProbeModel probe;        // the probe the machine really has (virtual)
-  std::vector<std::string> measured;  // copies of the measured logs in inputs/measured (real machine)
+  sim::Model model;                         // the profile's true effects (virtual)
+  metrology::ProbeModel probe;              // the probe the machine really has (virtual)
+  std::vector<std::string> measured;        // copies of the measured logs in inputs/measured (real machine)
+  std::vector<std::string> measured_given;  // the logs as the user named them (for errors the user can fix)
   // LinuxCNC: its formloop.ini. One cycle: the simulated part is the configuration's probe surface, which
   // a compensated program cannot change, so the cutting program is not run and there is no second cycle.
   std::string linuxcnc;
@@ -160,7 +161,8 @@ struct Machined {
 };
 Result<Machined> MachineCycle(const Inputs& in, const Program& program, double tool_radius_mm,
                               const metrology::ProbingPlan& plan, const std::vector<Eigen::Vector3d>& approaches,
-                              const std::optional<recon::FootPointProjector>& part_surface, int loop,
+                              const std::optional<recon::FootPointProjector>& part_surface,
+                              const std::vector<nc::UnreachableProbePoint>& left_out, int loop,
                               const RunFolderWriter& folder);
 
 // 7b. The cycle's analysis (deviations.csv|.ply, analysis.json) and its compensation decision.

@@ -242,6 +242,17 @@ void HeaderSection(std::string& html, const RunData& run) {
               Num(Member(last, "form_error_um"), 2) + " µm",
               Member(s, "fit_check_max_um").is_number() ? Readable(Member(s, "fit_check_max_um").get<double>()) + " µm"
                                                         : "—"}});
+  // Probe points the run left out of its plan (the probe cannot reach them clear of the part).
+  const Json& left_out = Member(Member(s, "probing"), "left_out");
+  if (left_out.is_array() && !left_out.empty()) {
+    std::string ids;
+    for (const Json& id : left_out) ids += (ids.empty() ? "" : ", ") + (id.is_number() ? id.dump() : std::string("?"));
+    html += fmt::format(
+        "<p class=\"note\"><strong>Probe points left out:</strong> {} of the {} planned: a 3-axis probe cannot "
+        "reach them clear of the part (points {}; toolpath/probing_left_out.json). The deviations and the "
+        "diagnosis are of the others.</p>\n",
+        left_out.size(), Num(Member(Member(s, "probing"), "planned"), 0), Esc(ids));
+  }
   html +=
       "<nav class=\"toc\"><a href=\"#view3d\">3-D view</a> <a href=\"#loops\">Loops</a> <a "
       "href=\"#deviations\">Deviations</a> <a href=\"#spatial\">Spatial analysis</a>" +

@@ -22,6 +22,7 @@
 #include "app/kb_jobs.h"
 #include "app/part.h"
 #include "app/pipeline.h"
+#include "app/report.h"
 #include "app/run_folder.h"
 #include "core/atomic_file.h"
 #include "core/json_io.h"
@@ -463,6 +464,40 @@ TEST_F(CadPartsTest, APublicFaceThatFoldsOverRunsWithoutThePointsUnderTheFoldAnd
       shortened, least);
   EXPECT_GE(least, -0.006);  // the samples' spacing: within 5 µm of the check's own
   EXPECT_EQ(shortened, 8);
+  // summary.json and the report say which points were left out.
+  const Json summary = ReadJsonFile(dir_ / "public" / "summary.json").value();
+  EXPECT_EQ(summary["probing"]["planned"], 100);
+  EXPECT_EQ(summary["probing"]["left_out"].get<std::vector<std::int64_t>>(), left_out);
+  ASSERT_TRUE(WriteRunReport(dir_ / "public", dir_ / "public-report.html").ok());
+  const std::string html = ReadFile((dir_ / "public-report.html").string()).value();
+  EXPECT_NE(html.find("Probe points left out:</strong> 39 of the 100 planned"), std::string::npos);
+  EXPECT_NE(html.find("(points 41, 42, "), std::string::npos);
+  // The same part run on a measured log: the log of the kept points (here the virtual run's own) matches the
+  // reduced plan point for point and gives the same first-cycle form error; a log that still holds a
+  // left-out point is refused, naming it.
+  fs::copy_file(dir_ / "public" / "loop-0" / "probe_log.csv", dir_ / "measured.csv");
+  const fs::path part_file = dir_ / "occt-face.json";
+  auto measured_run = [&](const std::string& out) {
+    RunOptions o;
+    o.out = dir_ / out;
+    o.measured = {(dir_ / "measured.csv").string()};
+    o.report = false;
+    return RunPart(ReadPart(part_file).value(), o);
+  };
+  const auto m = measured_run("measured");
+  ASSERT_TRUE(m.ok()) << m.status().ToString();
+  EXPECT_NEAR(m->loops.front().form_error_um, p->loops.front().form_error_um, 1e-9);
+  EXPECT_TRUE(fs::exists(dir_ / "measured" / "toolpath" / "probing_left_out.json"));
+  {
+    std::ofstream add(dir_ / "measured.csv", std::ios::app);
+    add << "41,3.4,9.4,9.0,0,0,-1,999.0\n";
+  }
+  const auto refused = measured_run("measured-41");
+  ASSERT_FALSE(refused.ok());
+  const std::string why = refused.status().ToString();
+  EXPECT_NE(why.find("measured.csv"), std::string::npos) << why;
+  EXPECT_NE(why.find("point 41 was left out of this run's probing plan"), std::string::npos) << why;
+  EXPECT_FALSE(fs::exists(dir_ / "measured-41"));
 
   // A dome of the starter library's "dome" family (sphere_cap, size 90 mm, radius ratio 1.4), exported as a
   // STEP face and described like the family's parts, but with no shape family given.
