@@ -29,6 +29,62 @@ double FTail(double f, int q, int dof) {
 
 // The current model and the fits built on it. Every comparison uses the linearised design (a
 // nonlinear term contributes its full Jacobian at its profiled τ), so RSS values are comparable.
+// A linear term's values with their components along the directions its fit leaves undetermined
+// (within 3 standard deviations of zero: a rotation about the axis of a surface of revolution, a part's
+// rotation on a sphere cap about the line to the centre) set to zero — what the data say of the term.
+std::vector<double> DeterminedPart(const std::vector<double>& values, const Eigen::MatrixXd& cov) {
+  const Eigen::Index w = cov.rows();
+  Eigen::VectorXd theta(w);
+  for (Eigen::Index k = 0; k < w; ++k) {
+    const double v = values[static_cast<std::size_t>(k)];
+    theta[k] = std::isnan(v) ? 0.0 : v;
+  }
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(cov);
+  Eigen::VectorXd determined = Eigen::VectorXd::Zero(w);
+  for (Eigen::Index k = 0; k < w; ++k) {
+    const Eigen::VectorXd v = eig.eigenvectors().col(k);
+    const double a = v.dot(theta);
+    if (std::abs(a) > 3.0 * std::sqrt(std::max(0.0, eig.eigenvalues()[k]))) determined += a * v;
+  }
+  return std::vector<double>(determined.data(), determined.data() + w);
+}
+
+// Combinations of a selected linear term's own parameters that move nothing the data see beside the
+// other selected terms: a part's rotation on a sphere cap about the line through the sphere's centre.
+// Each is a unit vector u in parameter space with ‖(I − P_others) X_k u‖ < 1 % of ‖X_k u‖ measured on
+// the term's unit-norm columns (the combination's multiple correlation with the rest above 0.99995).
+struct OwnNullDirections {
+  Eigen::VectorXd scale;                    // 1 / column norm
+  std::vector<Eigen::VectorXd> directions;  // in the unit-norm columns' coordinates
+};
+OwnNullDirections NullDirectionsOf(const std::vector<TermFit>& s, int k) {
+  constexpr double kNullShare = 1e-4;  // ‖·‖² share left after the projection
+  OwnNullDirections out;
+  const TermFit& t = s[static_cast<std::size_t>(k)];
+  const Eigen::Index width = t.columns.cols();
+  if (width < 2 || !t.term.effect->linear()) return out;
+  out.scale = Eigen::VectorXd::Ones(width);
+  Eigen::MatrixXd g = t.columns;
+  for (Eigen::Index j = 0; j < width; ++j) {
+    const double norm = g.col(j).norm();
+    if (norm > 0) {
+      out.scale[j] = 1.0 / norm;
+      g.col(j) /= norm;
+    }
+  }
+  if (s.size() > 1) {
+    const Eigen::MatrixXd others = DesignOf(s, k);
+    const Eigen::HouseholderQR<Eigen::MatrixXd> qr(others);
+    const Eigen::MatrixXd q = qr.householderQ() * Eigen::MatrixXd::Identity(others.rows(), others.cols());
+    g -= q * (q.transpose() * g);
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(g.transpose() * g);
+  for (Eigen::Index j = 0; j < width; ++j) {
+    if (eig.eigenvalues()[j] < kNullShare) out.directions.push_back(eig.eigenvectors().col(j));
+  }
+  return out;
+}
+
 class Selector {
  public:
   Selector(const Problem& prob, const DiagnoseOptions& options, double tau_lo, double tau_hi)
@@ -80,16 +136,7 @@ class Selector {
   bool PlausibleFit(const TermFit& f) const {
     if (!f.term.effect->linear() || f.columns.cols() < 2) return Plausible(f.term, f.theta);
     const Eigen::Index w = f.columns.cols();
-    const Eigen::MatrixXd cov = f.fit.cov.bottomRightCorner(w, w);
-    const Eigen::Map<const Eigen::VectorXd> theta(f.theta.data(), w);
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(cov);
-    Eigen::VectorXd determined = Eigen::VectorXd::Zero(w);
-    for (Eigen::Index k = 0; k < w; ++k) {
-      const Eigen::VectorXd v = eig.eigenvectors().col(k);
-      const double a = v.dot(theta);
-      if (std::abs(a) > 3.0 * std::sqrt(std::max(0.0, eig.eigenvalues()[k]))) determined += a * v;
-    }
-    return Plausible(f.term, std::vector<double>(determined.data(), determined.data() + w));
+    return Plausible(f.term, DeterminedPart(f.theta, f.fit.cov.bottomRightCorner(w, w)));
   }
 
   // One forward step: every candidate fitted with the current terms; the best qualifying one is added.
@@ -269,6 +316,17 @@ JointValues Joint(const Problem& prob, const std::vector<TermFit>& s) {
   return j;
 }
 
+// s[k]'s values in the joint fit `jv`; a linear term of several columns with only what the data determine
+// of it (DeterminedPart), which is what its plausibility is judged on.
+std::vector<double> DeterminedValues(const std::vector<TermFit>& s, const JointValues& jv, int k) {
+  const TermFit& t = s[static_cast<std::size_t>(k)];
+  const Eigen::Index width = t.columns.cols();
+  const std::vector<double>& values = jv.values[static_cast<std::size_t>(k)];
+  if (!t.term.effect->linear() || width < 2) return values;
+  const int at = jv.offsets[static_cast<std::size_t>(k)];
+  return DeterminedPart(values, jv.fit.cov.block(at, at, width, width));
+}
+
 // How closely candidate columns `c` can stand in for s[k]: the multiple correlation of s[k]'s fitted
 // contribution with c, both taken orthogonal to the other selected terms (1 = c does all its work).
 double PartialCorrelation(const std::vector<TermFit>& s, int k, const Eigen::MatrixXd& c, const Fit& joint) {
@@ -404,7 +462,7 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
       const std::vector<TermFit> fitted = sel.Build(units);
       const JointValues jv = Joint(prob, fitted);
       for (std::size_t k = 0; k < fitted.size(); ++k) {
-        const auto v = violations_of(fitted[k].term, jv.values[k]);
+        const auto v = violations_of(fitted[k].term, DeterminedValues(fitted, jv, static_cast<int>(k)));
         if (!v.empty()) report_implausible(fitted[k].term, v, jv.values[k]);
       }
     }
@@ -451,6 +509,25 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
         if (column_p(base, col, n - p_s) < options.alias_alpha && column_p(with.fit, col, dof) >= options.alias_alpha &&
             sel.PlausibleFit(with)) {
           uf.Join(ns + np + static_cast<int>(m), ns + c);
+        }
+      }
+    }
+    // A combination of a selected term's own parameters that moves nothing the data see (NullDirectionsOf)
+    // makes the parameters it involves one alias group: on a sphere cap a part's three rotation angles
+    // act as a shift perpendicular to the line to the centre, and which angles make it cannot be told.
+    std::vector<std::pair<int, int>> own_null;  // {term, a column node of its null combination}
+    for (int k = 0; k < ns; ++k) {
+      for (const Eigen::VectorXd& u : NullDirectionsOf(s, k).directions) {
+        int first = -1;
+        for (std::size_t m = 0; m < columns.size(); ++m) {
+          if (columns[m].first != k || std::abs(u[columns[m].second]) < 0.1) continue;
+          const int node = ns + np + static_cast<int>(m);
+          if (first < 0) {
+            first = node;
+            own_null.push_back({k, node});
+          } else {
+            uf.Join(first, node);
+          }
         }
       }
     }
@@ -542,6 +619,14 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
         }
       }
     }
+    // A term grouped as a whole takes its null combination's parameters into its group (one finding).
+    {
+      std::vector<int> size(static_cast<std::size_t>(nodes), 0);
+      for (int m = 0; m < nodes; ++m) ++size[static_cast<std::size_t>(uf.Find(m))];
+      for (const auto& [k, node] : own_null) {
+        if (size[static_cast<std::size_t>(uf.Find(k))] > 1) uf.Join(k, node);
+      }
+    }
     groups.clear();
     named.clear();
     std::vector<int> group_of(static_cast<std::size_t>(nodes), -1);
@@ -571,7 +656,7 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
     for (int k = 0; k < ns; ++k) {
       const TermFit& t = s[static_cast<std::size_t>(k)];
       const Effect& e = *t.term.effect;
-      std::vector<std::string> v = violations_of(t.term, jv.values[static_cast<std::size_t>(k)]);
+      std::vector<std::string> v = violations_of(t.term, DeterminedValues(s, jv, k));
       for (int j = 0; j < e.parameter_count(); ++j) {
         const ParameterRange* range = options.plausible.Find(e, j);
         if (range == nullptr || e.parameters()[j].linear) continue;
@@ -607,6 +692,13 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
     result.terms.push_back(s[k].term);
     std::vector<double> theta = jv.values[k];
     for (double& v : theta) v = std::isnan(v) ? 0.0 : v;
+    // Along a combination that moves nothing the data see, the fit's value is noise: the model keeps none.
+    const OwnNullDirections null = NullDirectionsOf(s, static_cast<int>(k));
+    for (const Eigen::VectorXd& u : null.directions) {
+      Eigen::Map<Eigen::VectorXd> t(theta.data(), static_cast<Eigen::Index>(theta.size()));
+      const Eigen::VectorXd normalised = t.cwiseQuotient(null.scale);
+      t = (normalised - u * u.dot(normalised)).cwiseProduct(null.scale);
+    }
     result.theta.push_back(theta);
   }
   // Intervals that do not assume the candidates left out are absent: the profile intervals of the
