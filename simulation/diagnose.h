@@ -30,6 +30,11 @@
 //      — with its combined prediction and gain, and no parameter of its members is printed. A single
 //      parameter of a selected effect joins a group when it is significant without a candidate and
 //      not with it ("setup_offset(tz_um)": the effect stays named, that parameter is not printed).
+//      A candidate in no group, asked for beside the selected terms (a column of it significant at
+//      `alias_alpha`), whose column is nearly collinear with a selected term of one column already in
+//      a group (estimates correlated ≥ 0.95 given the rest) joins that group, its most collinear
+//      one: both are there, their split is not determined (a set-up z offset beside a tool radius
+//      grouped with the probe radius on an egg box). A named term gains no group so.
 //      Design correlations between named effects and the candidates they resemble are reported too.
 //   5. Plausibility: a named effect whose value lies outside its plausible range (rule base,
 //      plausible_ranges.h) is not named; the finding says which value the data asked for, and the
