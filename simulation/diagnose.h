@@ -34,10 +34,13 @@
 //      `alias_alpha`), whose column is nearly collinear with a selected term of one column already in
 //      a group (estimates correlated ≥ 0.95 given the rest) joins that group, its most collinear
 //      one: both are there, their split is not determined (a set-up z offset beside a tool radius
-//      grouped with the probe radius on an egg box). A named term gains no group so.
+//      grouped with the probe radius on an egg box). A named term gains no group so. The parameters
+//      of a combination of one term's own that moves nothing the data see form a group too (a part's
+//      rotation on a sphere cap about the line through the centre), the model keeping none of it.
 //      Design correlations between named effects and the candidates they resemble are reported too.
 //   5. Plausibility: a named effect whose value lies outside its plausible range (rule base,
-//      plausible_ranges.h) is not named; the finding says which value the data asked for, and the
+//      plausible_ranges.h; for a linear effect of several parameters, the part of its values the data
+//      determine) is not named; the finding says which value the data asked for, and the
 //      selection runs again without that effect.
 //   6. Intervals: 95 % profile likelihood (the values whose profiled RSS stays below
 //      RSS_min (1 + F(0.95; 1, ν)/ν); the t interval for a linear parameter when no τ is fitted; τ

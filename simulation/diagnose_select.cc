@@ -31,8 +31,6 @@ double FTail(double f, int q, int dof) {
   return boost::math::cdf(boost::math::complement(boost::math::fisher_f(q, dof), f));
 }
 
-// The current model and the fits built on it. Every comparison uses the linearised design (a
-// nonlinear term contributes its full Jacobian at its profiled τ), so RSS values are comparable.
 // A linear term's values with their components along the directions its fit leaves undetermined
 // (within 3 standard deviations of zero: a rotation about the axis of a surface of revolution, a part's
 // rotation on a sphere cap about the line to the centre) set to zero — what the data say of the term.
@@ -55,8 +53,9 @@ std::vector<double> DeterminedPart(const std::vector<double>& values, const Eige
 
 // Combinations of a selected linear term's own parameters that move nothing the data see beside the
 // other selected terms: a part's rotation on a sphere cap about the line through the sphere's centre.
-// Each is a unit vector u in parameter space with ‖(I − P_others) X_k u‖ < 1 % of ‖X_k u‖ measured on
-// the term's unit-norm columns (the combination's multiple correlation with the rest above 0.99995).
+// Each is a unit vector u on the term's unit-norm columns G with ‖(I − P_others) G u‖² < 1e-4: what is
+// left of the combination once the other terms are projected out is below 1 % of a single column's norm
+// (the term's own columns cancel there, or the others take it).
 struct OwnNullDirections {
   Eigen::VectorXd scale;                    // 1 / column norm
   std::vector<Eigen::VectorXd> directions;  // in the unit-norm columns' coordinates
@@ -89,6 +88,8 @@ OwnNullDirections NullDirectionsOf(const std::vector<TermFit>& s, int k) {
   return out;
 }
 
+// The current model and the fits built on it. Every comparison uses the linearised design (a
+// nonlinear term contributes its full Jacobian at its profiled τ), so RSS values are comparable.
 class Selector {
  public:
   Selector(const Problem& prob, const DiagnoseOptions& options, double tau_lo, double tau_hi)
@@ -622,9 +623,9 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
     // look-alike (below), and a look-alike significant by chance (1 % of the time at alias_alpha) must
     // not unname it. The candidate joins one group, its most collinear term's: one look-alike near two
     // groups would tie together what the tests above keep apart. Not a parameter of a term of several
-    // columns (a set-up offset's tz): in the multi-effect suite, three of the five radius candidates so
-    // joined to a tz were effects not there (pooled parts on sphere caps, whose set-ups the fit gets
-    // wrong), and the groups they widened no longer split.
+    // columns (a set-up offset's tz): in the multi-effect suite (measured before a term was judged on
+    // what the data determine of it), three of the five radius candidates so joined to a tz were effects
+    // not there (pooled parts on sphere caps), and the groups they widened no longer split.
     {
       const std::vector<int> size = uf.SetSizes();              // before any of these joins
       std::vector<int> best(static_cast<std::size_t>(np), -1);  // per candidate, into collinear
