@@ -48,6 +48,9 @@ Result<Machine> ResolveMachine(const PartSpec& part, const RunOptions& options, 
     m.virtual_machine = false;
     FL_RETURN_IF_ERROR(folder.MakeFolder(fs::path("inputs") / "measured"));
     for (std::size_t k = 0; k < options.measured.size(); ++k) {
+      // Read as a probe log here, before any stage runs, so a malformed one is refused at once and named as
+      // the user gave it (the copy below is in a run folder that a failed run removes).
+      FL_RETURN_IF_ERROR(metrology::ReadProbeLog(options.measured[k]).status());
       FL_ASSIGN_OR_RETURN(std::string text, ReadFile(options.measured[k]));
       const fs::path copy = fs::path("inputs") / "measured" / ("loop-" + std::to_string(k) + ".csv");
       FL_RETURN_IF_ERROR(folder.WriteText(copy, text));
@@ -505,21 +508,6 @@ Result<Machined> MachineCycle(const Inputs& in, const Program& program, double t
                                          {"controller_seconds", probed.run.total_s}}));
   } else {
     const std::string& measured = machine.measured[static_cast<std::size_t>(loop)];
-    // Checked in the file the user gave (its lines; the copy in inputs/ is gone when the run fails): a point
-    // this run left out of the plan is named as such rather than as a point of another plan.
-    const std::string& given_path = machine.measured_given[static_cast<std::size_t>(loop)];
-    FL_ASSIGN_OR_RETURN(const metrology::ProbeLog given, metrology::ReadProbeLog(given_path));
-    for (const metrology::ProbeRecord& r : given.records) {
-      const auto u = std::find_if(left_out.begin(), left_out.end(),
-                                  [&](const nc::UnreachableProbePoint& p) { return p.id == r.id; });
-      if (u != left_out.end()) {
-        return Status::BadInput(
-            Where{.file = given_path, .line = r.line, .field = "id"},
-            fmt::format("point {} was left out of this run's probing plan: {}", r.id, u->reason),
-            "measure the part with the probing program this run writes (toolpath/probe.*, without that point; "
-            "toolpath/probing_left_out.json lists the points left out), or delete the row");
-      }
-    }
     FL_ASSIGN_OR_RETURN(std::string text, ReadFile(measured));
     FL_RETURN_IF_ERROR(folder.WriteText(loop_dir / "probe_log.csv", text));
     FL_RETURN_IF_ERROR(
@@ -528,6 +516,20 @@ Result<Machined> MachineCycle(const Inputs& in, const Program& program, double t
   }
   // The analysis reads the log back from disk, as it would a real machine's.
   FL_ASSIGN_OR_RETURN(out.log, metrology::ReadProbeLog(folder.Path(loop_dir / "probe_log.csv")));
+  // A measured log's point that this run left out of the plan is named as such (not as a point of another
+  // plan), in the file the user gave: the copy holds the same bytes, so the same lines.
+  const bool measured_log = !machine.virtual_machine && machine.linuxcnc.empty();
+  for (std::size_t i = 0; measured_log && i < out.log.records.size(); ++i) {
+    const metrology::ProbeRecord& r = out.log.records[i];
+    const auto u = std::find_if(left_out.begin(), left_out.end(),
+                                [&](const nc::UnreachableProbePoint& p) { return p.id == r.id; });
+    if (u == left_out.end()) continue;
+    return Status::BadInput(
+        Where{.file = machine.measured_given[static_cast<std::size_t>(loop)], .line = r.line, .field = "id"},
+        fmt::format("point {} was left out of this run's probing plan: {}", r.id, u->reason),
+        "measure the part with the probing program this run writes (toolpath/probe.*, without that point; "
+        "toolpath/probing_left_out.json lists the points left out), or delete the row");
+  }
   return out;
 }
 
