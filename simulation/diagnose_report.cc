@@ -19,7 +19,18 @@ std::string Joined(const std::vector<std::string>& names) {
 }  // namespace
 
 std::string AliasGroup::Message() const {
-  return "one or more of: " + Joined(members) + "; these data cannot tell them apart";
+  std::string out = "one or more of: " + Joined(members) + "; these data cannot tell them apart";
+  for (const auto& u : undetermined) out += "; " + u.Text();
+  return out;
+}
+
+std::string AliasGroup::Undetermined::Text() const {
+  std::string names, values;
+  for (std::size_t j = 0; j < parameters.size() && j < coefficients.size(); ++j) {
+    names += (j == 0 ? "" : " : ") + parameters[j];
+    values += (j == 0 ? "" : " : ") + fmt::format("{:.2f}", coefficients[j]);
+  }
+  return names + " = " + values + " changes nothing these points see";
 }
 
 bool Diagnosis::InAliasGroup(std::string_view effect) const {
@@ -63,7 +74,15 @@ nlohmann::json Diagnosis::ToJson() const {
                            {"variance_explained", g.variance_explained},
                            {"combined_rms_um", g.combined_rms_um},
                            {"design_correlation", g.max_correlation},
-                           {"separate_by", g.separate_by}});
+                           {"separate_by", g.separate_by},
+                           {"undetermined",
+                            [&] {
+                              nlohmann::json u = nlohmann::json::array();
+                              for (const auto& c : g.undetermined) {
+                                u.push_back({{"parameters", c.parameters}, {"coefficients", c.coefficients}});
+                              }
+                              return u;
+                            }()}});
   }
   nlohmann::json implausible_json = nlohmann::json::array();
   for (const auto& b : implausible) {

@@ -88,6 +88,23 @@ OwnNullDirections NullDirectionsOf(const std::vector<TermFit>& s, int k) {
   return out;
 }
 
+// A null combination in the term's raw parameters, for the engineer (AliasGroup::Undetermined).
+template <typename Label>
+AliasGroup::Undetermined UndeterminedOf(const Eigen::VectorXd& u, const Eigen::VectorXd& scale,
+                                        const Label& column_label, int k) {
+  const Eigen::VectorXd raw = u.cwiseProduct(scale);
+  Eigen::Index largest = 0;
+  const double top = raw.cwiseAbs().maxCoeff(&largest);
+  const double sign = raw[largest] < 0 ? -1.0 : 1.0;  // the largest component positive
+  AliasGroup::Undetermined combination;
+  for (Eigen::Index j = 0; j < raw.size(); ++j) {
+    if (std::abs(raw[j]) < 0.05 * top) continue;
+    combination.parameters.push_back(column_label(k, static_cast<int>(j)));
+    combination.coefficients.push_back(sign * raw[j] / raw.norm());
+  }
+  return combination;
+}
+
 // The current model and the fits built on it. Every comparison uses the linearised design (a
 // nonlinear term contributes its full Jacobian at its profiled τ), so RSS values are comparable.
 class Selector {
@@ -881,6 +898,20 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
         combined += x.col(c) * joint.beta[c];
       } else {
         others = Concat(others, x.col(c));
+      }
+    }
+    // What of a member the data do not see at all (a null combination of its own parameters, joined into
+    // this group as a whole term or by its columns): said in the finding.
+    const auto in_this_group = [&](int node) { return std::count(groups[g].begin(), groups[g].end(), node) > 0; };
+    for (int k = 0; k < ns; ++k) {
+      const OwnNullDirections null = NullDirectionsOf(s, k);
+      for (const Eigen::VectorXd& u : null.directions) {
+        bool here = in_this_group(k);
+        for (std::size_t m = 0; !here && m < columns.size(); ++m) {
+          here = columns[m].first == k && std::abs(u[columns[m].second]) >= 0.1 &&
+                 in_this_group(ns + np + static_cast<int>(m));
+        }
+        if (here) group.undetermined.push_back(UndeterminedOf(u, null.scale, column_label, k));
       }
     }
     group.variance_explained = rss0 > 0 ? (LeastSquares(others, prob.r).rss - joint.rss) / rss0 : 0.0;

@@ -222,6 +222,26 @@ TEST(MultiEffectTest, APooledSphereCapsRotationIsGroupedNotReplacedByOffsets) {
     grouped = grouped || angles >= 2;
   }
   EXPECT_TRUE(grouped) << both->Summary();
+  // ... and the finding says which turn changes nothing: the one about the line from the part origin to
+  // the sphere's centre (50, 40, -80) mm, which moves every point of the cap along the sphere.
+  const Eigen::Vector3d axis = Eigen::Vector3d(50, 40, -80).normalized();
+  int said = 0;
+  for (const auto& g : both->alias_groups) {
+    for (const auto& u : g.undetermined) {
+      Eigen::Vector3d w = Eigen::Vector3d::Zero();
+      for (std::size_t j = 0; j < u.parameters.size(); ++j) {
+        for (int axis_index = 0; axis_index < 3; ++axis_index) {
+          const std::string name = std::string("setup_rotation(w") + "xyz"[axis_index] + "_urad)@B";
+          if (u.parameters[j] == name) w[axis_index] = u.coefficients[j];
+        }
+      }
+      if (w.norm() < 0.9) continue;
+      ++said;
+      EXPECT_GT(std::abs(w.normalized().dot(axis)), 0.99) << u.Text() << "\n" << both->Summary();
+      EXPECT_NE(g.Message().find("changes nothing these points see"), std::string::npos) << g.Message();
+    }
+  }
+  EXPECT_EQ(said, 1) << both->Summary();
   for (const auto& c : both->causes) {
     if (c.Label() != "setup_rotation@B") continue;
     for (std::size_t j = 0; j < c.aliased.size(); ++j) EXPECT_TRUE(c.aliased[j]) << c.parameter_names[j];
