@@ -56,8 +56,15 @@ std::vector<std::string> GroupSignatures(const sim::Diagnosis& d) {
   return out;
 }
 
-// A group is split when no alias group of the new diagnosis holds two of its effects.
+// A group is split when no alias group of the new diagnosis holds two of its effects. The group is the
+// first part's: in a pooled diagnosis a member of a part's own set-up counts only when it is the first
+// part's (a later part's offset and rotation grouped together are that part's clamping, another group).
 bool Splits(const std::string& signature, const sim::Diagnosis& d) {
+  const std::string first = d.parts.empty() ? std::string() : d.parts.front();
+  const auto ofFirstPart = [&](const std::string& member) {
+    const std::size_t at = member.find('@');
+    return at == std::string::npos || member.substr(at + 1) == first;
+  };
   std::vector<std::string> effects;
   for (std::size_t a = 0, b; a <= signature.size(); a = b + 1) {
     b = signature.find('+', a);
@@ -68,7 +75,7 @@ bool Splits(const std::string& signature, const sim::Diagnosis& d) {
     int held = 0;
     for (const auto& e : effects) {
       bool in = false;
-      for (const auto& m : g.members) in = in || m.substr(0, m.find('@')) == e;
+      for (const auto& m : g.members) in = in || (m.substr(0, m.find('@')) == e && ofFirstPart(m));
       held += in;
     }
     if (held >= 2) return false;
@@ -160,30 +167,44 @@ nlohmann::json RunScenario(int index, bool pool = PoolingWanted()) {
     // ... and the direct readings the proposals ask for, as an engineer following them would take them
     // (`formloop run` does not take them: `diagnose --direct` reads them): those of shared effects (tool
     // setter, reference sphere) once before the second part; a set-up datum on each later part, of its own
-    // clamping — the first part's is gone by then and is not measured.
+    // clamping. The pipeline columns leave the first part's own datum out (pooling alone must split what it
+    // can); the "with datum" columns add it, as taken while the first part is still clamped (its diagnosis
+    // runs inside the loop, before the part comes off): a group of that part's own set-up alone is not seen
+    // by any other part, so only a reading on the part splits it.
     const std::vector<sim::ExperimentProposal>& asked = proposals.ok() ? *proposals : NoProposals();
     sim::DiagnoseOptions pipeline_options = Options();
     pipeline_options.direct = SharedReadings(s.parts[1], asked, seed + 9500000);
     row["pipeline_readings"] = pipeline_options.direct.size();
     std::vector<std::vector<sim::DirectMeasurement>> own_setup(pipeline_parts.size());
-    for (std::size_t p = 1; p < pipeline_parts.size(); ++p) {
+    for (std::size_t p = 0; p < pipeline_parts.size(); ++p) {
       own_setup[p] = OwnSetupReadings(pipeline_parts[p], std::to_string(p + 1), asked, seed + 9600000 + p);
     }
     row["pipeline_setup_readings"] = pipeline_parts.size() > 1 ? own_setup[1].size() : 0;
-    nlohmann::json pooled = nlohmann::json::object(), pooled_pipeline = nlohmann::json::object();
+    row["first_part_setup_readings"] = own_setup[0].size();
+    nlohmann::json pooled = nlohmann::json::object(), pooled_pipeline = nlohmann::json::object(),
+                   pooled_datum = nlohmann::json::object();
     for (std::size_t parts : {2, 3}) {
       if (!pool) break;
-      for (const bool pipeline : {false, true}) {
+      for (const int variant : {0, 1, 2}) {  // plain, pipeline, pipeline with the first part's datum
+        const bool pipeline = variant > 0;
+        if (variant == 2 && own_setup[0].empty()) {  // nothing asked on the first part: the pipeline's
+          pooled_datum[std::to_string(parts)] = pooled_pipeline[std::to_string(parts)];
+          continue;
+        }
         std::vector<sim::ProbeDataInput> inputs;
         for (std::size_t p = 0; p < parts; ++p) inputs.push_back(InputOf(pipeline ? pipeline_parts[p] : s.parts[p]));
         sim::DiagnoseOptions options = pipeline ? pipeline_options : Options();
-        for (std::size_t p = 1; pipeline && p < parts; ++p) {
+        for (std::size_t p = variant == 2 ? 0 : 1; pipeline && p < parts; ++p) {
           options.direct.insert(options.direct.end(), own_setup[p].begin(), own_setup[p].end());
         }
         const auto dp = sim::DiagnosePooled(inputs, s.parts[0].baseline, options);
         EXPECT_TRUE(dp.ok()) << dp.status().message();
         if (!dp.ok()) continue;
-        if (std::getenv("FL_DEBUG_POOLED") && pipeline) {
+        if (std::getenv("FL_DEBUG_POOLED") && variant == 2) {
+          std::printf("pooled pipeline with the first part's datum, %zu parts (%zu readings):\n%s", parts,
+                      options.direct.size(), dp->Summary().c_str());
+        }
+        if (std::getenv("FL_DEBUG_POOLED") && variant == 1) {
           std::printf("pooled pipeline, %zu parts (%zu readings):\n%s", parts, options.direct.size(),
                       dp->Summary().c_str());
           for (std::size_t p = 0; p < parts; ++p) {
@@ -201,12 +222,13 @@ nlohmann::json RunScenario(int index, bool pool = PoolingWanted()) {
         }
         nlohmann::json split = nlohmann::json::object();
         for (const auto& sig : GroupSignatures(*d)) split[sig] = Splits(sig, *dp);
-        (pipeline ? pooled_pipeline : pooled)[std::to_string(parts)] = {
+        (variant == 0 ? pooled : variant == 1 ? pooled_pipeline : pooled_datum)[std::to_string(parts)] = {
             {"grade", GradeDiagnosis(*dp, s, parts).ToJson()}, {"split", split}, {"groups", GroupSignatures(*dp)}};
       }
     }
     row["pooled"] = pooled;
     row["pooled_pipeline"] = pooled_pipeline;
+    row["pooled_datum"] = pooled_datum;
     // The separating experiment: applied on the virtual machine, diagnosed again.
     nlohmann::json experiments = nlohmann::json::array();
     for (std::size_t g = 0; proposals.ok() && g < proposals->size(); ++g) {
@@ -321,6 +343,8 @@ struct SuiteTotals {
   std::map<std::string, std::array<int, 4>> pooled;
   // ... the later parts planned as the pipeline plans them (the first part's proposals applied).
   std::map<std::string, std::array<int, 4>> pooled_pipeline;
+  // ... and with the first part's own set-up readings taken too (its datum, while it is clamped).
+  std::map<std::string, std::array<int, 4>> pooled_datum;
   // Pooled diagnoses ("pooled_pipeline by 2, set-up rotated", ...): {count, all found, something false}.
   std::map<std::string, std::array<int, 3>> pooled_grades;
 };
@@ -339,6 +363,7 @@ SuiteTotals Summarise() {
   std::map<std::string, int> surfaces, group_count;
   std::map<std::string, std::array<int, 4>> split;  // signature -> {2-part splits, 2-part tries, 3-part splits, tries}
   std::map<std::string, std::array<int, 4>> split_pipeline;  // the same, later parts with the proposals applied
+  std::map<std::string, std::array<int, 4>> split_datum;     // ... and the first part's datum taken
   std::map<std::string, std::array<int, 2>> per_effect;      // effect -> {found, true}
   // Pooled diagnoses: {count, every true effect found, an effect named that is not there}.
   std::map<std::string, std::array<int, 3>> pooled_grades;
@@ -393,9 +418,10 @@ SuiteTotals Summarise() {
         scenarios_right += all_right;
       }
     }
-    for (const char* kind : {"pooled", "pooled_pipeline"}) {
+    for (const char* kind : {"pooled", "pooled_pipeline", "pooled_datum"}) {
       if (!row.contains(kind)) continue;
-      auto& tally = std::string(kind) == "pooled" ? split : split_pipeline;
+      auto& tally = std::string(kind) == "pooled" ? split : std::string(kind) == "pooled_pipeline" ? split_pipeline
+                                                                                                   : split_datum;
       for (int parts : {2, 3}) {
         const std::string key = std::to_string(parts);
         if (!row[kind].contains(key)) continue;
@@ -433,25 +459,30 @@ SuiteTotals Summarise() {
   std::printf(
       "  pooling (plain: the later parts probed with their own plans; pipeline: with the first part's\n"
       "  proposals applied as formloop run applies them, and the readings they ask for taken as an engineer\n"
-      "  would: tool setter and reference sphere once, a datum of each later part's own set-up)\n");
-  std::printf("  %-60s %5s %14s %14s %14s %14s\n", "alias group", "seen", "plain by 2", "plain by 3", "pipeline by 2",
-              "pipeline by 3");
-  std::array<int, 8> all{};
+      "  would: tool setter and reference sphere once, a datum of each later part's own set-up; with datum:\n"
+      "  the pipeline and the first part's own datum, taken while it is still clamped)\n");
+  std::printf("  %-60s %5s %14s %14s %14s %14s %14s %14s\n", "alias group", "seen", "plain by 2", "plain by 3",
+              "pipeline by 2", "pipeline by 3", "w/ datum by 2", "w/ datum by 3");
+  std::array<int, 12> all{};
+  const auto cell = [](int yes, int tries) {
+    std::printf(" %6d/%-3d %3.0f%%", yes, tries, 100.0 * yes / std::max(1, tries));
+  };
   for (const auto& [sig, n] : group_count) {
-    const auto& sp = split[sig];
-    const auto& pp = split_pipeline[sig];
-    for (int k = 0; k < 4; ++k) {
-      all[static_cast<std::size_t>(k)] += sp[static_cast<std::size_t>(k)];
-      all[static_cast<std::size_t>(k + 4)] += pp[static_cast<std::size_t>(k)];
+    std::printf("  %-60s %5d", sig.c_str(), n);
+    int column = 0;
+    for (const auto* tally : {&split, &split_pipeline, &split_datum}) {
+      const auto it = tally->find(sig);
+      const std::array<int, 4> c = it == tally->end() ? std::array<int, 4>{} : it->second;
+      for (std::size_t k = 0; k < 4; ++k) all[static_cast<std::size_t>(column) * 4 + k] += c[k];
+      cell(c[0], c[1]);
+      cell(c[2], c[3]);
+      ++column;
     }
-    std::printf("  %-60s %5d %6d/%-3d %3.0f%% %6d/%-3d %3.0f%% %6d/%-3d %3.0f%% %6d/%-3d %3.0f%%\n", sig.c_str(), n,
-                sp[0], sp[1], 100.0 * sp[0] / std::max(1, sp[1]), sp[2], sp[3], 100.0 * sp[2] / std::max(1, sp[3]),
-                pp[0], pp[1], 100.0 * pp[0] / std::max(1, pp[1]), pp[2], pp[3], 100.0 * pp[2] / std::max(1, pp[3]));
+    std::printf("\n");
   }
-  std::printf("  %-60s %5s %6d/%-3d %3.0f%% %6d/%-3d %3.0f%% %6d/%-3d %3.0f%% %6d/%-3d %3.0f%%\n", "all groups", "",
-              all[0], all[1], 100.0 * all[0] / std::max(1, all[1]), all[2], all[3],
-              100.0 * all[2] / std::max(1, all[3]), all[4], all[5], 100.0 * all[4] / std::max(1, all[5]), all[6],
-              all[7], 100.0 * all[6] / std::max(1, all[7]));
+  std::printf("  %-60s %5s", "all groups", "");
+  for (std::size_t k = 0; k < 12; k += 2) cell(all[k], all[k + 1]);
+  std::printf("\n");
   // Not a target of its own (the issue grades the first part's diagnosis and the split of its groups);
   // printed because `formloop run` pools by default: a set-up rotation on a sphere cap is a shift, which
   // today's selection can drop for an implausible rotation and name as set-up offsets on every part.
@@ -494,6 +525,7 @@ SuiteTotals Summarise() {
   for (const auto& [sig, n] : group_count) {
     t.pooled[sig] = split[sig];
     t.pooled_pipeline[sig] = split_pipeline[sig];
+    t.pooled_datum[sig] = split_datum[sig];
   }
   return t;
 }
@@ -564,8 +596,9 @@ bool HoldsSharedEffect(const std::string& signature) {
 // every group seen in the suite split in >= 80 % of its occurrences with 2 parts and with 3; and each
 // group seen at least 5 times that holds a shared effect split in >= 80 % of them by 2 or by 3 parts (a
 // rate over fewer occurrences says little; the groups of one part's own set-up are excluded, see
-// HoldsSharedEffect). Whole suite, main of 2026-11-27: 267 / 275 of 317 (84.2 / 86.8 %); the groups seen
-// >= 5 times with a shared effect 80-100 %.
+// HoldsSharedEffect). Whole suite, main of 2026-11-27 (a group graded as the first part's: a later part's
+// own set-up grouped is not it): 291 / 294 of 317 (91.8 / 92.7 %); counting a later part's own offset and
+// rotation grouped as the first part's group unsplit, 267 / 275 (84.2 / 86.8 %).
 TEST(MultiEffect, PoolingTarget) {
   const SuiteTotals t = Summarise();
   std::array<int, 4> all{};
@@ -595,16 +628,34 @@ TEST(MultiEffect, PoolingTarget) {
   }
 }
 
-// ... and the issue's letter: every group, however rarely seen, >= 80 % by 2 or 3 parts. NOT MET (whole
-// suite, main of 2026-11-27): 140 of the 164 distinct groups; of the 24 others, 9 are groups of the first
-// part's own set-up alone (setup_offset components with setup_rotation components: 0-50 %, which pooling
-// cannot split) and 15 hold a shared effect but are seen once (14) or twice (1); in 11 of their 15 failing
-// occurrences by 3 parts what stays grouped is only the first part's set-up. Kept as a disabled check:
+// ... and with the first part's own datum taken too, while it is still clamped (its diagnosis runs in
+// the loop before the part comes off; the datum is what its proposal asks): a group of that part's own
+// set-up alone is seen by no other part, so pooling cannot split it, and the datum does. Every group seen
+// more than once split in >= 80 % of its occurrences by 2 or by 3 parts, and all occurrences >= 90 %.
+// Whole suite, main of 2026-11-27: 308 / 310 of 317 (97.2 / 97.8 %); 161 of the 164 distinct groups.
+TEST(MultiEffect, PoolingWithFirstPartsDatumTarget) {
+  const SuiteTotals t = Summarise();
+  std::array<int, 4> all{};
+  for (const auto& [sig, sp] : t.pooled_datum) {
+    for (std::size_t k = 0; k < 4; ++k) all[k] += sp[k];
+    if (std::max(sp[1], sp[3]) >= 2) {
+      EXPECT_GE(std::max(sp[0], sp[2]), 0.80 * std::max(sp[1], sp[3])) << sig;
+    }
+  }
+  EXPECT_GE(all[0], 0.90 * all[1]) << "2 parts";
+  EXPECT_GE(all[2], 0.90 * all[3]) << "3 parts";
+}
+
+// ... and the issue's letter: every group, however rarely seen, >= 80 % by 2 or 3 parts, the first part's
+// datum taken. NOT MET (whole suite, main of 2026-11-27): 161 of the 164 distinct groups; the 3 others are
+// seen once each (scenarios 38, 133, 175). Without the first part's datum 149 of 164 (most of the 15
+// others are that part's own offset and rotation, which only a reading on it splits). Kept as a disabled
+// check:
 //   build/tests/formloop_multi_effect_tests --gtest_also_run_disabled_tests
 //     --gtest_filter=MultiEffect.DISABLED_EveryGroupPoolingTarget
 TEST(MultiEffect, DISABLED_EveryGroupPoolingTarget) {
   const SuiteTotals t = Summarise();
-  for (const auto& [sig, sp] : t.pooled_pipeline) {
+  for (const auto& [sig, sp] : t.pooled_datum) {
     const int best = std::max(sp[0], sp[2]);
     EXPECT_GE(best, 0.80 * std::max(sp[1], sp[3])) << sig;
   }
