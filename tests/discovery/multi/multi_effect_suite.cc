@@ -188,7 +188,8 @@ nlohmann::json RunScenario(int index, bool pool = PoolingWanted()) {
       for (const int variant : {0, 1, 2}) {  // plain, pipeline, pipeline with the first part's datum
         const bool pipeline = variant > 0;
         if (variant == 2 && own_setup[0].empty()) {  // nothing asked on the first part: the pipeline's
-          pooled_datum[std::to_string(parts)] = pooled_pipeline[std::to_string(parts)];
+          const std::string key = std::to_string(parts);
+          if (pooled_pipeline.contains(key)) pooled_datum[key] = pooled_pipeline[key];
           continue;
         }
         std::vector<sim::ProbeDataInput> inputs;
