@@ -37,8 +37,8 @@
 //      grouped with the probe radius on an egg box). A named term gains no group so. The parameters
 //      of a combination of one term's own that moves nothing the data see form a group too (a part's
 //      rotation on a sphere cap about the line through the centre), the model keeping none of it; the
-//      finding says the combination ("...(wx_urad)@B : ...(wy_urad)@B : ...(wz_urad)@B = 0.49 : 0.39 :
-//      -0.78 changes nothing these points see": the turn about that axis).
+//      finding says the combination ("...(wx_urad)@B : ...(wy_urad)@B : ...(wz_urad)@B = -0.49 : -0.39 :
+//      0.78 changes nothing these points see": the turn about that axis).
 //      Design correlations between named effects and the candidates they resemble are reported too.
 //   5. Plausibility: a named effect whose value lies outside its plausible range (rule base,
 //      plausible_ranges.h; for a linear effect of several parameters, the part of its values the data
@@ -160,7 +160,7 @@ struct AliasGroup {
   struct Undetermined {
     std::vector<std::string> parameters;  // column labels: "setup_rotation(wx_urad)@2"
     std::vector<double> coefficients;     // unit norm; components below 5 % of the largest left out
-    std::string Text() const;             // "a : b : c = 0.49 : 0.39 : -0.78 changes nothing these points see"
+    std::string Text() const;             // "a : b : c = -0.49 : -0.39 : 0.78 changes nothing these points see"
   };
   std::vector<Undetermined> undetermined;
   std::string Message() const;        // "one or more of: a, b, c; these data cannot tell them apart"

@@ -771,12 +771,15 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
   const int p_s = Selector::Params(s);
   const int nu = std::max(1, n - p_s);
   const double f95 = boost::math::quantile(boost::math::fisher_f(1, nu), 0.95);
+  // Each term's combinations that move nothing the data see (its values, and the alias groups' findings).
+  std::vector<OwnNullDirections> nulls;
+  for (int k = 0; k < ns; ++k) nulls.push_back(NullDirectionsOf(s, k));
   for (std::size_t k = 0; k < s.size(); ++k) {
     result.terms.push_back(s[k].term);
     std::vector<double> theta = jv.values[k];
     for (double& v : theta) v = std::isnan(v) ? 0.0 : v;
     // Along a combination that moves nothing the data see, the fit's value is noise: the model keeps none.
-    const OwnNullDirections null = NullDirectionsOf(s, static_cast<int>(k));
+    const OwnNullDirections& null = nulls[k];
     for (const Eigen::VectorXd& u : null.directions) {
       Eigen::Map<Eigen::VectorXd> t(theta.data(), static_cast<Eigen::Index>(theta.size()));
       const Eigen::VectorXd normalised = t.cwiseQuotient(null.scale);
@@ -904,7 +907,7 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
     // this group as a whole term or by its columns): said in the finding.
     const auto in_this_group = [&](int node) { return std::count(groups[g].begin(), groups[g].end(), node) > 0; };
     for (int k = 0; k < ns; ++k) {
-      const OwnNullDirections null = NullDirectionsOf(s, k);
+      const OwnNullDirections& null = nulls[static_cast<std::size_t>(k)];
       for (const Eigen::VectorXd& u : null.directions) {
         bool here = in_this_group(k);
         for (std::size_t m = 0; !here && m < columns.size(); ++m) {
