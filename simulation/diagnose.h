@@ -28,8 +28,11 @@
 //      proportion is parsimony's case. Alias edges joined into connected groups: a group of two
 //      or more is reported as one finding — "one or more of: ...; these data cannot tell them apart"
 //      — with its combined prediction and gain, and no parameter of its members is printed. A single
-//      parameter of a selected effect joins a group when it is significant without a candidate and
-//      not with it ("setup_offset(tz_um)": the effect stays named, that parameter is not printed).
+//      parameter of a selected effect joins a group when it is significant without a candidate (at
+//      `alias_alpha` / the number of parameters so tested: Bonferroni, as a forward step) and not
+//      with it ("setup_offset(tz_um)": the effect stays named, that parameter is not printed); one
+//      the data do not ask for at that level is printed with its interval, which is joined over its
+//      look-alikes (6.), not grouped with everything it resembles.
 //      A candidate in no group, asked for beside the selected terms (a column of it significant at
 //      `alias_alpha`), whose column is nearly collinear with a selected term of one column already in
 //      a group (estimates correlated ≥ 0.95 given the rest) joins that group, its most collinear

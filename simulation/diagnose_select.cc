@@ -507,6 +507,9 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
         columns.push_back({k, j});
     }
     const int nodes = ns + np + static_cast<int>(columns.size());
+    // A parameter counts as asked for by the data at alias_alpha / (the parameters so tested): Bonferroni
+    // over the family, as a forward step over its candidates.
+    const double parameter_alpha = options.alias_alpha / std::max<double>(1.0, static_cast<double>(columns.size()));
     UnionFind uf(nodes);
     const int p_s = Selector::Params(s);
     const Fit base = sel.FitOf(s);
@@ -556,7 +559,14 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
       }
       for (std::size_t m = 0; m < columns.size(); ++m) {
         const int col = offset[columns[m].first] + columns[m].second;
-        if (column_p(base, col, n - p_s) < options.alias_alpha && column_p(with.fit, col, dof) >= options.alias_alpha &&
+        if (std::getenv("FL_DEBUG_ALIAS") && column_p(base, col, n - p_s) < parameter_alpha &&
+            column_p(with.fit, col, dof) >= options.alias_alpha) {
+          std::fprintf(stderr, "param alias: %s col %d given %s: p without %.3g with %.3g plausible %d\n",
+                       prob.Label(s[static_cast<std::size_t>(columns[m].first)].term).c_str(), columns[m].second,
+                       prob.Label(pool[static_cast<std::size_t>(c)]).c_str(), column_p(base, col, n - p_s),
+                       column_p(with.fit, col, dof), sel.PlausibleFit(with));
+        }
+        if (column_p(base, col, n - p_s) < parameter_alpha && column_p(with.fit, col, dof) >= options.alias_alpha &&
             sel.PlausibleFit(with)) {
           uf.Join(ns + np + static_cast<int>(m), ns + c);
         }
