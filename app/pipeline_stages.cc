@@ -516,9 +516,10 @@ Result<Machined> MachineCycle(const Inputs& in, const Program& program, double t
   }
   // The analysis reads the log back from disk, as it would a real machine's.
   FL_ASSIGN_OR_RETURN(out.log, metrology::ReadProbeLog(folder.Path(loop_dir / "probe_log.csv")));
-  // A measured log's point that this run left out of the plan is named as such (not as a point of another
-  // plan), in the file the user gave: the copy holds the same bytes, so the same lines.
+  // A measured log is the user's file: what later stages say of its rows (an id of another plan, a point
+  // this run left out) names that file, whose lines the copy holds byte for byte, not the run folder's copy.
   const bool measured_log = !machine.virtual_machine && machine.linuxcnc.empty();
+  if (measured_log) out.log.source = machine.measured_given[static_cast<std::size_t>(loop)];
   for (std::size_t i = 0; measured_log && i < out.log.records.size(); ++i) {
     const metrology::ProbeRecord& r = out.log.records[i];
     const auto u = std::find_if(left_out.begin(), left_out.end(),

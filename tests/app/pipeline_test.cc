@@ -4,6 +4,7 @@
 #include <chrono>
 #include <csignal>
 #include <filesystem>
+#include <fstream>
 #include <thread>
 
 #include <sys/wait.h>
@@ -277,6 +278,22 @@ TEST_F(PipelineTest, MeasuredLogGivesOneCycleAndTheCompensatedProgram) {
   const auto both = RunPart(part, measured);
   ASSERT_FALSE(both.ok());
   EXPECT_NE(both.status().message().find("--measured"), std::string::npos);
+  // A log with an id of another plan is refused naming the user's file and its line, not the run
+  // folder's copy (which is gone by then: the failed run's folder is renamed).
+  std::string text = ReadFile((dir_ / "virtual" / "loop-0" / "probe_log.csv").string()).value();
+  const std::size_t row = text.find("\n3,");
+  ASSERT_NE(row, std::string::npos);
+  text.replace(row + 1, 1, "99999");
+  const fs::path other = dir_ / "other-plan.csv";
+  { std::ofstream(other) << text; }
+  measured.machine.clear();
+  measured.measured = {other.string()};
+  measured.out = dir_ / "other";
+  const auto refused = RunPart(part, measured);
+  ASSERT_FALSE(refused.ok());
+  const std::string why = refused.status().ToString();
+  EXPECT_NE(why.find(other.string() + ":5: field 'id': id 99999 is not in the probing plan"), std::string::npos) << why;
+  EXPECT_EQ(why.find("probe_log.csv"), std::string::npos) << why;
 }
 
 TEST_F(PipelineTest, AParametricSurfaceWithNoSurfaceIsRefusedNamingIt) {
