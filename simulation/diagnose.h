@@ -51,7 +51,10 @@
 //      RSS_min (1 + F(0.95; 1, ν)/ν); the t interval for a linear parameter when no τ is fitted; τ
 //      clipped to its plausible range), joined over the selected model and the model plus each
 //      candidate left out: an interval does not assume that a look-alike too weak to be selected is
-//      absent (extreme-bounds analysis, Leamer 1983).
+//      absent (extreme-bounds analysis, Leamer 1983); and over the model with each alias group's
+//      selected member replaced by each of the group's candidates: "one or more of" does not say
+//      which member is there, so a named interval must not assume it (a z scale grouped with wear
+//      took the slow part of a thermal drift, whose τ and amplitude intervals then missed the truth).
 //   7. If the residual after the selected terms is still spatially correlated (z > z_critical):
 //      "unexplained systematic residual", with where (local Moran HH/LL clusters); a localised region
 //      is set aside and the selection repeated outside it (RunEngine).

@@ -820,9 +820,43 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
       widened[i] = ProfileIntervals(prob, extended, tau_lo, tau_hi, nu_c, f95_c);
     }
   });
+  // ... and with each alias group carried by another of its members: a selected term in a group is "one
+  // or more of" its members, so a named term's interval must not assume it is the one that is there (a
+  // z scale grouped with wear on a Franke part takes the slow part of a thermal drift, which then fits
+  // a τ and an amplitude far from the truth with intervals that exclude it).
+  std::vector<std::pair<int, int>> swaps;  // {selected term in a group, candidate of the same group}
+  for (const auto& g : groups) {
+    for (int a : g) {
+      if (a >= ns) continue;
+      for (int c : g) {
+        if (c >= ns && c < ns + np) swaps.push_back({a, c - ns});
+      }
+    }
+  }
+  std::vector<std::vector<std::vector<std::pair<double, double>>>> swapped(swaps.size());
+  ParallelFor(static_cast<long>(swaps.size()), 1, [&](long begin, long end) {
+    for (auto i = static_cast<std::size_t>(begin); i < static_cast<std::size_t>(end); ++i) {
+      const auto [k, c] = swaps[i];
+      const Term& term = pool[static_cast<std::size_t>(c)];
+      const bool other_nonlinear = std::any_of(s.begin(), s.end(), [&](const TermFit& t) {
+        return &t != &s[static_cast<std::size_t>(k)] && !t.term.effect->linear();
+      });
+      if (!term.effect->linear() && other_nonlinear) continue;  // one nonlinear term at a time
+      TermFit with = sel.With(s, term, k);
+      if (!sel.PlausibleFit(with)) continue;
+      std::vector<TermFit> model = s;
+      model[static_cast<std::size_t>(k)] = std::move(with);
+      const int nu_c = std::max(1, n - Selector::Params(model));
+      const double f95_c = boost::math::quantile(boost::math::fisher_f(1, nu_c), 0.95);
+      swapped[i] = ProfileIntervals(prob, model, tau_lo, tau_hi, nu_c, f95_c);
+      swapped[i][static_cast<std::size_t>(k)].clear();  // the swapped-in term's intervals are not s[k]'s
+    }
+  });
+  for (auto& wider : swapped) widened.push_back(std::move(wider));
   for (const auto& wider : widened) {
     if (wider.empty()) continue;
     for (std::size_t k = 0; k < s.size(); ++k) {
+      if (wider[k].size() != intervals[k].size()) continue;
       for (std::size_t j = 0; j < intervals[k].size(); ++j) {
         if (std::isnan(wider[k][j].first) || std::isnan(intervals[k][j].first)) continue;
         intervals[k][j].first = std::min(intervals[k][j].first, wider[k][j].first);

@@ -33,6 +33,9 @@ constexpr std::uint64_t kSeedBase = 900000;
 // Suite scenarios whose proposals use the newer direct kinds (MultiEffect.NewDirectKindsSplitTheirGroups).
 constexpr int kNewKindScenarios[] = {2, 15};
 const std::vector<std::string> kNewKindsShown = {"step_gauge", "tool_setter_before_after"};
+// Suite scenarios whose named intervals missed the truth while they assumed that an alias group's selected
+// member was the one there (MultiEffect.NamedIntervalsHoldWhicheverGroupMemberIsThere).
+constexpr int kGroupCarrierScenarios[] = {4, 113, 133, 205};
 
 sim::DiagnoseOptions Options() {
   sim::DiagnoseOptions o;
@@ -204,6 +207,14 @@ nlohmann::json RunScenario(int index, bool pool = PoolingWanted()) {
         if (std::getenv("FL_DEBUG_POOLED") && variant == 2) {
           std::printf("pooled pipeline with the first part's datum, %zu parts (%zu readings):\n%s", parts,
                       options.direct.size(), dp->Summary().c_str());
+        }
+        // What the designer would propose on the pooled diagnosis itself (debugging a group pooling leaves).
+        if (std::getenv("FL_DEBUG_POOLED_PROPOSE") && variant == 2 && !dp->alias_groups.empty()) {
+          const auto pp = sim::ProposeExperiments(inputs, *dp, s.parts[0].baseline, ExperimentOptionsFor(s.parts[0]));
+          if (!pp.ok()) std::printf("pooled proposal failed: %s\n", pp.status().message().c_str());
+          for (std::size_t g = 0; pp.ok() && g < pp->size(); ++g) {
+            std::printf("pooled proposal by %zu: %s\n", parts, (*pp)[g].ToJson().dump().c_str());
+          }
         }
         if (std::getenv("FL_DEBUG_POOLED") && variant == 1) {
           std::printf("pooled pipeline, %zu parts (%zu readings):\n%s", parts, options.direct.size(),
@@ -546,7 +557,7 @@ TEST(MultiEffect, Rates) {
 // the scenario's truth plus the instrument's noise) and diagnosing again splits every group of the
 // scenario in >= 80 % of the aliased scenarios. The table of predicted and measured correlations is
 // printed by Summarise. Whole suite, main of 2026-11-27 (a minor member must be told from its look-alikes
-// too): 238 of 261 aliased scenarios (91.2 %), 293 of 317 groups (92.4 %); before that 226 of 260
+// too): 239 of 260 aliased scenarios (91.9 %), 293 of 315 groups (93.0 %); before that 226 of 260
 // (86.9 %); before the experiment-design fixes: 159 of 260 (61.2 %).
 TEST(MultiEffect, ExperimentTarget) {
   const SuiteTotals t = Summarise();
@@ -557,6 +568,27 @@ TEST(MultiEffect, ExperimentTarget) {
 // measure — step gauges, ball bars, the deflection test cut, the sphere in many directions, the tool
 // setter before and after the cut: in these suite scenarios the proposal of a group includes one of them,
 // and its reading (truth + the instrument's noise) splits the group.
+// A named effect's interval holds whichever member of an alias group is there: the first part's
+// diagnosis of each scenario below has a group and names effects whose every parameter's 95 % interval
+// holds the truth. Before the intervals were joined over the model with each group carried by another
+// member, all four missed: a thermal drift beside a group that takes its slow part (scenario 133, a z
+// scale grouped with wear: A 5.7 [3.7, 16.5] µm, τ 123 [83, 672] s against 20.5 µm and 743 s; 4 likewise)
+// and set-up z offsets beside a group that takes part of them (205: tz 38.9 [38.2, 42.7] µm against 16.9;
+// 113 likewise).
+TEST(MultiEffect, NamedIntervalsHoldWhicheverGroupMemberIsThere) {
+  for (int index : kGroupCarrierScenarios) {
+    const std::uint64_t seed = kSeedBase + static_cast<std::uint64_t>(index);
+    Rng layout_rng(seed ^ 0x5bd1e995ULL);
+    const MultiScenario s = DrawMultiScenario(seed, DrawLayouts(layout_rng, 3));
+    const auto d = sim::Diagnose(InputOf(s.parts[0]), s.parts[0].baseline, Options());
+    ASSERT_TRUE(d.ok()) << index << ": " << d.status().message();
+    EXPECT_FALSE(d->alias_groups.empty()) << index;
+    const Grade grade = GradeDiagnosis(*d, s, 1);
+    EXPECT_GT(grade.parameters, 0) << index;
+    EXPECT_EQ(grade.inside, grade.parameters) << index << ": " << grade.ToJson().dump();
+  }
+}
+
 TEST(MultiEffect, NewDirectKindsSplitTheirGroups) {
   const std::vector<std::string> kinds = {"step_gauge", "ball_bar", "deflection_test_cut", "sphere_directions",
                                           "tool_setter_before_after"};
@@ -598,8 +630,8 @@ bool HoldsSharedEffect(const std::string& signature) {
 // group seen at least 5 times that holds a shared effect split in >= 80 % of them by 2 or by 3 parts (a
 // rate over fewer occurrences says little; the groups of one part's own set-up are excluded, see
 // HoldsSharedEffect). Whole suite, main of 2026-11-27 (a group graded as the first part's: a later part's
-// own set-up grouped is not it): 291 / 294 of 317 (91.8 / 92.7 %); counting a later part's own offset and
-// rotation grouped as the first part's group unsplit, 267 / 275 (84.2 / 86.8 %).
+// own set-up grouped is not it): 289 / 294 of 315 (91.7 / 93.3 %); counting a later part's own offset and
+// rotation grouped as the first part's group unsplit (the grading before, on 317 groups), 267 / 275.
 TEST(MultiEffect, PoolingTarget) {
   const SuiteTotals t = Summarise();
   std::array<int, 4> all{};
@@ -613,7 +645,7 @@ TEST(MultiEffect, PoolingTarget) {
   EXPECT_GE(all[2], 0.80 * all[3]) << "3 parts";
   // The pooled diagnoses themselves, graded against every part's truth as the first part's is: every true
   // effect found in >= 90 %, something false named in <= 5 % (whole suite, main of 2026-11-27, pipeline
-  // by 3 parts: found 98.5 % / 100 % without / with a set-up rotation, false 3.5 % / 0 %; before a term
+  // by 3 parts: found 98.5 % / 100 % without / with a set-up rotation, false 3.0 % / 0 %; before a term
   // was judged on what the data determine of it, a sphere cap's undetermined rotation threw out every
   // part's rotation: in the rotated scenarios by 3 parts, found 57 %, false 36 %).
   for (const char* kind : {"pooled_pipeline by 2", "pooled_pipeline by 3"}) {
@@ -633,7 +665,7 @@ TEST(MultiEffect, PoolingTarget) {
 // the loop before the part comes off; the datum is what its proposal asks): a group of that part's own
 // set-up alone is seen by no other part, so pooling cannot split it, and the datum does. Every group seen
 // more than once split in >= 80 % of its occurrences by 2 or by 3 parts, and all occurrences >= 90 %.
-// Whole suite, main of 2026-11-27: 308 / 310 of 317 (97.2 / 97.8 %); 161 of the 164 distinct groups.
+// Whole suite, main of 2026-11-27: 307 / 310 of 315 (97.5 / 98.4 %); 160 of the 162 distinct groups.
 TEST(MultiEffect, PoolingWithFirstPartsDatumTarget) {
   const SuiteTotals t = Summarise();
   std::array<int, 4> all{};
@@ -648,10 +680,11 @@ TEST(MultiEffect, PoolingWithFirstPartsDatumTarget) {
 }
 
 // ... and the letter: every group, however rarely seen, >= 80 % by 2 or 3 parts, the first part's
-// datum taken. NOT MET (whole suite, main of 2026-11-27): 161 of the 164 distinct groups; the 3 others are
-// seen once each (scenarios 38, 133, 175). Without the first part's datum 149 of 164 (most of the 15
-// others are that part's own offset and rotation, which only a reading on it splits). Kept as a disabled
-// check:
+// datum taken. NOT MET (whole suite, main of 2026-11-27): 160 of the 162 distinct groups; the 2 others are
+// seen once each (scenarios 133, 175), and the designer run on their pooled diagnoses finds no change it
+// predicts to split them (FL_DEBUG_POOLED_PROPOSE=1 with MultiEffect.DISABLED_One). Without the first
+// part's datum 148 of 162 (most of the 14 others are that part's own offset and rotation, which only a
+// reading on it splits). Kept as a disabled check:
 //   build/tests/formloop_multi_effect_tests --gtest_also_run_disabled_tests
 //     --gtest_filter=MultiEffect.DISABLED_EveryGroupPoolingTarget
 TEST(MultiEffect, DISABLED_EveryGroupPoolingTarget) {
