@@ -564,10 +564,6 @@ TEST(MultiEffect, ExperimentTarget) {
   EXPECT_GE(t.scenarios_split, 0.80 * t.experiment_scenarios);
 }
 
-// The direct kinds for what the first ones (tool setter, reference sphere, datum faces and plane) do not
-// measure — step gauges, ball bars, the deflection test cut, the sphere in many directions, the tool
-// setter before and after the cut: in these suite scenarios the proposal of a group includes one of them,
-// and its reading (truth + the instrument's noise) splits the group.
 // A named effect's interval holds whichever member of an alias group is there: the first part's
 // diagnosis of each scenario below has a group and names effects whose every parameter's 95 % interval
 // holds the truth. Before the intervals were joined over the model with each group carried by another
@@ -589,6 +585,10 @@ TEST(MultiEffect, NamedIntervalsHoldWhicheverGroupMemberIsThere) {
   }
 }
 
+// The direct kinds for what the first ones (tool setter, reference sphere, datum faces and plane) do not
+// measure — step gauges, ball bars, the deflection test cut, the sphere in many directions, the tool
+// setter before and after the cut: in these suite scenarios the proposal of a group includes one of them,
+// and its reading (truth + the instrument's noise) splits the group.
 TEST(MultiEffect, NewDirectKindsSplitTheirGroups) {
   const std::vector<std::string> kinds = {"step_gauge", "ball_bar", "deflection_test_cut", "sphere_directions",
                                           "tool_setter_before_after"};
