@@ -507,6 +507,7 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
         columns.push_back({k, j});
     }
     const int nodes = ns + np + static_cast<int>(columns.size());
+    const bool debug = std::getenv("FL_DEBUG_ALIAS") != nullptr;
     // A parameter counts as asked for by the data at alias_alpha / (the parameters so tested): Bonferroni
     // over the family, as a forward step over its candidates.
     const double parameter_alpha = options.alias_alpha / std::max<double>(1.0, static_cast<double>(columns.size()));
@@ -534,7 +535,7 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
         const TermFit swapped = sel.With(s, pool[static_cast<std::size_t>(c)], k);
         const int q = static_cast<int>(s[static_cast<std::size_t>(k)].columns.cols());
         const double f = ((swapped.fit.rss - with.fit.rss) / q) / (with.fit.rss / dof);
-        if (std::getenv("FL_DEBUG_ALIAS")) {
+        if (debug) {
           std::fprintf(stderr, "alias test: %s given %s: F %.3f p %.3g plausible %d (%s)\n",
                        prob.Label(s[static_cast<std::size_t>(k)].term).c_str(),
                        prob.Label(pool[static_cast<std::size_t>(c)]).c_str(), f, FTail(f, q, dof),
@@ -559,7 +560,7 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
       }
       for (std::size_t m = 0; m < columns.size(); ++m) {
         const int col = offset[columns[m].first] + columns[m].second;
-        if (std::getenv("FL_DEBUG_ALIAS") && column_p(base, col, n - p_s) < parameter_alpha &&
+        if (debug && column_p(base, col, n - p_s) < parameter_alpha &&
             column_p(with.fit, col, dof) >= options.alias_alpha) {
           std::fprintf(stderr, "param alias: %s col %d given %s: p without %.3g with %.3g plausible %d\n",
                        prob.Label(s[static_cast<std::size_t>(columns[m].first)].term).c_str(), columns[m].second,
@@ -666,7 +667,7 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
       for (int c = 0; c < np; ++c) {
         if (best[static_cast<std::size_t>(c)] < 0) continue;
         const int k = collinear[static_cast<std::size_t>(best[static_cast<std::size_t>(c)])].term;
-        if (std::getenv("FL_DEBUG_ALIAS")) {
+        if (debug) {
           std::fprintf(stderr, "collinear alias: %s with %s\n", prob.Label(s[static_cast<std::size_t>(k)].term).c_str(),
                        prob.Label(pool[static_cast<std::size_t>(c)]).c_str());
         }
@@ -802,57 +803,52 @@ Result<Selection> SelectCauses(const Problem& prob, const Model& baseline, const
   // look-alike too weak to be selected can still shift a named parameter (a set-up z offset against the
   // tool radius, a thermal amplitude against wear); its model's interval then widens the reported one.
   auto intervals = ProfileIntervals(prob, s, tau_lo, tau_hi, nu, f95);
-  // Each candidate's intervals on the cores --threads allows (empty: left out), then joined in order.
-  std::vector<std::vector<std::vector<std::pair<double, double>>>> widened(pool.size());
-  ParallelFor(static_cast<long>(pool.size()), 1, [&](long begin, long end) {
-    for (auto i = static_cast<std::size_t>(begin); i < static_cast<std::size_t>(end); ++i) {
-      const Term& c = pool[i];
-      if (!c.effect->linear() &&
-          !(s.empty() || std::all_of(s.begin(), s.end(), [](const TermFit& t) { return t.term.effect->linear(); }))) {
-        continue;  // one nonlinear term at a time
-      }
-      const TermFit with = sel.With(s, c);
-      if (!sel.PlausibleFit(with)) continue;
-      std::vector<TermFit> extended = s;
-      extended.push_back(with);
-      const int nu_c = std::max(1, nu - static_cast<int>(with.columns.cols()));
-      const double f95_c = boost::math::quantile(boost::math::fisher_f(1, nu_c), 0.95);
-      widened[i] = ProfileIntervals(prob, extended, tau_lo, tau_hi, nu_c, f95_c);
-    }
-  });
   // ... and with each alias group carried by another of its members: a selected term in a group is "one
   // or more of" its members, so a named term's interval must not assume it is the one that is there (a
   // z scale grouped with wear on a Franke part takes the slow part of a thermal drift, which then fits
-  // a τ and an amplitude far from the truth with intervals that exclude it).
+  // a τ and an amplitude far from the truth with intervals that exclude it). Only named terms' intervals
+  // are reported: with none, no swap is fitted.
   std::vector<std::pair<int, int>> swaps;  // {selected term in a group, candidate of the same group}
   for (const auto& g : groups) {
     for (int a : g) {
-      if (a >= ns) continue;
       for (int c : g) {
-        if (c >= ns && c < ns + np) swaps.push_back({a, c - ns});
+        if (!named.empty() && a < ns && c >= ns && c < ns + np) swaps.push_back({a, c - ns});
       }
     }
   }
-  std::vector<std::vector<std::vector<std::pair<double, double>>>> swapped(swaps.size());
-  ParallelFor(static_cast<long>(swaps.size()), 1, [&](long begin, long end) {
+  // One nonlinear term at a time: a nonlinear candidate only beside linear terms (s[skip] left out).
+  auto nonlinear_besides = [&](int skip) {
+    for (int k = 0; k < ns; ++k) {
+      if (k != skip && !s[static_cast<std::size_t>(k)].term.effect->linear()) return true;
+    }
+    return false;
+  };
+  auto intervals_of = [&](const std::vector<TermFit>& model) {
+    const int nu_m = std::max(1, n - Selector::Params(model));
+    const double f95_m = boost::math::quantile(boost::math::fisher_f(1, nu_m), 0.95);
+    return ProfileIntervals(prob, model, tau_lo, tau_hi, nu_m, f95_m);
+  };
+  // Each alternative's intervals on the cores --threads allows (empty: left out), then joined in order:
+  // the model plus candidate i, then the model with swap i − np.
+  std::vector<std::vector<std::vector<std::pair<double, double>>>> widened(pool.size() + swaps.size());
+  ParallelFor(static_cast<long>(widened.size()), 1, [&](long begin, long end) {
     for (auto i = static_cast<std::size_t>(begin); i < static_cast<std::size_t>(end); ++i) {
-      const auto [k, c] = swaps[i];
-      const Term& term = pool[static_cast<std::size_t>(c)];
-      const bool other_nonlinear = std::any_of(s.begin(), s.end(), [&](const TermFit& t) {
-        return &t != &s[static_cast<std::size_t>(k)] && !t.term.effect->linear();
-      });
-      if (!term.effect->linear() && other_nonlinear) continue;  // one nonlinear term at a time
-      TermFit with = sel.With(s, term, k);
+      const bool swap = i >= pool.size();
+      const int k = swap ? swaps[i - pool.size()].first : -1;
+      const Term& c = pool[swap ? static_cast<std::size_t>(swaps[i - pool.size()].second) : i];
+      if (!c.effect->linear() && nonlinear_besides(k)) continue;
+      TermFit with = sel.With(s, c, k);
       if (!sel.PlausibleFit(with)) continue;
       std::vector<TermFit> model = s;
-      model[static_cast<std::size_t>(k)] = std::move(with);
-      const int nu_c = std::max(1, n - Selector::Params(model));
-      const double f95_c = boost::math::quantile(boost::math::fisher_f(1, nu_c), 0.95);
-      swapped[i] = ProfileIntervals(prob, model, tau_lo, tau_hi, nu_c, f95_c);
-      swapped[i][static_cast<std::size_t>(k)].clear();  // the swapped-in term's intervals are not s[k]'s
+      if (swap) {
+        model[static_cast<std::size_t>(k)] = std::move(with);
+      } else {
+        model.push_back(std::move(with));
+      }
+      widened[i] = intervals_of(model);
+      if (swap) widened[i][static_cast<std::size_t>(k)].clear();  // the swapped-in term's, not s[k]'s
     }
   });
-  for (auto& wider : swapped) widened.push_back(std::move(wider));
   for (const auto& wider : widened) {
     if (wider.empty()) continue;
     for (std::size_t k = 0; k < s.size(); ++k) {
