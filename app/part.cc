@@ -139,6 +139,35 @@ Status ReadSeparatingExperiment(const nlohmann::json& json, const std::string& s
   return Status::Ok();
 }
 
+// direct_measurements: a file of `formloop diagnose --direct` relative to the part file, or the list
+// inline. The readings are of this part: a "part" label (which a pooled `formloop diagnose` needs) is
+// refused.
+Status ReadDirect(const nlohmann::json& json, const std::string& source, PartSpec* part) {
+  if (!json.contains("direct_measurements")) return Status::Ok();
+  const nlohmann::json& value = json.at("direct_measurements");
+  std::string from = source;
+  if (value.is_string()) {
+    const std::string text = value.get<std::string>();
+    if (text.empty()) {
+      return Status::BadInput(Where{.file = source, .field = "direct_measurements"}, "is empty",
+                              "name the readings file (relative to the part file) or leave the field out");
+    }
+    const std::filesystem::path file = std::filesystem::path(source).parent_path() / text;
+    FL_ASSIGN_OR_RETURN(part->direct, sim::ReadDirectMeasurements(file.string()));
+    from = file.string();
+  } else {
+    FL_ASSIGN_OR_RETURN(part->direct, sim::DirectMeasurementsFromJson(value, source, "direct_measurements"));
+  }
+  for (std::size_t i = 0; i < part->direct.size(); ++i) {
+    if (!part->direct[i].part.empty()) {
+      return Status::BadInput(Where{.file = from, .field = "direct_measurements[" + std::to_string(i) + "].part"},
+                              "a part file's readings are of this part",
+                              "leave \"part\" out (it names a part of a pooled `formloop diagnose`)");
+    }
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
 Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source) {
@@ -146,7 +175,8 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
   JsonFields top(json, source);
   FL_RETURN_IF_ERROR(top.CheckKnown({"name", "surface", "material", "tolerance_mm", "seed", "fit", "tool", "tools",
                                      "toolpath", "machine", "probing", "analysis", "loops", "comment", "shape_family",
-                                     "finish_ra_um", "batch_size", "separating_experiment"}));
+                                     "finish_ra_um", "batch_size", "separating_experiment",
+                                     "direct_measurements"}));
   FL_RETURN_IF_ERROR(top.OptionalString("shape_family", &part.shape_family));
   FL_RETURN_IF_ERROR(
       top.OptionalNumber("finish_ra_um", &part.finish_ra_um, {.min = 0, .max = 100, .exclusive_min = true}));
@@ -397,6 +427,7 @@ Result<PartSpec> ParsePart(const nlohmann::json& json, const std::string& source
   FL_RETURN_IF_ERROR(in_file(part.analysis.Validate()));
   FL_RETURN_IF_ERROR(in_file(part.fit.Validate()));
   FL_RETURN_IF_ERROR(ReadSeparatingExperiment(json, source, &part));
+  FL_RETURN_IF_ERROR(ReadDirect(json, source, &part));
   return part;
 }
 
@@ -520,6 +551,11 @@ nlohmann::json PartSpec::ToJson() const {
     nlohmann::json list = nlohmann::json::array();
     for (const auto& p : proposals) list.push_back(p.ToJson());
     out["separating_experiment"] = {{"proposals", list}};
+  }
+  if (!direct.empty()) {  // inline: the resolved part holds the readings themselves
+    nlohmann::json list = nlohmann::json::array();
+    for (const auto& d : direct) list.push_back(d.ToJson());
+    out["direct_measurements"] = list;
   }
   return out;
 }

@@ -29,6 +29,10 @@
 //                                                // store this part's proposals there; or a diagnosis.json of
 //                                                // `formloop diagnose` (its proposals' "next_part"), or
 //                                                // {"proposals": [next_part, ...]} inline
+//   "direct_measurements": "readings.json"       // optional (issue 20): readings taken beside the probe log
+//                                                // (tool setter, reference sphere, datum; the format of
+//                                                // `formloop diagnose --direct`, relative to the part file),
+//                                                // or the list inline; the first-cycle diagnosis uses them
 // }
 
 #include <filesystem>
@@ -48,6 +52,7 @@
 #include "nc-gen/probe_program.h"
 #include "nc-gen/toolpath.h"
 #include "reconstruction/bspline_surface.h"
+#include "simulation/diagnose.h"
 #include "simulation/model.h"
 #include "simulation/proposal_plan.h"
 #include "simulation/virtual_machine.h"
@@ -100,6 +105,10 @@ struct PartSpec {
   // "given": `proposals` (read from a file of `formloop diagnose` or inline).
   std::string separating_experiment;
   std::vector<sim::PlannedProposal> proposals;
+  // direct_measurements (simulation/diagnose.h): readings of this part's machine, tool, probe and set-up
+  // taken beside the probe log — a tool setter, a reference sphere, the fixture's datum — as the separating
+  // experiment asks for them; rows of the part's first-cycle diagnosis (as `formloop diagnose --direct`).
+  std::vector<sim::DirectMeasurement> direct;
 
   nlohmann::json ToJson() const;     // fully resolved
   std::string SurfaceName() const;   // the reference name, "<kind>(p=v, ...)", "cad:FILE[faces]" or "scan:FILE"

@@ -634,6 +634,20 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
   // carried by some of its members) would leave on each part the same misfit of the carriers, which the
   // pooled data then name as an effect of their own.
   const sim::Model baseline = pooled ? sim::Model{} : learned;
+  // The part's direct readings (a set-up's: the first part's of a pooled diagnosis, which is this one). An
+  // effect the baseline holds is not diagnosed, so its reading has nothing to inform: said, not used.
+  json direct_not_used = json::array();
+  for (const sim::DirectMeasurement& m : part.direct) {
+    if (baseline.Has(m.effect)) {
+      direct_not_used.push_back({{"reading", m.ToJson()},
+                                 {"why", "the baseline (the learned model of case " + case_uid + ") holds " + m.effect +
+                                             ", which this diagnosis does not estimate again"}});
+      log::Warn("[diagnosis] the reading of {}.{} is not used: the learned model of case {} holds {}", m.effect,
+                m.parameter, case_uid, m.effect);
+    } else {
+      options.direct.push_back(m);
+    }
+  }
   if (machined.cut && pooling != nullptr) {
     FL_ASSIGN_OR_RETURN(pooling->record, sim::PartRecord::Of(input));
   }
@@ -670,6 +684,7 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
                    : choice.learned ? "learned model of case " + case_uid
                                     : "no effects (no learned model)";
   dj["baseline_model"] = baseline.ToJson();
+  if (!direct_not_used.empty()) dj["direct_not_used"] = direct_not_used;
   FL_RETURN_IF_ERROR(folder.WriteJson(dir / "diagnosis.json", dj));
   FL_RETURN_IF_ERROR(sim::WriteModel(folder.Path(dir / "model.json"), d.extended));
   log::Info("[diagnosis] {}", d.Summary());
@@ -688,7 +703,9 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
     // Pooled: the experiment for the next part is designed on this part's own data and diagnosis.
     sim::Diagnosis alone;
     if (pooled) {
-      FL_ASSIGN_OR_RETURN(alone, sim::Diagnose(input, learned, options));
+      sim::DiagnoseOptions alone_options = options;  // against the learned model: its effects' readings out
+      std::erase_if(alone_options.direct, [&](const sim::DirectMeasurement& m) { return learned.Has(m.effect); });
+      FL_ASSIGN_OR_RETURN(alone, sim::Diagnose(input, learned, alone_options));
     }
     FL_ASSIGN_OR_RETURN(const auto found, sim::ProposeExperiments({input}, pooled ? alone : d, learned, eo));
     json list = json::array();

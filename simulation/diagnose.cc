@@ -254,15 +254,25 @@ nlohmann::json DirectMeasurement::ToJson() const {
 
 Result<std::vector<DirectMeasurement>> ReadDirectMeasurements(const std::string& path) {
   FL_ASSIGN_OR_RETURN(const Json j, ReadJsonFile(path));
-  if (!j.is_object() || !j.contains("direct_measurements") || !j["direct_measurements"].is_array()) {
-    return Status::BadInput(Where{.file = path, .field = "direct_measurements"}, "missing or not an array",
+  if (!j.is_object() || !j.contains("direct_measurements")) {
+    return Status::BadInput(Where{.file = path, .field = "direct_measurements"}, "missing",
                             "give {\"direct_measurements\": [{\"effect\": \"tool_radius\", \"parameter\": "
                             "\"delta_r_um\", \"value\": 6.1, \"sigma\": 1.0, \"by\": \"tool setter\"}]}");
   }
+  return DirectMeasurementsFromJson(j["direct_measurements"], path, "direct_measurements");
+}
+
+Result<std::vector<DirectMeasurement>> DirectMeasurementsFromJson(const nlohmann::json& list, const std::string& source,
+                                                                  const std::string& field) {
+  const std::string& path = source;
+  if (!list.is_array()) {
+    return Status::BadInput(Where{.file = path, .field = field}, "not an array",
+                            "give [{\"effect\": \"tool_radius\", \"parameter\": \"delta_r_um\", \"value\": 6.1, "
+                            "\"sigma\": 1.0, \"by\": \"tool setter\"}, ...]");
+  }
   std::vector<DirectMeasurement> out;
-  const Json& list = j["direct_measurements"];
   for (std::size_t i = 0; i < list.size(); ++i) {
-    const std::string at = "direct_measurements[" + std::to_string(i) + "]";
+    const std::string at = field + "[" + std::to_string(i) + "]";
     const Json& e = list[i];
     if (!e.is_object()) return Status::BadInput(Where{.file = path, .field = at}, "must be an object");
     DirectMeasurement d;

@@ -104,6 +104,10 @@ struct DirectMeasurement {
 // {"direct_measurements": [{"effect": "tool_radius", "parameter": "delta_r_um", "value": 6.1,
 //   "sigma": 1.0, "by": "tool setter"}, ...]} — errors name the file, the entry and the field.
 Result<std::vector<DirectMeasurement>> ReadDirectMeasurements(const std::string& path);
+// The same list given inline (the part file's "direct_measurements"): errors name `source` and
+// `field`[i].<key>.
+Result<std::vector<DirectMeasurement>> DirectMeasurementsFromJson(const nlohmann::json& list, const std::string& source,
+                                                                  const std::string& field);
 
 struct DiagnoseOptions {
   double alpha = 0.01;        // family-wise level of the F test per step (spec: 0.01)

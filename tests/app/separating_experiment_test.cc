@@ -65,7 +65,7 @@ class SeparatingExperimentTest : public ::testing::Test {
     if (!experiment.is_null()) j["separating_experiment"] = experiment;
     return j;
   }
-  Result<RunSummary> Run(const Json& part_json, const std::string& out) const {
+  Result<RunSummary> Run(const Json& part_json, const std::string& out, bool learn = false) const {
     const fs::path file = dir_ / (out + ".json");
     EXPECT_TRUE(WriteJsonFile(file, part_json).ok());
     FL_ASSIGN_OR_RETURN(const PartSpec part, ReadPart(file));
@@ -74,7 +74,8 @@ class SeparatingExperimentTest : public ::testing::Test {
     o.kb = kb_.string();
     o.machine = "virtual";
     o.part_source = file.string();
-    o.learn = false;  // each part diagnosed against the nominal model: what its own data say
+    o.learn = learn;  // false: each part diagnosed against the nominal model, what its own data say
+    if (learn) o.pool_cases = 0;
     return RunPart(part, o);
   }
   fs::path dir_, kb_;
@@ -212,6 +213,104 @@ TEST_F(SeparatingExperimentTest, TheNextPartIsProbedWithTheLibrarysTiltedReprobe
       << mismatched.status().ToString();
   EXPECT_NE(mismatched.status().ToString().find("is not the point of toolpath/probing_plan.json"), std::string::npos)
       << mismatched.status().ToString();
+}
+
+// The readings the proposal asks for, taken and given to `formloop run` with the part
+// ("direct_measurements", the format of `formloop diagnose --direct`): the tool setter and the reference
+// sphere tell the two radii apart on the very part whose probe log alone groups them (the test above);
+// both are named, each interval holding the truth (10 and 8 µm), and the run folder's resolved part holds
+// the readings. Bad readings are refused naming the file and the field.
+TEST_F(SeparatingExperimentTest, ThePartsReadingsTellTheRadiiApart) {
+  const Json readings = {{"direct_measurements",
+                          {{{"effect", "tool_radius"},
+                            {"parameter", "delta_r_um"},
+                            {"value", 10.6},
+                            {"sigma", 1.0},
+                            {"by", "tool setter"}},
+                           {{"effect", "probe_radius"},
+                            {"parameter", "delta_r_eff_um"},
+                            {"value", 7.7},
+                            {"sigma", 0.5},
+                            {"by", "reference sphere"}}}}};
+  ASSERT_TRUE(WriteJsonFile(dir_ / "readings.json", readings).ok());
+  Json part = PartJson("reg-dome-a", "radii-read", nullptr);
+  part["direct_measurements"] = "readings.json";
+  const auto run = Run(part, "read");
+  ASSERT_TRUE(run.ok()) << run.status().ToString();
+  const Json d = ReadJsonFile(dir_ / "read" / "loop-0" / "diagnosis" / "diagnosis.json").value();
+  ASSERT_TRUE(d.contains("direct_measurements")) << d.dump();
+  EXPECT_EQ(d["direct_measurements"].size(), 2u);
+  EXPECT_FALSE(d.contains("direct_not_used"));
+  std::printf("with the readings: causes %s\nalias groups %s\n", d["causes"].dump().c_str(),
+              d["alias_groups"].dump().c_str());
+  for (const auto& g : d["alias_groups"]) {
+    const std::string members = g["members"].dump();
+    EXPECT_FALSE(members.find("tool_radius") != std::string::npos &&
+                 members.find("probe_radius") != std::string::npos)
+        << "the readings split the radii: " << d["alias_groups"].dump();
+  }
+  const std::map<std::string, std::pair<std::string, double>> truth = {{"tool_radius", {"delta_r_um", 10.0}},
+                                                                      {"probe_radius", {"delta_r_eff_um", 8.0}}};
+  for (const auto& [effect, parameter] : truth) {
+    bool named = false;
+    for (const auto& c : d["causes"]) {
+      if (c["effect"] != effect) continue;
+      named = true;
+      const Json& interval = c["interval_95"][parameter.first];
+      EXPECT_LE(interval[0].get<double>(), parameter.second) << c.dump();
+      EXPECT_GE(interval[1].get<double>(), parameter.second) << c.dump();
+    }
+    EXPECT_TRUE(named) << effect << " not named: " << d["causes"].dump();
+  }
+  // The run folder's part is itself a part file holding the readings inline.
+  const Json resolved = ReadJsonFile(dir_ / "read" / "inputs" / "part.json").value();
+  ASSERT_TRUE(resolved.contains("direct_measurements"));
+  const auto again = ParsePart(resolved, "resolved");
+  ASSERT_TRUE(again.ok()) << again.status().ToString();
+  ASSERT_EQ(again->direct.size(), 2u);
+  EXPECT_EQ(again->direct[1].by, "reference sphere");
+
+  // The same part again, planned with the learned model of this one (retrieved), not pooled: the model holds
+  // the radii the readings named, which that part's diagnosis does not estimate again, so each reading of
+  // an effect the model holds is said not to be used (with why) and the run goes on.
+  Json next = PartJson("reg-dome-a", "radii-next", nullptr);  // retrieves radii-read: the same description
+  next["direct_measurements"] = readings["direct_measurements"];
+  const auto learned_run = Run(next, "next", true);
+  ASSERT_TRUE(learned_run.ok()) << learned_run.status().ToString();
+  const Json dn = ReadJsonFile(dir_ / "next" / "loop-0" / "diagnosis" / "diagnosis.json").value();
+  std::printf("learned baseline: %s\nnot used: %s\n", dn["baseline"].dump().c_str(),
+              dn.value("direct_not_used", Json()).dump().c_str());
+  const Json& baseline = dn["baseline_model"]["effects"];
+  std::size_t held = 0;
+  for (const auto& e : baseline) held += e["name"] == "tool_radius" || e["name"] == "probe_radius";
+  ASSERT_GT(held, 0u) << dn["baseline_model"].dump();
+  ASSERT_TRUE(dn.contains("direct_not_used"));
+  EXPECT_EQ(dn["direct_not_used"].size(), held);
+  EXPECT_EQ(dn.value("direct_measurements", Json::array()).size(), 2 - held);
+  for (const auto& n : dn["direct_not_used"]) {
+    EXPECT_NE(n["why"].get<std::string>().find("learned model of case radii-read"), std::string::npos) << n.dump();
+  }
+
+  auto refused = [&](const Json& value, const std::string& file, const std::string& expected) {
+    Json bad = PartJson("reg-dome-a", "bad", nullptr);
+    bad["direct_measurements"] = value;
+    ASSERT_TRUE(WriteJsonFile(dir_ / "bad.json", bad).ok());
+    const auto r = ReadPart(dir_ / "bad.json");
+    ASSERT_FALSE(r.ok()) << value.dump();
+    const std::string message(r.status().message());
+    EXPECT_NE(message.find(file), std::string::npos) << message;
+    EXPECT_NE(message.find(expected), std::string::npos) << message;
+  };
+  refused("missing.json", "missing.json", "missing.json");
+  refused(7, "bad.json", "direct_measurements");
+  refused(Json::array({{{"effect", "tool_radius"}, {"parameter", "delta_r_um"}, {"sigma", 1}}}), "bad.json",
+          "direct_measurements[0].value");
+  refused(Json::array({{{"effect", "setup_offset"}, {"parameter", "tz_um"}, {"value", 3}, {"sigma", 1}, {"part", "B"}}}),
+          "bad.json", "direct_measurements[0].part");
+  Json wrong_sigma = readings;
+  wrong_sigma["direct_measurements"][1]["sigma"] = 0;
+  ASSERT_TRUE(WriteJsonFile(dir_ / "bad_readings.json", wrong_sigma).ok());
+  refused("bad_readings.json", "bad_readings.json", "direct_measurements[1]");
 }
 
 TEST_F(SeparatingExperimentTest, APartWithoutTheOptionWritesNothingNewAndBadValuesAreRefused) {
