@@ -179,18 +179,22 @@ nlohmann::json RunScenario(int index, bool pool = PoolingWanted()) {
     // by any other part, so only a reading on the part splits it.
     std::vector<sim::ExperimentProposal> asked = proposals.ok() ? *proposals : NoProposals();
     // FL_DEBUG_ALL_READINGS=1 (or a comma list of DirectKind::kind): the pipeline columns take every such
-    // reading, whatever was proposed — do the instruments formloop knows split a group at all?
-    if (std::getenv("FL_DEBUG_ALL_READINGS")) {
-      sim::ExperimentProposal all;
+    // reading, whatever was proposed — do the instruments formloop knows split a group at all? With
+    // FL_DEBUG_READINGS_SIGMA_SCALE=f their σ is f times the modelled one (would finer instruments?). They
+    // come first, so a proposal's reading of the same parameter does not replace them (ReadingsAsked).
+    if (const char* only = std::getenv("FL_DEBUG_ALL_READINGS")) {
+      const char* scale_text = std::getenv("FL_DEBUG_READINGS_SIGMA_SCALE");
+      const double scale = scale_text != nullptr ? std::atof(scale_text) : 1.0;
       const double path_m = s.parts[0].machined->cls.back().path_length_mm * 1e-3;
-      const std::string only = std::getenv("FL_DEBUG_ALL_READINGS");
+      sim::ExperimentProposal all;
       for (const auto& k : sim::DefaultDirectKinds()) {
-        if (only != "1" && ("," + only + ",").find("," + k.kind + ",") == std::string::npos) continue;
-        for (const auto& prm : k.parameters) {
-          all.direct.push_back({k.effect, prm, 0.0, k.per_path_length ? k.sigma / path_m : k.sigma, "", k.instrument});
+        if (std::string(only) != "1" && ("," + std::string(only) + ",").find("," + k.kind + ",") == std::string::npos) {
+          continue;
         }
+        const double sigma = scale * (k.per_path_length ? k.sigma / path_m : k.sigma);
+        for (const auto& prm : k.parameters) all.direct.push_back({k.effect, prm, 0.0, sigma, "", k.instrument});
       }
-      asked.push_back(all);
+      asked.insert(asked.begin(), all);
     }
     sim::DiagnoseOptions pipeline_options = Options();
     pipeline_options.direct = SharedReadings(s.parts[1], asked, seed + 9500000);
@@ -751,8 +755,9 @@ TEST(MultiEffect, PoolingWithFirstPartsDatumTarget) {
 // seen once (scenario 175: the first part's true z offset of 0.62 µm, 0.34 µm RMS over the three parts,
 // grouped with the tool radius, the probe radius and the rotations). Every reading formloop knows, taken
 // on every part (FL_DEBUG_ALL_READINGS=1 with MultiEffect.DISABLED_One), leaves it grouped; with the tool
-// setter, reference sphere and datum ten times finer than modelled (0.1 µm) it splits (tz 0.59 [0.39,
-// 0.75] µm), at three times finer it does not. Without the first part's datum 148 of 162 (13 of the 14
+// setter, reference sphere and datum ten times finer than modelled (0.1 µm; FL_DEBUG_ALL_READINGS=
+// tool_setter,reference_sphere,datum FL_DEBUG_READINGS_SIGMA_SCALE=0.1) it splits (tz 0.59 [0.39, 0.75]
+// µm), at three times finer (0.3) it does not. Without the first part's datum 148 of 162 (13 of the 14
 // others split once it is taken: what they keep grouped is that part's own offset and rotation, which no
 // other part sees). Kept as a disabled check:
 //   build/tests/formloop_multi_effect_tests --gtest_also_run_disabled_tests
