@@ -54,6 +54,8 @@ Result<std::vector<sim::PlannedProposal>> StoredSeparatingExperiments(kb::Librar
   FL_ASSIGN_OR_RETURN(std::vector<kb::CaseRecord> cases, library.ListCases());
   std::stable_sort(cases.begin(), cases.end(), [&](const kb::CaseRecord& a, const kb::CaseRecord& b) {
     if ((a.uid == preferred) != (b.uid == preferred)) return a.uid == preferred;
+    // Else the newest: its diagnosis saw the most of the machine (a pooled one, all the parts before it).
+    if (a.updated_at != b.updated_at) return a.updated_at > b.updated_at;
     return a.uid < b.uid;
   });
   for (const kb::CaseRecord& c : cases) {

@@ -32,7 +32,8 @@ nlohmann::json LearnedModelEntry(const sim::Model& model, const std::string& mac
 
 // The separating experiments (simulation/proposal_plan.h) the case library holds for a machine/tool/material:
 // the "separating_experiments" of a case's learned-model entry with that key — the case `preferred` (the
-// retrieved one) when it has them, else the first such case by uid. Empty: none; *from_case names the case.
+// retrieved one, whose learned model the run's diagnosis starts from) when it has them, else the most
+// recently updated such case (ties by uid). Empty: none; *from_case names the case.
 Result<std::vector<sim::PlannedProposal>> StoredSeparatingExperiments(kb::Library& library, const std::string& machine,
                                                                       const std::string& tool,
                                                                       const std::string& material,
