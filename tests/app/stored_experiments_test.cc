@@ -63,29 +63,27 @@ class StoredExperimentsTest : public ::testing::Test {
     ASSERT_TRUE(imported.ok()) << imported.status().ToString();
     ASSERT_EQ(imported->cases_added, 3u);
   }
+  // The proposals taken for vm-1 / ball r3 / H13 with `preferred` retrieved: from which case, and the
+  // raster turn of its one proposal.
+  void ExpectTaken(const std::string& preferred, const std::string& uid, double turn_deg) {
+    std::string from;
+    const auto got = StoredSeparatingExperiments(*library_, "vm-1", "ball r3", "H13", preferred, &from);
+    ASSERT_TRUE(got.ok()) << got.status().ToString();
+    ASSERT_EQ(got->size(), 1u);
+    EXPECT_EQ(from, uid) << "retrieved " << preferred;
+    EXPECT_DOUBLE_EQ(got->front().raster_turn_deg, turn_deg) << "retrieved " << preferred;
+  }
   std::unique_ptr<kb::Library> library_;
 };
 
 TEST_F(StoredExperimentsTest, TheNewestCaseOfTheKeyWhenTheRetrievedOneHoldsNone) {
-  std::string from;
-  const auto got = StoredSeparatingExperiments(*library_, "vm-1", "ball r3", "H13", "not-in-library", &from);
-  ASSERT_TRUE(got.ok()) << got.status().ToString();
-  ASSERT_EQ(got->size(), 1u);
-  EXPECT_EQ(from, "b-new");
-  EXPECT_DOUBLE_EQ(got->front().raster_turn_deg, 20);
+  ExpectTaken("not-in-library", "b-new", 20);
 }
 
 TEST_F(StoredExperimentsTest, TheRetrievedCaseFirst) {
-  std::string from;
-  const auto got = StoredSeparatingExperiments(*library_, "vm-1", "ball r3", "H13", "a-old", &from);
-  ASSERT_TRUE(got.ok()) << got.status().ToString();
-  ASSERT_EQ(got->size(), 1u);
-  EXPECT_EQ(from, "a-old");
-  EXPECT_DOUBLE_EQ(got->front().raster_turn_deg, 10);
+  ExpectTaken("a-old", "a-old", 10);
   // The retrieved case of another machine holds none for vm-1: the newest of vm-1's.
-  const auto other = StoredSeparatingExperiments(*library_, "vm-1", "ball r3", "H13", "c-other", &from);
-  ASSERT_TRUE(other.ok()) << other.status().ToString();
-  EXPECT_EQ(from, "b-new");
+  ExpectTaken("c-other", "b-new", 20);
 }
 
 TEST_F(StoredExperimentsTest, NoneForAnotherKey) {
