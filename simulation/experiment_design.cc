@@ -63,9 +63,13 @@ struct GroupDesign {
 
 class Designer {
  public:
-  Designer(const Diagnosis& diagnosis, const AliasGroup& group, double tau) : d_(diagnosis), group_(group), tau_(tau) {}
+  // `taken`: readings already made (the diagnosis's own, ProposeExperiments), rows of every design before
+  // the ones Evaluate is given: a change adds its information to what is measured already.
+  Designer(const Diagnosis& diagnosis, const AliasGroup& group, double tau, std::vector<DirectMeasurement> taken = {})
+      : d_(diagnosis), group_(group), tau_(tau), taken_(std::move(taken)) {}
 
   Status Init(const std::vector<std::string>& parts) {
+    parts_ = parts;
     for (const auto& m : group_.members) {
       FL_ASSIGN_OR_RETURN(Block b, ParseLabel(m, parts));
       members_.push_back(b);
@@ -112,14 +116,16 @@ class Designer {
     return Status::Ok();
   }
 
-  // `direct`: direct measurements appended as rows after the problem's (weight 1/σ; the combined
-  // prediction is 0 there, the rows being new observations).
-  Result<GroupDesign> Evaluate(const Problem& prob, const std::vector<DirectMeasurement>& direct = {}) {
+  // `proposed`: direct measurements appended as rows after the problem's and the readings made (weight
+  // 1/σ; the combined prediction is 0 there, the rows being new observations).
+  Result<GroupDesign> Evaluate(const Problem& prob, const std::vector<DirectMeasurement>& proposed = {}) {
+    std::vector<DirectMeasurement> direct = taken_;
+    direct.insert(direct.end(), proposed.begin(), proposed.end());
     GroupDesign out;
     const Eigen::Index rows = prob.n() + static_cast<Eigen::Index>(direct.size());
     out.others = Eigen::MatrixXd(rows, 0);
     for (const Block& o : others_) {
-      Eigen::MatrixXd c = WithDirectRows(Columns(prob, o.term), o.term, direct);
+      FL_ASSIGN_OR_RETURN(Eigen::MatrixXd c, WithDirectRows(Columns(prob, o.term), o.term, direct));
       if (!o.drop.empty()) {
         // The member columns are taken out of their term; the rest stays.
         Eigen::MatrixXd rest(rows, 0);
@@ -133,7 +139,7 @@ class Designer {
       out.others = Concat(out.others, c);
     }
     for (const Block& m : members_) {
-      Eigen::MatrixXd c = WithDirectRows(Columns(prob, m.term), m.term, direct);
+      FL_ASSIGN_OR_RETURN(Eigen::MatrixXd c, WithDirectRows(Columns(prob, m.term), m.term, direct));
       if (m.column >= 0) c = Eigen::MatrixXd(c.col(m.column));
       out.members.push_back(c);
     }
@@ -174,17 +180,28 @@ class Designer {
 
  private:
   // A term's columns with one row per direct measurement below them: 1/σ at the measured parameter's
-  // column (a set-up: the first part's) when it is this term's effect, else 0.
-  static Eigen::MatrixXd WithDirectRows(const Eigen::MatrixXd& c, const Term& t,
-                                        const std::vector<DirectMeasurement>& direct) {
+  // column (a set-up: the column of the reading's part, the first when it names none) when it is this
+  // term's effect, else 0.
+  Result<Eigen::MatrixXd> WithDirectRows(const Eigen::MatrixXd& c, const Term& t,
+                                         const std::vector<DirectMeasurement>& direct) const {
     if (direct.empty()) return c;
     Eigen::MatrixXd out = Eigen::MatrixXd::Zero(c.rows() + static_cast<Eigen::Index>(direct.size()), c.cols());
     out.topRows(c.rows()) = c;
+    const int p = t.effect->parameter_count();
     for (std::size_t k = 0; k < direct.size(); ++k) {
       if (direct[k].effect != t.effect->name()) continue;
-      for (int j = 0; j < t.effect->parameter_count(); ++j) {
-        if (t.effect->parameters()[j].name == direct[k].parameter && j < c.cols()) {
-          out(c.rows() + static_cast<Eigen::Index>(k), j) = 1.0 / direct[k].sigma;
+      int part = 0;
+      if (!direct[k].part.empty()) {
+        const auto it = std::find(parts_.begin(), parts_.end(), direct[k].part);
+        if (it == parts_.end()) {
+          return Status::Internal("experiment design: a reading of part '" + direct[k].part + "', not one diagnosed");
+        }
+        part = static_cast<int>(it - parts_.begin());
+      }
+      const int first = t.part == detail::kEachPart ? part * p : 0;
+      for (int j = 0; j < p; ++j) {
+        if (t.effect->parameters()[j].name == direct[k].parameter && first + j < c.cols()) {
+          out(c.rows() + static_cast<Eigen::Index>(k), first + j) = 1.0 / direct[k].sigma;
         }
       }
     }
@@ -213,6 +230,8 @@ class Designer {
   const Diagnosis& d_;
   const AliasGroup& group_;
   double tau_;
+  std::vector<DirectMeasurement> taken_;
+  std::vector<std::string> parts_;
   std::vector<Block> members_, others_;
   std::vector<std::pair<Block, std::vector<double>>> values_;
   std::vector<Eigen::VectorXd> scales_;
@@ -431,12 +450,11 @@ struct PartData {
   std::vector<std::string> labels;
 };
 
-Result<PartData> ReadParts(const std::vector<ProbeDataInput>& parts, const Diagnosis& diagnosis,
-                           const Model& baseline) {
+// The parts' residuals (in the diagnosis's order) with each part's σ and label.
+Result<PartData> PartDataOf(std::vector<ProbeResidualData> residuals, const Diagnosis& diagnosis) {
   PartData out;
   std::size_t row = 0;
-  for (const auto& in : parts) {
-    FL_ASSIGN_OR_RETURN(ProbeResidualData data, ProbeResiduals(in, baseline));
+  for (auto& data : residuals) {
     // σ of the part: the RMS of the diagnosis' residual after its model over the part's rows.
     double sum = 0;
     const std::size_t m = data.contexts.size();
@@ -449,12 +467,22 @@ Result<PartData> ReadParts(const std::vector<ProbeDataInput>& parts, const Diagn
     out.sigma.push_back(std::max(1e-3, std::sqrt(sum / static_cast<double>(m))));
     out.data.push_back(std::move(data));
   }
-  out.labels = diagnosis.parts.size() == parts.size() && parts.size() > 1 ? diagnosis.parts
-                                                                          : std::vector<std::string>(parts.size(), "");
-  if (parts.size() > 1 && diagnosis.parts.size() != parts.size()) {
-    for (std::size_t p = 0; p < parts.size(); ++p) out.labels[p] = std::to_string(p + 1);
+  const std::size_t parts = out.data.size();
+  out.labels = diagnosis.parts.size() == parts && parts > 1 ? diagnosis.parts : std::vector<std::string>(parts, "");
+  if (parts > 1 && diagnosis.parts.size() != parts) {
+    for (std::size_t p = 0; p < parts; ++p) out.labels[p] = std::to_string(p + 1);
   }
   return out;
+}
+
+Result<PartData> ReadParts(const std::vector<ProbeDataInput>& parts, const Diagnosis& diagnosis,
+                           const Model& baseline) {
+  std::vector<ProbeResidualData> residuals;
+  for (const auto& in : parts) {
+    FL_ASSIGN_OR_RETURN(ProbeResidualData data, ProbeResiduals(in, baseline));
+    residuals.push_back(std::move(data));
+  }
+  return PartDataOf(std::move(residuals), diagnosis);
 }
 
 double TauOf(const Diagnosis& d, const Problem& prob, const PlausibleRanges& plausible) {
@@ -519,16 +547,13 @@ Result<double> GroupCorrelation(const std::vector<ProbeDataInput>& parts, const 
   return detail::GroupDesignCorrelation(g.members, g.others);
 }
 
-Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<ProbeDataInput>& parts,
-                                                           const Diagnosis& diagnosis, const Model& baseline,
-                                                           const ExperimentOptions& options) {
-  FL_RETURN_IF_ERROR(options.Validate());
+namespace {
+
+// ProposeExperiments on the parts' residuals `pd`; `first` is the part a re-probe or the next part's plan
+// refer to (its residuals are pd's first).
+Result<std::vector<ExperimentProposal>> Propose(const ProbeDataInput& first, const PartData& pd,
+                                                const Diagnosis& diagnosis, const ExperimentOptions& options) {
   std::vector<ExperimentProposal> out;
-  if (diagnosis.alias_groups.empty()) return out;
-  if (parts.empty() || parts.front().surface == nullptr || parts.front().plan == nullptr) {
-    return Status::Internal("ProposeExperiments: the first part needs its surface and plan");
-  }
-  FL_ASSIGN_OR_RETURN(const PartData pd, ReadParts(parts, diagnosis, baseline));
   std::vector<detail::PartRows> current;
   for (std::size_t p = 0; p < pd.data.size(); ++p) {
     current.push_back(
@@ -537,9 +562,9 @@ Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<Pro
   FL_ASSIGN_OR_RETURN(const Problem now, detail::BuildProbeProblem(current, pd.labels, 8));
   const Eigen::Index n_now = now.n();
   // Re-probe candidates with their contexts (the first part's path).
-  FL_ASSIGN_OR_RETURN(const auto candidates, Candidates(parts.front(), options));
+  FL_ASSIGN_OR_RETURN(const auto candidates, Candidates(first, options));
   FL_ASSIGN_OR_RETURN(const std::vector<PointContext> candidate_contexts,
-                      AssociateWithToolpath(*parts.front().cutter_locations, parts.front().tool_radius_mm,
+                      AssociateWithToolpath(*first.cutter_locations, first.tool_radius_mm,
                                             MeasuredPointsOf(candidates.first, candidates.second)));
   const Eigen::VectorXd candidate_zero = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(candidate_contexts.size()));
   // Next parts: the first part's plan on a re-planned path.
@@ -556,14 +581,13 @@ Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<Pro
       FL_ASSIGN_OR_RETURN(const std::vector<CutterLocation> cls, options.replan(turn, feed));
       if (cls.empty()) continue;
       NextPart np{turn, feed, cls.back().time_s, {}};
-      FL_ASSIGN_OR_RETURN(
-          np.contexts, AssociateWithToolpath(cls, parts.front().tool_radius_mm, MeasuredPointsOf(*parts.front().plan)));
+      FL_ASSIGN_OR_RETURN(np.contexts, AssociateWithToolpath(cls, first.tool_radius_mm, MeasuredPointsOf(*first.plan)));
       next_parts.push_back(std::move(np));
     }
   }
   const double path_length_m =
-      parts.front().cutter_locations->empty() ? 0.0 : parts.front().cutter_locations->back().path_length_mm * 1e-3;
-  const Eigen::VectorXd next_zero = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(parts.front().plan->points.size()));
+      first.cutter_locations->empty() ? 0.0 : first.cutter_locations->back().path_length_mm * 1e-3;
+  const Eigen::VectorXd next_zero = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(first.plan->points.size()));
   std::vector<std::string> labels_plus = pd.labels;
   if (labels_plus.size() == 1) labels_plus = {"1"};
   labels_plus.push_back("next");
@@ -574,7 +598,7 @@ Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<Pro
       for (const auto& m : group.members) names += m + " ";
       std::fprintf(stderr, "group: %s\n", names.c_str());
     }
-    Designer designer(diagnosis, group, TauOf(diagnosis, now, options.plausible));
+    Designer designer(diagnosis, group, TauOf(diagnosis, now, options.plausible), diagnosis.direct);
     FL_RETURN_IF_ERROR(designer.Init(pd.labels));
     FL_ASSIGN_OR_RETURN(const GroupDesign base, designer.Evaluate(now));
     const double rho0 = detail::GroupDesignCorrelation(base.members, base.others);
@@ -607,7 +631,10 @@ Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<Pro
       Eigen::MatrixXd x = g.others;
       for (const auto& m : g.members) x = Concat(x, m);
       const Eigen::Index k_o = g.others.cols(), k = x.cols();
-      Eigen::MatrixXd info = x.topRows(n_now).transpose() * x.topRows(n_now);
+      // The information of the data (the first n_now rows) and of the readings already made (the last).
+      const Eigen::Index made = static_cast<Eigen::Index>(diagnosis.direct.size());
+      Eigen::MatrixXd info =
+          x.topRows(n_now).transpose() * x.topRows(n_now) + x.bottomRows(made).transpose() * x.bottomRows(made);
       const double ridge = 1e-8 * std::max(1.0, info.trace() / std::max<Eigen::Index>(1, k));
       info += ridge * Eigen::MatrixXd::Identity(k, k);
       Eigen::MatrixXd inv = info.inverse();
@@ -706,6 +733,21 @@ Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<Pro
           const DirectKind& dk = *relevant[k];
           p.kind += (p.kind.empty() ? "" : "+") + dk.kind;
           actions += (actions.empty() ? "" : "; ") + dk.action;
+          // A reading the diagnosis has already (of the first part's set-up when it is one): the proposal
+          // is to read it again, which the design counts as a further, independent reading.
+          std::vector<const DirectMeasurement*> made;
+          for (const std::string& prm : dk.parameters) {
+            for (const DirectMeasurement& m : diagnosis.direct) {
+              if (m.effect == dk.effect && m.parameter == prm && (m.part.empty() || m.part == pd.labels.front())) {
+                made.push_back(&m);
+                break;
+              }
+            }
+          }
+          if (!made.empty() && made.size() == dk.parameters.size()) {
+            actions += fmt::format(" again (already read{}, sigma {:g}; the new reading counted as independent of it)",
+                                   made.front()->by.empty() ? "" : " by the " + made.front()->by, made.front()->sigma);
+          }
           p.cost_s += dk.cost_s;
           const double sigma = dk.per_path_length ? dk.sigma / std::max(1e-3, path_length_m) : dk.sigma;
           for (const std::string& parameter : dk.parameters) {
@@ -764,6 +806,37 @@ Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<Pro
     out.push_back(*best);
   }
   return out;
+}
+
+}  // namespace
+
+Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<ProbeDataInput>& parts,
+                                                           const Diagnosis& diagnosis, const Model& baseline,
+                                                           const ExperimentOptions& options) {
+  FL_RETURN_IF_ERROR(options.Validate());
+  if (diagnosis.alias_groups.empty()) return std::vector<ExperimentProposal>{};
+  if (parts.empty() || parts.front().surface == nullptr || parts.front().plan == nullptr) {
+    return Status::Internal("ProposeExperiments: the first part needs its surface and plan");
+  }
+  FL_ASSIGN_OR_RETURN(const PartData pd, ReadParts(parts, diagnosis, baseline));
+  return Propose(parts.front(), pd, diagnosis, options);
+}
+
+Result<std::vector<ExperimentProposal>> ProposeExperiments(const ProbeDataInput& part,
+                                                           const std::vector<ProbeResidualData>& earlier,
+                                                           const Diagnosis& diagnosis, const Model& baseline,
+                                                           const ExperimentOptions& options) {
+  FL_RETURN_IF_ERROR(options.Validate());
+  if (diagnosis.alias_groups.empty()) return std::vector<ExperimentProposal>{};
+  if (part.surface == nullptr || part.plan == nullptr) {
+    return Status::Internal("ProposeExperiments: the part needs its surface and plan");
+  }
+  std::vector<ProbeResidualData> residuals;
+  FL_ASSIGN_OR_RETURN(ProbeResidualData own, ProbeResiduals(part, baseline));
+  residuals.push_back(std::move(own));
+  residuals.insert(residuals.end(), earlier.begin(), earlier.end());
+  FL_ASSIGN_OR_RETURN(const PartData pd, PartDataOf(std::move(residuals), diagnosis));
+  return Propose(part, pd, diagnosis, options);
 }
 
 }  // namespace formloop::sim

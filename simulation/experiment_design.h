@@ -111,8 +111,17 @@ struct ExperimentProposal {
 };
 
 // One proposal per alias group of `diagnosis` (made from `parts` with `baseline`; the first part is the
-// one a re-probe or the next part's plan refer to). `parts` must carry the surface.
+// one a re-probe or the next part's plan refer to). `parts` must carry the surface. The readings the
+// diagnosis used (its `direct`) are counted as made: a change is judged by what it adds to them, and a
+// reading proposed again says so.
 Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<ProbeDataInput>& parts,
+                                                           const Diagnosis& diagnosis, const Model& baseline,
+                                                           const ExperimentOptions& options);
+// The same for a pooled diagnosis whose other parts are known by their residuals against `baseline`
+// only (the case library's part records, PartRecord::Against): `part` first, then `earlier` in the
+// diagnosis's order (DiagnosePooledResiduals's).
+Result<std::vector<ExperimentProposal>> ProposeExperiments(const ProbeDataInput& part,
+                                                           const std::vector<ProbeResidualData>& earlier,
                                                            const Diagnosis& diagnosis, const Model& baseline,
                                                            const ExperimentOptions& options);
 

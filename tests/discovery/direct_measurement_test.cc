@@ -178,6 +178,46 @@ TEST(DirectMeasurementTest, AnAliasedSetupParameterIsSplitByTheProposedReadings)
   }
 }
 
+// The design counts the readings the diagnosis has already: a coarse tool-setter reading (σ 10 µm of a
+// 7 µm radius error) leaves the radii (and the z set-up) grouped, and the proposal made on that diagnosis knows the
+// reading is there — the group's design correlation before the change is below the probe data's alone, and the tool
+// setter it proposes is said to be a second reading. (Before, the design ignored readings made: a pooled diagnosis with
+// the tool setter, sphere and datum read was proposed those same readings, its correlation "before" 1.0000, the suite's
+// scenario 175.)
+TEST(DirectMeasurementTest, TheProposalCountsTheReadingsTheDiagnosisHasAlready) {
+  const sim::Model m = MachineOf({{"tool_radius", {7.0}}});
+  const Scenario s = ProbePart({"saddle", 0, 24}, m, 51);
+  const auto plain = sim::Diagnose(InputOf(s), s.baseline, Options());
+  ASSERT_TRUE(plain.ok()) << plain.status().message();
+  sim::DiagnoseOptions o = Options();
+  o.direct = {{"tool_radius", "delta_r_um", 4.0, 10.0, "", "tool presetter"}};
+  const auto read = sim::Diagnose(InputOf(s), s.baseline, o);
+  ASSERT_TRUE(read.ok()) << read.status().message();
+  std::printf("with a coarse tool-setter reading:\n%s", read->Summary().c_str());
+  ASSERT_TRUE(read->InAliasGroup("tool_radius") && read->InAliasGroup("probe_radius")) << read->Summary();
+  auto radii = [](const std::vector<sim::ExperimentProposal>& ps) -> const sim::ExperimentProposal* {
+    for (const auto& p : ps) {
+      if (std::count(p.members.begin(), p.members.end(), "tool_radius") > 0) return &p;
+    }
+    return nullptr;
+  };
+  const auto before = sim::ProposeExperiments({InputOf(s)}, *plain, s.baseline, ExperimentOptionsFor(s));
+  const auto after = sim::ProposeExperiments({InputOf(s)}, *read, s.baseline, ExperimentOptionsFor(s));
+  ASSERT_TRUE(before.ok() && after.ok());
+  const sim::ExperimentProposal* p0 = radii(*before);
+  const sim::ExperimentProposal* p1 = radii(*after);
+  ASSERT_TRUE(p0 != nullptr && p1 != nullptr);
+  std::printf(
+      "probe data alone: [%s] %s (correlation %.8f -> %.8f)\nwith the reading: [%s] %s (correlation %.8f -> %.8f)\n",
+      p0->kind.c_str(), p0->change.c_str(), p0->correlation_before, p0->correlation_after, p1->kind.c_str(),
+      p1->change.c_str(), p1->correlation_before, p1->correlation_after);
+  EXPECT_LT(p1->correlation_before, p0->correlation_before);
+  EXPECT_TRUE(p1->predicted_to_split);
+  ASSERT_NE(p1->kind.find("tool_setter"), std::string::npos) << p1->kind;
+  EXPECT_NE(p1->change.find("again (already read by the tool presetter, sigma 10;"), std::string::npos) << p1->change;
+  EXPECT_EQ(p0->change.find("already read"), std::string::npos) << p0->change;
+}
+
 // The file `formloop diagnose --direct` reads: values, errors naming the entry and the field.
 TEST(DirectMeasurementTest, TheFileIsReadAndBadEntriesAreNamed) {
   const std::filesystem::path dir = FreshTestDir("direct_measurements");
