@@ -652,12 +652,14 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
     FL_ASSIGN_OR_RETURN(pooling->record, sim::PartRecord::Of(input));
   }
   sim::Diagnosis d;
+  std::vector<sim::ProbeResidualData> earlier;  // pooled: the earlier cases' residuals, in the diagnosis's order
   if (pooled) {
     FL_ASSIGN_OR_RETURN(sim::ProbeResidualData own, sim::ProbeResiduals(input, baseline));
     std::vector<sim::ProbeResidualData> parts = {std::move(own)};
     std::vector<std::string> labels = {part.name};
     for (std::size_t k = 0; k < pooling->earlier->records.size(); ++k) {
-      parts.push_back(pooling->earlier->records[k].Against(baseline));
+      earlier.push_back(pooling->earlier->records[k].Against(baseline));
+      parts.push_back(earlier.back());
       labels.push_back(pooling->earlier->uids[k]);
     }
     FL_ASSIGN_OR_RETURN(d, sim::DiagnosePooledResiduals(parts, baseline, options, labels));
@@ -700,14 +702,10 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
       FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::PlanRaster(q, o));
       return nc::CutterLocationsOf(path);
     };
-    // Pooled: the experiment for the next part is designed on this part's own data and diagnosis.
-    sim::Diagnosis alone;
-    if (pooled) {
-      sim::DiagnoseOptions alone_options = options;  // against the learned model: its effects' readings out
-      std::erase_if(alone_options.direct, [&](const sim::DirectMeasurement& m) { return learned.Has(m.effect); });
-      FL_ASSIGN_OR_RETURN(alone, sim::Diagnose(input, learned, alone_options));
-    }
-    FL_ASSIGN_OR_RETURN(const auto found, sim::ProposeExperiments({input}, pooled ? alone : d, learned, eo));
+    // Pooled: designed on the pooled diagnosis, the earlier parts' data with this part's — the groups
+    // left are those no part split, and a change is judged by what it adds to all the parts.
+    FL_ASSIGN_OR_RETURN(const auto found, pooled ? sim::ProposeExperiments(input, earlier, d, baseline, eo)
+                                                 : sim::ProposeExperiments({input}, d, baseline, eo));
     json list = json::array();
     for (const auto& p : found) {
       proposals->push_back(sim::PlannedProposal::Of(p, q.domain()));

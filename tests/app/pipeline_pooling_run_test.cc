@@ -226,7 +226,11 @@ TEST_F(PipelinePoolingRunTest, TheSecondPartPoolsTheFirstAndSplitsWhatNeitherCan
   fs::remove_all(dir_ / "first");
   const fs::path before_second = dir_ / "before-second.sqlite";
   fs::copy_file(kb_, before_second);
-  const auto second = Run(second_part, "second", kb_, 2, true);
+  // It asks for the separating experiment (the library holds none yet: its plan is unchanged), so the run
+  // proposes one for the next part.
+  Json asking = second_part;
+  asking["separating_experiment"] = "library";
+  const auto second = Run(asking, "second", kb_, 2, true);
   ASSERT_TRUE(second.ok()) << second.status().ToString();
   EXPECT_EQ(second->pooled_cases, std::vector<std::string>{"warm-dome"});
   // The run folder's inputs name the record it pooled.
@@ -259,17 +263,29 @@ TEST_F(PipelinePoolingRunTest, TheSecondPartPoolsTheFirstAndSplitsWhatNeitherCan
   EXPECT_TRUE(InAGroup(d2, "tool_radius")) << d2["alias_groups"].dump();
   EXPECT_FALSE(InAGroup(d2, "setup_offset")) << d2["alias_groups"].dump();
   EXPECT_FALSE(InAGroup(d2, "thermal_drift_z")) << d2["alias_groups"].dump();
+  // The separating experiment for the next part is designed on the pooled diagnosis: one proposal per
+  // group the two parts leave, the same members (the egg box alone would group its z offset with a
+  // thermal drift, a group pooling has split), and the radii are predicted to be split by it.
+  const Json proposals = ReadJsonFile(dir_ / "second" / "loop-0" / "diagnosis" / "proposals.json").value();
+  std::printf("second part's proposals: %s\n", proposals.dump().substr(0, 2000).c_str());
+  ASSERT_EQ(proposals["proposals"].size(), d2["alias_groups"].size()) << proposals.dump();
+  for (std::size_t g = 0; g < d2["alias_groups"].size(); ++g) {
+    EXPECT_EQ(proposals["proposals"][g]["alias_group"], d2["alias_groups"][g]["members"]);
+    EXPECT_TRUE(proposals["proposals"][g]["predicted_to_split"].get<bool>()) << proposals["proposals"][g].dump();
+  }
 
   // Reproducible: the same part, library (as it was before the second run) and options give the same
   // diagnosis and record the same pooled inputs, byte for byte.
   fs::remove(kb_);
   fs::copy_file(before_second, kb_);
-  const auto again = Run(second_part, "again", kb_, 2, true);
+  const auto again = Run(asking, "again", kb_, 2, true);
   ASSERT_TRUE(again.ok()) << again.status().ToString();
   EXPECT_EQ(FileText(dir_ / "second" / "loop-0" / "diagnosis" / "diagnosis.json"),
             FileText(dir_ / "again" / "loop-0" / "diagnosis" / "diagnosis.json"));
   EXPECT_EQ(FileText(dir_ / "second" / "inputs" / "pooled_cases.json"),
             FileText(dir_ / "again" / "inputs" / "pooled_cases.json"));
+  EXPECT_EQ(FileText(dir_ / "second" / "loop-0" / "diagnosis" / "proposals.json"),
+            FileText(dir_ / "again" / "loop-0" / "diagnosis" / "proposals.json"));
 }
 
 }  // namespace
