@@ -652,14 +652,13 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
     FL_ASSIGN_OR_RETURN(pooling->record, sim::PartRecord::Of(input));
   }
   sim::Diagnosis d;
-  std::vector<sim::ProbeResidualData> earlier;  // pooled: the earlier cases' residuals, in the diagnosis's order
+  std::vector<sim::ProbeResidualData> parts;  // pooled: this part's residuals, then the earlier cases'
   if (pooled) {
     FL_ASSIGN_OR_RETURN(sim::ProbeResidualData own, sim::ProbeResiduals(input, baseline));
-    std::vector<sim::ProbeResidualData> parts = {std::move(own)};
+    parts.push_back(std::move(own));
     std::vector<std::string> labels = {part.name};
     for (std::size_t k = 0; k < pooling->earlier->records.size(); ++k) {
-      earlier.push_back(pooling->earlier->records[k].Against(baseline));
-      parts.push_back(earlier.back());
+      parts.push_back(pooling->earlier->records[k].Against(baseline));
       labels.push_back(pooling->earlier->uids[k]);
     }
     FL_ASSIGN_OR_RETURN(d, sim::DiagnosePooledResiduals(parts, baseline, options, labels));
@@ -702,9 +701,9 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
       FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::PlanRaster(q, o));
       return nc::CutterLocationsOf(path);
     };
-    // Pooled: designed on the pooled diagnosis, the earlier parts' data with this part's — the groups
+    // Pooled: designed on the pooled diagnosis from the residuals it was made from — the groups
     // left are those no part split, and a change is judged by what it adds to all the parts.
-    FL_ASSIGN_OR_RETURN(const auto found, pooled ? sim::ProposeExperiments(input, earlier, d, baseline, eo)
+    FL_ASSIGN_OR_RETURN(const auto found, pooled ? sim::ProposeExperiments(input, parts, d, eo)
                                                  : sim::ProposeExperiments({input}, d, baseline, eo));
     json list = json::array();
     for (const auto& p : found) {

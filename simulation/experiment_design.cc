@@ -810,33 +810,30 @@ Result<std::vector<ExperimentProposal>> Propose(const ProbeDataInput& first, con
 
 }  // namespace
 
+Result<std::vector<ExperimentProposal>> ProposeExperiments(const ProbeDataInput& part,
+                                                           const std::vector<ProbeResidualData>& residuals,
+                                                           const Diagnosis& diagnosis,
+                                                           const ExperimentOptions& options) {
+  FL_RETURN_IF_ERROR(options.Validate());
+  if (diagnosis.alias_groups.empty()) return std::vector<ExperimentProposal>{};
+  if (part.surface == nullptr || part.plan == nullptr || part.cutter_locations == nullptr) {
+    return Status::Internal("ProposeExperiments: the first part needs its surface, plan and path");
+  }
+  FL_ASSIGN_OR_RETURN(const PartData pd, PartDataOf(residuals, diagnosis));
+  return Propose(part, pd, diagnosis, options);
+}
+
 Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<ProbeDataInput>& parts,
                                                            const Diagnosis& diagnosis, const Model& baseline,
                                                            const ExperimentOptions& options) {
-  FL_RETURN_IF_ERROR(options.Validate());
   if (diagnosis.alias_groups.empty()) return std::vector<ExperimentProposal>{};
-  if (parts.empty() || parts.front().surface == nullptr || parts.front().plan == nullptr) {
-    return Status::Internal("ProposeExperiments: the first part needs its surface and plan");
-  }
-  FL_ASSIGN_OR_RETURN(const PartData pd, ReadParts(parts, diagnosis, baseline));
-  return Propose(parts.front(), pd, diagnosis, options);
-}
-
-Result<std::vector<ExperimentProposal>> ProposeExperiments(const ProbeDataInput& part,
-                                                           const std::vector<ProbeResidualData>& earlier,
-                                                           const Diagnosis& diagnosis, const Model& baseline,
-                                                           const ExperimentOptions& options) {
-  FL_RETURN_IF_ERROR(options.Validate());
-  if (diagnosis.alias_groups.empty()) return std::vector<ExperimentProposal>{};
-  if (part.surface == nullptr || part.plan == nullptr) {
-    return Status::Internal("ProposeExperiments: the part needs its surface and plan");
-  }
+  if (parts.empty()) return Status::Internal("ProposeExperiments: no part");
   std::vector<ProbeResidualData> residuals;
-  FL_ASSIGN_OR_RETURN(ProbeResidualData own, ProbeResiduals(part, baseline));
-  residuals.push_back(std::move(own));
-  residuals.insert(residuals.end(), earlier.begin(), earlier.end());
-  FL_ASSIGN_OR_RETURN(const PartData pd, PartDataOf(std::move(residuals), diagnosis));
-  return Propose(part, pd, diagnosis, options);
+  for (const auto& in : parts) {
+    FL_ASSIGN_OR_RETURN(ProbeResidualData data, ProbeResiduals(in, baseline));
+    residuals.push_back(std::move(data));
+  }
+  return ProposeExperiments(parts.front(), residuals, diagnosis, options);
 }
 
 }  // namespace formloop::sim

@@ -117,12 +117,12 @@ struct ExperimentProposal {
 Result<std::vector<ExperimentProposal>> ProposeExperiments(const std::vector<ProbeDataInput>& parts,
                                                            const Diagnosis& diagnosis, const Model& baseline,
                                                            const ExperimentOptions& options);
-// The same for a pooled diagnosis whose other parts are known by their residuals against `baseline`
-// only (the case library's part records, PartRecord::Against): `part` first, then `earlier` in the
-// diagnosis's order (DiagnosePooledResiduals's).
+// The same from the residuals the diagnosis was made from, in its order (DiagnosePooledResiduals's: a
+// pooled diagnosis whose earlier parts are known by their case-library records only); `part` is the
+// first, whose surface, plan and path a re-probe or the next part's plan refer to.
 Result<std::vector<ExperimentProposal>> ProposeExperiments(const ProbeDataInput& part,
-                                                           const std::vector<ProbeResidualData>& earlier,
-                                                           const Diagnosis& diagnosis, const Model& baseline,
+                                                           const std::vector<ProbeResidualData>& residuals,
+                                                           const Diagnosis& diagnosis,
                                                            const ExperimentOptions& options);
 
 // The design correlation of `members` (labels as an AliasGroup lists them) against the other effects
