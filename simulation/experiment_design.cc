@@ -116,6 +116,38 @@ class Designer {
     return Status::Ok();
   }
 
+  // Pooled: the in-model members' values fitted on the current data beside the others, each part with its
+  // own set-up. The extended model holds one instance per effect (the first part's set-up), which every
+  // part would otherwise be given: the combined prediction, and so the proposal, would depend on the order
+  // of the parts.
+  Status FitValues(const Problem& now) {
+    if (values_.empty()) return Status::Ok();
+    FL_ASSIGN_OR_RETURN(const GroupDesign g, Evaluate(now));
+    Eigen::MatrixXd a = g.others.topRows(now.n());
+    std::vector<std::vector<Eigen::Index>> where(values_.size());
+    for (std::size_t v = 0; v < values_.size(); ++v) {
+      const Block& b = values_[v].first;
+      const Eigen::MatrixXd c = Columns(now, b.term);
+      const int p = b.term.effect->parameter_count();
+      for (Eigen::Index k = 0; k < c.cols(); ++k) {
+        const bool used = b.column >= 0 ? k == b.column : b.term.effect->parameters()[k % p].linear;
+        if (!used) continue;
+        where[v].push_back(k);
+        a = Concat(a, c.col(k));
+      }
+    }
+    const detail::Fit fit = detail::LeastSquares(a, now.r);
+    if (fit.beta.size() != a.cols()) return Status::Ok();
+    Eigen::Index next = g.others.cols();
+    for (std::size_t v = 0; v < values_.size(); ++v) {
+      std::vector<double>& own = values_[v].second;
+      const Eigen::Index width = Columns(now, values_[v].first.term).cols();
+      if (static_cast<Eigen::Index>(own.size()) < width) own.resize(static_cast<std::size_t>(width), 0.0);
+      for (Eigen::Index k : where[v]) own[static_cast<std::size_t>(k)] = fit.beta[next++];
+    }
+    return Status::Ok();
+  }
+
   // `proposed`: direct measurements appended as rows after the problem's and the readings made (weight
   // 1/σ; the combined prediction is 0 there, the rows being new observations).
   Result<GroupDesign> Evaluate(const Problem& prob, const std::vector<DirectMeasurement>& proposed = {}) {
@@ -529,22 +561,47 @@ Result<std::pair<metrology::ProbingPlan, std::vector<Eigen::Vector3d>>> Candidat
 
 }  // namespace
 
-Result<double> GroupCorrelation(const std::vector<ProbeDataInput>& parts, const Diagnosis& diagnosis,
-                                const Model& baseline, const std::vector<std::string>& members,
-                                const std::vector<DirectMeasurement>& direct) {
-  FL_ASSIGN_OR_RETURN(const PartData pd, ReadParts(parts, diagnosis, baseline));
+namespace {
+
+Result<Problem> ProblemOf(const PartData& pd) {
   std::vector<detail::PartRows> rows;
   for (std::size_t p = 0; p < pd.data.size(); ++p) {
     rows.push_back(
         {&pd.data[p].contexts, &pd.data[p].residual_um, &pd.data[p].sensitivity, static_cast<int>(p), pd.sigma[p]});
   }
-  FL_ASSIGN_OR_RETURN(const Problem prob, detail::BuildProbeProblem(rows, pd.labels, 8));
+  return detail::BuildProbeProblem(rows, pd.labels, 8);
+}
+
+}  // namespace
+
+Result<double> GroupCorrelation(const std::vector<ProbeDataInput>& parts, const Diagnosis& diagnosis,
+                                const Model& baseline, const std::vector<std::string>& members,
+                                const std::vector<DirectMeasurement>& direct) {
+  FL_ASSIGN_OR_RETURN(const PartData pd, ReadParts(parts, diagnosis, baseline));
+  FL_ASSIGN_OR_RETURN(const Problem prob, ProblemOf(pd));
   AliasGroup group;
   group.members = members;
   Designer designer(diagnosis, group, TauOf(diagnosis, prob, PlausibleRanges{}));
   FL_RETURN_IF_ERROR(designer.Init(pd.labels));
   FL_ASSIGN_OR_RETURN(const GroupDesign g, designer.Evaluate(prob, direct));
   return detail::GroupDesignCorrelation(g.members, g.others);
+}
+
+Result<double> GroupSeparation(const std::vector<ProbeDataInput>& parts, const Diagnosis& diagnosis,
+                               const Model& baseline, const std::vector<std::string>& members,
+                               const std::vector<DirectMeasurement>& direct) {
+  const auto group = std::find_if(diagnosis.alias_groups.begin(), diagnosis.alias_groups.end(),
+                                  [&](const AliasGroup& g) { return g.members == members; });
+  if (group == diagnosis.alias_groups.end()) {
+    return Status::BadInput(Where{.field = "members"}, "not an alias group of the diagnosis");
+  }
+  FL_ASSIGN_OR_RETURN(const PartData pd, ReadParts(parts, diagnosis, baseline));
+  FL_ASSIGN_OR_RETURN(const Problem prob, ProblemOf(pd));
+  Designer designer(diagnosis, *group, TauOf(diagnosis, prob, PlausibleRanges{}), diagnosis.direct);
+  FL_RETURN_IF_ERROR(designer.Init(pd.labels));
+  if (pd.data.size() > 1) FL_RETURN_IF_ERROR(designer.FitValues(prob));
+  FL_ASSIGN_OR_RETURN(const GroupDesign g, designer.Evaluate(prob, direct));
+  return Separation(g, prob.n());
 }
 
 namespace {
@@ -600,6 +657,7 @@ Result<std::vector<ExperimentProposal>> Propose(const ProbeDataInput& first, con
     }
     Designer designer(diagnosis, group, TauOf(diagnosis, now, options.plausible), diagnosis.direct);
     FL_RETURN_IF_ERROR(designer.Init(pd.labels));
+    if (pd.data.size() > 1) FL_RETURN_IF_ERROR(designer.FitValues(now));
     FL_ASSIGN_OR_RETURN(const GroupDesign base, designer.Evaluate(now));
     const double rho0 = detail::GroupDesignCorrelation(base.members, base.others);
     const double logdet0 = LogDetInformation(base);

@@ -132,4 +132,12 @@ Result<double> GroupCorrelation(const std::vector<ProbeDataInput>& parts, const 
                                 const Model& baseline, const std::vector<std::string>& members,
                                 const std::vector<DirectMeasurement>& direct = {});
 
+// The separation (λ, see above) the readings `direct` would give the alias group of `diagnosis` that lists
+// `members`, on the data of `parts`, the readings the diagnosis used counted as made: what a proposal of
+// those readings predicts. A pooled diagnosis's group is predicted with each part's own set-up, so the
+// figure does not depend on the order of the parts.
+Result<double> GroupSeparation(const std::vector<ProbeDataInput>& parts, const Diagnosis& diagnosis,
+                               const Model& baseline, const std::vector<std::string>& members,
+                               const std::vector<DirectMeasurement>& direct);
+
 }  // namespace formloop::sim
