@@ -721,7 +721,7 @@ TEST(MultiEffect, APooledGroupsPredictionDoesNotDependOnTheOrderOfTheParts) {
   const std::uint64_t seed = kSeedBase + static_cast<std::uint64_t>(kOrderScenario);
   Rng layout_rng(seed ^ 0x5bd1e995ULL);
   const MultiScenario s = DrawMultiScenario(seed, DrawLayouts(layout_rng, 3));
-  // Every reading formloop knows of the group's effects, a set-up's on each part (labelled).
+  // Every reading formloop knows, a set-up's on each part (labelled).
   const double path_m = s.parts[0].machined->cls.back().path_length_mm * 1e-3;
   std::vector<sim::DirectMeasurement> readings;
   for (const auto& k : sim::DefaultDirectKinds()) {
