@@ -16,6 +16,10 @@
 // evaluators (Geom_BSplineSurface::D2, GeomAdaptor_Surface::D2 with its span cache, our
 // SpanPolynomials) on Newton-like clusters of parameters.
 //
+// And points far from Q ("<surface>_far": 10,000 points 3 to 30 mm off Q on either side, like a probing
+// program's moves checked for clearance), ours next to OpenCASCADE's init-once variants; their table
+// compares the distances only (a far point's foot point need not be (u, v)).
+//
 // After the runs it prints, per surface, the times side by side, the speed-ups, and the agreement with
 // OpenCASCADE over all points: max |d_ours - d_occt| with d_occt = (p - q_occt)·n(q_occt), how often
 // OpenCASCADE found no point or a farther one, and the max |d_ours - t|.
@@ -28,6 +32,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <initializer_list>
 #include <map>
 #include <string>
 #include <vector>
@@ -49,6 +54,8 @@ using Eigen::Vector3d;
 
 constexpr std::size_t kPoints = 100'000;
 constexpr double kOffsetMm = 1;  // points within ±1 mm of Q along its normal (issue 26's recipe)
+constexpr std::size_t kFarPoints = 10'000;
+constexpr double kFarMinMm = 3, kFarMaxMm = 30;  // the far points' distance along the normal, either side
 // "_bicubic": the same fit with the degree held at 3 (OpenCASCADE raises it to 5 for the tolerance otherwise).
 const char* const kSurfaces[] = {"franke", "egg_box", "franke_bicubic"};
 
@@ -63,9 +70,14 @@ const Case& GetCase(const std::string& name) {
   auto it = cases.find(name);
   if (it != cases.end()) return it->second;
   Case c;
+  const auto ends_with = [](const std::string& text, const std::string& tail) {
+    return text.size() > tail.size() && text.substr(text.size() - tail.size()) == tail;
+  };
+  const bool far = ends_with(name, "_far");
+  const std::string base = far ? name.substr(0, name.size() - 4) : name;
   const std::string suffix = "_bicubic";
-  const bool bicubic = name.size() > suffix.size() && name.substr(name.size() - suffix.size()) == suffix;
-  auto surface = MakeReferenceSurface(bicubic ? name.substr(0, name.size() - suffix.size()) : name);
+  const bool bicubic = ends_with(base, suffix);
+  auto surface = MakeReferenceSurface(bicubic ? base.substr(0, base.size() - suffix.size()) : base);
   if (!surface.ok()) std::abort();
   GridFitOptions options;
   if (bicubic) options.degree_min = options.degree_max = 3;
@@ -74,9 +86,10 @@ const Case& GetCase(const std::string& name) {
   c.q = *q;
   const ParamDomain d = c.q.domain();
   Rng rng(20240612);
-  for (std::size_t k = 0; k < kPoints; ++k) {
+  for (std::size_t k = 0; k < (far ? kFarPoints : kPoints); ++k) {
     const double u = rng.Uniform(d.u_min, d.u_max), v = rng.Uniform(d.v_min, d.v_max);
-    const double t = rng.Uniform(-kOffsetMm, kOffsetMm);
+    double t = rng.Uniform(-kOffsetMm, kOffsetMm);
+    if (far) t = (t < 0 ? -1 : 1) * rng.Uniform(kFarMinMm, kFarMaxMm);
     c.points.push_back(c.q.Point(u, v) + t * c.q.Normal(u, v));
     c.offsets_mm.push_back(t);
   }
@@ -113,9 +126,11 @@ void BM_Build(benchmark::State& state, const std::string& name) {
 
 // threads: 1 (the single-threaded figure) or 0 (all cores, --threads' default; timed by the wall clock,
 // since the benchmark's CPU column counts the calling thread only).
-void BM_Ours(benchmark::State& state, const std::string& name, int threads) {
+// seed_grid: the start grid (0 = automatic; the far table's dense column takes 512 × 512, the start grid of a
+// CAD face of many spans, whose cells are then a small fraction of the points' distance).
+void BM_Ours(benchmark::State& state, const std::string& name, int threads, int seed_grid = 0) {
   const Case& c = GetCase(name);
-  const FootPointProjector projector = BuildOrDie(c.q, 0);
+  const FootPointProjector projector = BuildOrDie(c.q, seed_grid);
   std::vector<FootPoint> feet;
   SetThreadCount(threads);
   state.counters["threads"] = ThreadCount();
@@ -129,16 +144,16 @@ void BM_Ours(benchmark::State& state, const std::string& name, int threads) {
   }
   SetThreadCount(1);  // the rest of the bench (ours_seed_grid) runs on one thread
   if (threads != 1) {
-    state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * kPoints));
+    state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * c.points.size()));
     return;
   }
-  Answers& answers = AllAnswers()["ours/" + name];
+  Answers& answers = AllAnswers()[(seed_grid == 0 ? "ours/" : "ours_dense/") + name];
   answers = {};
   for (const FootPoint& f : feet) {
     answers.deviation_mm.push_back(f.deviation_mm);
     answers.distance_mm.push_back(f.distance_mm);
   }
-  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * kPoints));
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * c.points.size()));
 }
 
 // Build + ProjectAll with a given start grid (0 = automatic).
@@ -151,7 +166,7 @@ void BM_OursSeedGrid(benchmark::State& state, const std::string& name) {
     benchmark::DoNotOptimize(projector.ProjectAll(c.points));
   }
   state.counters["samples"] = samples;
-  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * kPoints));
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * c.points.size()));
 }
 
 // What OpenCASCADE returned for one point: recorded inside the timed loop (cheap), turned into a
@@ -185,7 +200,7 @@ Answers ToAnswers(const std::vector<OcctRaw>& raw, const Case& c) {
 void BM_OcctNewPerPoint(benchmark::State& state, const std::string& name) {
   const Case& c = GetCase(name);
   std::vector<OcctRaw> raw;
-  raw.reserve(kPoints);
+  raw.reserve(c.points.size());
   for (auto _ : state) {
     raw.clear();
     for (const Vector3d& p : c.points) {
@@ -198,7 +213,7 @@ void BM_OcctNewPerPoint(benchmark::State& state, const std::string& name) {
     }
   }
   AllAnswers()["occt_new_per_point/" + name] = ToAnswers(raw, c);
-  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * kPoints));
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * c.points.size()));
 }
 
 // One projector, Init once, Perform per point, with OpenCASCADE's default gradient search (Grad) or its
@@ -207,7 +222,7 @@ void BM_OcctInitOnce(benchmark::State& state, const std::string& name, Extrema_E
   const Case& c = GetCase(name);
   const ParamDomain d = c.q.domain();
   std::vector<OcctRaw> raw;
-  raw.reserve(kPoints);
+  raw.reserve(c.points.size());
   for (auto _ : state) {
     raw.clear();
     GeomAPI_ProjectPointOnSurf projection;
@@ -222,7 +237,7 @@ void BM_OcctInitOnce(benchmark::State& state, const std::string& name, Extrema_E
     }
   }
   AllAnswers()[std::string(algo == Extrema_ExtAlgo_Tree ? "occt_tree/" : "occt_init_once/") + name] = ToAnswers(raw, c);
-  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * kPoints));
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * c.points.size()));
 }
 
 // Newton-like evaluation pattern: clusters of 5 evaluations within 0.05 mm of a random (u, v).
@@ -304,6 +319,34 @@ class TableReporter : public benchmark::ConsoleReporter {
   std::map<std::string, double> times_ms_;
 };
 
+// Agreement of our answers with each OpenCASCADE variant that ran (summed): where OpenCASCADE found a
+// point at least as close as ours (to 1e-7 mm), the largest difference of the deviations; elsewhere who
+// is closer, or that OpenCASCADE found nothing.
+struct Agreement {
+  double max_diff = 0;
+  long fail = 0, occt_far = 0, ours_far = 0;
+};
+Agreement Compare(const Answers& a, const std::string& name, std::initializer_list<const char*> methods) {
+  Agreement g;
+  for (const char* method : methods) {
+    auto it = AllAnswers().find(method + name);
+    if (it == AllAnswers().end()) continue;
+    const Answers& o = it->second;
+    for (std::size_t k = 0; k < o.deviation_mm.size(); ++k) {
+      if (std::isnan(o.deviation_mm[k])) {
+        ++g.fail;
+      } else if (o.distance_mm[k] > a.distance_mm[k] + 1e-7) {
+        ++g.occt_far;
+      } else if (a.distance_mm[k] > o.distance_mm[k] + 1e-7) {
+        ++g.ours_far;
+      } else {
+        g.max_diff = std::max(g.max_diff, std::abs(a.deviation_mm[k] - o.deviation_mm[k]));
+      }
+    }
+  }
+  return g;
+}
+
 void PrintTable(const TableReporter& reporter) {
   std::printf("\nFoot points of %zu points within %g mm of Q, single thread, CPU ms (us/point = ms / 100)\n", kPoints,
               kOffsetMm);
@@ -324,41 +367,63 @@ void PrintTable(const TableReporter& reporter) {
     for (std::size_t k = 0; k < a.deviation_mm.size(); ++k) {
       max_truth = std::max(max_truth, std::abs(a.deviation_mm[k] - c.offsets_mm[k]));
     }
-    // Agreement with each OpenCASCADE variant that ran: where OpenCASCADE found a point at least as
-    // close as ours (to 1e-7 mm), the deviations must agree; elsewhere count who is closer.
-    double max_diff = 0;
-    long fail = 0, occt_far = 0, ours_far = 0;
-    for (const char* method : {"occt_new_per_point/", "occt_init_once/", "occt_tree/"}) {
-      auto it = all.find(method + std::string(name));
-      if (it == all.end()) continue;
-      const Answers& o = it->second;
-      for (std::size_t k = 0; k < o.deviation_mm.size(); ++k) {
-        if (std::isnan(o.deviation_mm[k])) {
-          ++fail;
-        } else if (o.distance_mm[k] > a.distance_mm[k] + 1e-7) {
-          ++occt_far;
-        } else if (a.distance_mm[k] > o.distance_mm[k] + 1e-7) {
-          ++ours_far;
-        } else {
-          max_diff = std::max(max_diff, std::abs(a.deviation_mm[k] - o.deviation_mm[k]));
-        }
-      }
-    }
+    const Agreement g = Compare(a, name, {"occt_new_per_point/", "occt_init_once/", "occt_tree/"});
     std::printf("%-9s %9.1f %12.1f %12.1f %12.1f %8.1f %8.1f %8.1f | %12.2e %12.2e %9ld %9ld %9ld\n", name, ours,
-                occt_new, occt_init, occt_tree, occt_new / ours, occt_init / ours, occt_tree / ours, max_diff,
-                max_truth, fail, occt_far, ours_far);
+                occt_new, occt_init, occt_tree, occt_new / ours, occt_init / ours, occt_tree / ours, g.max_diff,
+                max_truth, g.fail, g.occt_far, g.ours_far);
   }
   std::printf(
       "x_new, x_grad, x_tree: OpenCASCADE time / ours. occt_fail: no point found; occt_far / ours_far: that side's\n"
       "point is farther by more than 1e-7 mm (summed over the OpenCASCADE variants that ran).\n");
 }
 
+// The far points: time and distances only (ours against each OpenCASCADE variant that ran).
+void PrintFarTable(const TableReporter& reporter) {
+  std::printf("\nFoot points of %zu points %g to %g mm off Q, single thread, CPU ms\n", kFarPoints, kFarMinMm,
+              kFarMaxMm);
+  std::printf("%-9s %9s %15s %12s %12s %8s %8s | %9s %9s %9s %9s\n", "surface", "ours_ms", "ours_dense_ms",
+              "occt_grad_ms", "occt_tree_ms", "x_grad", "x_tree", "occt_fail", "occt_far", "ours_far", "dense_far");
+  for (const char* surface : kSurfaces) {
+    const std::string name = std::string(surface) + "_far";
+    const double ours = reporter.TimeMs("ours/" + name);
+    const double dense = reporter.TimeMs("ours_dense/" + name);
+    const double occt_init = reporter.TimeMs("occt_init_once/" + name);
+    const double occt_tree = reporter.TimeMs("occt_tree/" + name);
+    const auto& all = AllAnswers();
+    auto ours_it = all.find("ours/" + name);
+    if (ours_it == all.end()) continue;
+    const Answers& a = ours_it->second;
+    long dense_far = 0;
+    if (auto it = all.find("ours_dense/" + name); it != all.end()) {
+      for (std::size_t k = 0; k < a.distance_mm.size(); ++k) {
+        dense_far += it->second.distance_mm[k] > a.distance_mm[k] + 1e-7;
+      }
+    }
+    const Agreement g = Compare(a, name, {"occt_init_once/", "occt_tree/"});
+    std::printf("%-9s %9.1f %15.1f %12.1f %12.1f %8.1f %8.1f | %9ld %9ld %9ld %9ld\n", surface, ours, dense, occt_init,
+                occt_tree, occt_init / ours, occt_tree / ours, g.fail, g.occt_far, g.ours_far, dense_far);
+  }
+  std::printf(
+      "ours_dense: a 512 x 512 start grid (cells a small fraction of the distance); dense_far: its point farther\n"
+      "than the automatic grid's by more than 1e-7 mm.\n");
+}
+
+// OpenCASCADE's init-once projector with its gradient search and with its tree, once each (minutes).
+void RegisterOcctInitOnce(const std::string& name) {
+  for (const auto& [label, algo] :
+       {std::pair{"occt_init_once/", Extrema_ExtAlgo_Grad}, {"occt_tree/", Extrema_ExtAlgo_Tree}}) {
+    benchmark::RegisterBenchmark((label + name).c_str(), BM_OcctInitOnce, name, algo)
+        ->Iterations(1)
+        ->Unit(benchmark::kMillisecond);
+  }
+}
+
 void Register() {
   for (const char* name_text : kSurfaces) {
     const std::string name = name_text;
     benchmark::RegisterBenchmark(("build/" + name).c_str(), BM_Build, name)->Unit(benchmark::kMillisecond);
-    benchmark::RegisterBenchmark(("ours/" + name).c_str(), BM_Ours, name, 1)->Unit(benchmark::kMillisecond);
-    benchmark::RegisterBenchmark(("ours_all_cores/" + name).c_str(), BM_Ours, name, 0)
+    benchmark::RegisterBenchmark(("ours/" + name).c_str(), BM_Ours, name, 1, 0)->Unit(benchmark::kMillisecond);
+    benchmark::RegisterBenchmark(("ours_all_cores/" + name).c_str(), BM_Ours, name, 0, 0)
         ->Unit(benchmark::kMillisecond)
         ->UseRealTime();
     auto* seed_grid = benchmark::RegisterBenchmark(("ours_seed_grid/" + name).c_str(), BM_OursSeedGrid, name);
@@ -367,17 +432,18 @@ void Register() {
     benchmark::RegisterBenchmark(("occt_new_per_point/" + name).c_str(), BM_OcctNewPerPoint, name)
         ->Iterations(1)
         ->Unit(benchmark::kMillisecond);
-    benchmark::RegisterBenchmark(("occt_init_once/" + name).c_str(), BM_OcctInitOnce, name, Extrema_ExtAlgo_Grad)
-        ->Iterations(1)
-        ->Unit(benchmark::kMillisecond);
-    benchmark::RegisterBenchmark(("occt_tree/" + name).c_str(), BM_OcctInitOnce, name, Extrema_ExtAlgo_Tree)
-        ->Iterations(1)
-        ->Unit(benchmark::kMillisecond);
+    RegisterOcctInitOnce(name);
     benchmark::RegisterBenchmark(("EvalGeomD2/" + name).c_str(), BM_EvalGeomD2, name)->Unit(benchmark::kMicrosecond);
     benchmark::RegisterBenchmark(("EvalAdaptorD2/" + name).c_str(), BM_EvalAdaptorD2, name)
         ->Unit(benchmark::kMicrosecond);
     benchmark::RegisterBenchmark(("EvalSpanPolynomials/" + name).c_str(), BM_EvalSpanPolynomials, name)
         ->Unit(benchmark::kMicrosecond);
+  }
+  for (const char* name_text : kSurfaces) {
+    const std::string name = std::string(name_text) + "_far";
+    benchmark::RegisterBenchmark(("ours/" + name).c_str(), BM_Ours, name, 1, 0)->Unit(benchmark::kMillisecond);
+    benchmark::RegisterBenchmark(("ours_dense/" + name).c_str(), BM_Ours, name, 1, 512)->Unit(benchmark::kMillisecond);
+    RegisterOcctInitOnce(name);
   }
 }
 
@@ -392,6 +458,7 @@ int main(int argc, char** argv) {
   formloop::recon::TableReporter reporter;
   benchmark::RunSpecifiedBenchmarks(&reporter);
   formloop::recon::PrintTable(reporter);
+  formloop::recon::PrintFarTable(reporter);
   benchmark::Shutdown();
   return 0;
 }

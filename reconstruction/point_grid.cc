@@ -4,7 +4,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
+#include <mutex>
+
+#include <nanoflann.hpp>
 
 namespace formloop::recon {
 namespace {
@@ -13,8 +17,59 @@ namespace {
 // bounding box gets larger cells.
 constexpr double kMaxCellsPerPoint = 8;
 constexpr double kMinCellBudget = 4096;
+// The grid's work on one query, counted as runs of cells plus points looked at (WithinRadius: expected at
+// the mean density), beyond which the kd-tree takes over: Nearest after the ring that passes it,
+// WithinRadius before it starts. A query near the sheet does a few dozen. bench/projection_bench.cc's far
+// points (10,000, 3 to 30 mm off the surface), 2026-11-28: with a 512 × 512 start grid (cells about
+// 0.2 mm) 3,600–4,300 ms by the grid alone, 1,000–1,300 ms with the tree past 256 or 512, 1,300–1,700 past
+// 4,096; with the automatic one (cells about 2 mm, 1,300 samples) 136–139 ms alone, 145–177 with the tree
+// at any of these bounds (its queries cost a few µs more there).
+constexpr long kMaxGridWork = 512;
+constexpr std::size_t kLeafSize = 16;
+
+// nanoflann's view of the points in cell order (no copy; the search runs in double).
+struct Cloud {
+  const std::vector<Eigen::Vector3d>* points;
+  std::size_t kdtree_get_point_count() const { return points->size(); }
+  double kdtree_get_pt(std::size_t i, std::size_t d) const { return (*points)[i](static_cast<Eigen::Index>(d)); }
+  template <class Box>
+  bool kdtree_get_bbox(Box& /*box*/) const {
+    return false;
+  }
+};
+using KdTree =
+    nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, Cloud>, Cloud, 3, std::uint32_t>;
 
 }  // namespace
+
+struct PointGrid::Points {
+  std::vector<Eigen::Vector3d> sorted;  // the points in cell order
+  std::vector<int> index;               // their indices in the input
+  Cloud cloud{&sorted};                 // the tree keeps a reference to its adaptor: it lives here, beside the tree
+  mutable std::once_flag tree_built;
+  mutable std::unique_ptr<KdTree> tree;  // over `sorted`, built by the first query that needs it
+
+  const KdTree& Tree() const {
+    std::call_once(tree_built, [this] {
+      tree = std::make_unique<KdTree>(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(kLeafSize));
+    });
+    return *tree;
+  }
+  // Every point with squared distance <= r2 from p by our own squared norm, as (d², slot in cell order):
+  // the tree's ball is a hair wider, so no point the norm keeps is lost to the tree's own rounding.
+  void Within(const Eigen::Vector3d& p, double r2, std::vector<std::pair<double, int>>* out) const {
+    std::vector<std::pair<std::uint32_t, double>> matches;
+    const double wide = std::max(r2 * (1 + 1e-9), std::numeric_limits<double>::denorm_min());
+    Tree().radiusSearch(p.data(), wide, matches, nanoflann::SearchParams(32, 0, false));
+    out->clear();
+    for (const auto& [slot, unused] : matches) {
+      const double d2 = (sorted[slot] - p).squaredNorm();
+      if (d2 <= r2) out->emplace_back(d2, static_cast<int>(slot));
+    }
+  }
+};
+
+std::size_t PointGrid::size() const { return points_ == nullptr ? 0 : points_->index.size(); }
 
 PointGrid::PointGrid(const std::vector<Eigen::Vector3d>& points, double cell_mm) {
   if (points.empty()) return;
@@ -44,13 +99,15 @@ PointGrid::PointGrid(const std::vector<Eigen::Vector3d>& points, double cell_mm)
   }
   for (std::size_t c = 0; c < n_cells; ++c) start_[c + 1] += start_[c];
   std::vector<int> fill(start_.begin(), start_.end() - 1);
-  sorted_.resize(points.size());
-  index_.resize(points.size());
+  auto sorted = std::make_shared<Points>();
+  sorted->sorted.resize(points.size());
+  sorted->index.resize(points.size());
   for (std::size_t k = 0; k < points.size(); ++k) {  // input order within a cell
     const int slot = fill[cell_of[k]]++;
-    sorted_[static_cast<std::size_t>(slot)] = points[k];
-    index_[static_cast<std::size_t>(slot)] = static_cast<int>(k);
+    sorted->sorted[static_cast<std::size_t>(slot)] = points[k];
+    sorted->index[static_cast<std::size_t>(slot)] = static_cast<int>(k);
   }
+  points_ = std::move(sorted);
 }
 
 int PointGrid::CellCoord(double x, int axis) const {
@@ -65,16 +122,20 @@ int PointGrid::Nearest(const Eigen::Vector3d& p, double* distance_mm, std::vecto
   double best_d2 = std::numeric_limits<double>::infinity();
   if (seen != nullptr) seen->clear();
   if (complete_mm != nullptr) *complete_mm = 0;
-  if (index_.empty()) return best;
+  if (size() == 0) return best;
+  const std::vector<Eigen::Vector3d>& sorted = points_->sorted;
+  const std::vector<int>& index = points_->index;
   const int cx = CellCoord(p.x(), 0), cy = CellCoord(p.y(), 1), cz = CellCoord(p.z(), 2);
   const int max_ring = std::max({cx, dims_[0] - 1 - cx, cy, dims_[1] - 1 - cy, cz, dims_[2] - 1 - cz});
   // Rings of cells at Chebyshev distance k from p's (clamped) cell: every point not yet seen is at
   // least k cells away along some axis, so farther than k · cell from p.
   // Points s_begin .. s_end − 1 (cell order): distances, the best so far, the seen list.
+  long work = 0;
   auto visit = [&](int s_begin, int s_end) {
+    work += 1 + (s_end - s_begin);
     for (int s = s_begin; s < s_end; ++s) {
-      const double d2 = (sorted_[static_cast<std::size_t>(s)] - p).squaredNorm();
-      const int id = index_[static_cast<std::size_t>(s)];
+      const double d2 = (sorted[static_cast<std::size_t>(s)] - p).squaredNorm();
+      const int id = index[static_cast<std::size_t>(s)];
       if (seen != nullptr) seen->emplace_back(d2, id);
       if (d2 < best_d2 || (d2 == best_d2 && id < best)) {
         best_d2 = d2;
@@ -82,7 +143,8 @@ int PointGrid::Nearest(const Eigen::Vector3d& p, double* distance_mm, std::vecto
       }
     }
   };
-  for (int k = 0; k <= max_ring; ++k) {
+  bool done = false;
+  for (int k = 0; k <= max_ring && work <= kMaxGridWork; ++k) {
     const int x0 = std::max(0, cx - k), x1 = std::min(dims_[0] - 1, cx + k);
     for (int iz = std::max(0, cz - k); iz <= std::min(dims_[2] - 1, cz + k); ++iz) {
       for (int iy = std::max(0, cy - k); iy <= std::min(dims_[1] - 1, cy + k); ++iy) {
@@ -105,7 +167,26 @@ int PointGrid::Nearest(const Eigen::Vector3d& p, double* distance_mm, std::vecto
     }
     complete = std::max(complete, k * cell_mm_);
     if (complete_mm != nullptr) *complete_mm = complete;
-    if (best >= 0 && std::sqrt(best_d2) <= complete) break;
+    if (best >= 0 && std::sqrt(best_d2) <= complete) {
+      done = true;
+      break;
+    }
+    done = k == max_ring;  // every cell searched
+  }
+  if (!done) {
+    // Far from every point: the tree's nearest gives the distance; every point at it (ties) by our norm.
+    std::uint32_t slot = 0;
+    double tree_d2 = 0;
+    points_->Tree().knnSearch(p.data(), 1, &slot, &tree_d2);
+    std::vector<std::pair<double, int>> ties;
+    points_->Within(p, std::max(tree_d2, (sorted[slot] - p).squaredNorm()), &ties);
+    for (const auto& [d2, s] : ties) {
+      const int id = index[static_cast<std::size_t>(s)];
+      if (d2 < best_d2 || (d2 == best_d2 && id < best)) {
+        best_d2 = d2;
+        best = id;
+      }
+    }
   }
   if (distance_mm != nullptr) *distance_mm = std::sqrt(best_d2);
   return best;
@@ -114,18 +195,32 @@ int PointGrid::Nearest(const Eigen::Vector3d& p, double* distance_mm, std::vecto
 void PointGrid::WithinRadius(const Eigen::Vector3d& p, double radius_mm,
                              std::vector<std::pair<double, int>>* out) const {
   out->clear();
-  if (index_.empty() || !(radius_mm >= 0)) return;
+  if (size() == 0 || !(radius_mm >= 0)) return;
+  const std::vector<Eigen::Vector3d>& sorted = points_->sorted;
+  const std::vector<int>& index = points_->index;
   const int x0 = CellCoord(p.x() - radius_mm, 0), x1 = CellCoord(p.x() + radius_mm, 0);
   const int y0 = CellCoord(p.y() - radius_mm, 1), y1 = CellCoord(p.y() + radius_mm, 1);
   const int z0 = CellCoord(p.z() - radius_mm, 2), z1 = CellCoord(p.z() + radius_mm, 2);
   const double r2 = radius_mm * radius_mm;
+  // Rows (each one run of points) plus the points expected in the box's cells at the mean density.
+  const double rows = static_cast<double>(y1 - y0 + 1) * (z1 - z0 + 1);
+  const double per_cell = static_cast<double>(size()) / (start_.size() - 1);
+  if (rows * (1 + (x1 - x0 + 1) * per_cell) > kMaxGridWork) {
+    points_->Within(p, r2, out);
+    for (auto& [d, s] : *out) {
+      d = std::sqrt(d);
+      s = index[static_cast<std::size_t>(s)];
+    }
+    std::sort(out->begin(), out->end());
+    return;
+  }
   for (int iz = z0; iz <= z1; ++iz) {
     for (int iy = y0; iy <= y1; ++iy) {
       const std::size_t c0 = CellIndex(x0, iy, iz), c1 = CellIndex(x1, iy, iz);
       // Cells x0 .. x1 of a row are consecutive: one run of points.
       for (int s = start_[c0]; s < start_[c1 + 1]; ++s) {
-        const double d2 = (sorted_[static_cast<std::size_t>(s)] - p).squaredNorm();
-        if (d2 <= r2) out->emplace_back(std::sqrt(d2), index_[static_cast<std::size_t>(s)]);
+        const double d2 = (sorted[static_cast<std::size_t>(s)] - p).squaredNorm();
+        if (d2 <= r2) out->emplace_back(std::sqrt(d2), index[static_cast<std::size_t>(s)]);
       }
     }
   }

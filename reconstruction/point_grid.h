@@ -9,8 +9,18 @@
 // bench/projection_bench.cc: the "ours" rows before and after, 2026-11). Cells are stored densely
 // (counting sort of the points by cell, then the points' coordinates in cell order); the cell is
 // enlarged when the points' bounding box would need more than kMaxCellsPerPoint cells a point.
+//
+// A query far from the sheet is another matter: the rings of cells grow around p until they reach the
+// nearest point, so a point D above the sheet visits about (D / cell)^3 cells and every point in them (a
+// probing move's clearance, sampled every 10 µm up to safe Z above a finely sampled CAD face, took three
+// minutes in tests/app/cad_parts_test.cc). Once a query's grid work passes kMaxGridWork (point_grid.cc),
+// it goes to a kd-tree over the same points (nanoflann, built once, by the first such query); the tree only
+// proposes candidates, each kept or dropped by the same squared norm the grid uses, so both give the same
+// answer, bit for bit.
 
 #include <Eigen/Core>
+#include <memory>
+#include <utility>
 #include <vector>
 
 namespace formloop::recon {
@@ -29,9 +39,10 @@ class PointGrid {
   // Every point with |p − point| ≤ radius_mm as (distance, index), nearest first (ties: lower index).
   void WithinRadius(const Eigen::Vector3d& p, double radius_mm, std::vector<std::pair<double, int>>* out) const;
 
-  std::size_t size() const { return index_.size(); }
+  std::size_t size() const;
 
  private:
+  struct Points;  // the points in cell order, their input indices, and the kd-tree once it is built
   int CellCoord(double x, int axis) const;
   std::size_t CellIndex(int ix, int iy, int iz) const {
     return (static_cast<std::size_t>(iz) * dims_[1] + static_cast<std::size_t>(iy)) * dims_[0] +
@@ -41,9 +52,9 @@ class PointGrid {
   Eigen::Vector3d origin_ = Eigen::Vector3d::Zero();
   double cell_mm_ = 1;
   int dims_[3] = {0, 0, 0};
-  std::vector<int> start_;               // cell c holds the points start_[c] .. start_[c + 1] − 1 (cell order)
-  std::vector<Eigen::Vector3d> sorted_;  // the points in cell order
-  std::vector<int> index_;               // their indices in the input
+  std::vector<int> start_;  // cell c holds the points start_[c] .. start_[c + 1] − 1 (cell order)
+  // Shared by copies (the points never change after construction), so a copy keeps the tree too.
+  std::shared_ptr<const Points> points_;
 };
 
 }  // namespace formloop::recon

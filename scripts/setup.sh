@@ -29,7 +29,7 @@ PACKAGES=(
   libssl-dev        # SHA-256 (OpenSSL EVP) of the CAD and scan files a run copies into its folder
   libfuzzylite-dev  # the fuzzy feed controller's Mamdani inference (planning/fuzzy_feed.h)
   libnlopt-dev      # tests only: an independent optimum (COBYLA) for the cutting-parameter GA
-  libnanoflann-dev  # header-only kd-tree in double: k-NN and distance-band spatial weights (metrology/spatial_weights.cc)
+  libnanoflann-dev  # header-only kd-tree in double: k-NN and distance-band spatial weights (metrology/spatial_weights.cc), far queries of the projector's start grid (reconstruction/point_grid.cc)
   libtbb-dev        # both cores with results identical to one (core/parallel.h: fixed chunks over TBB)
   chromium          # headless browser: the report tests render report.html (charts, 3-D view, width, errors)
   libjs-three       # three.js + OrbitControls, inlined into report.html for its 3-D view (no network)
