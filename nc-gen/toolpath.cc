@@ -2,7 +2,7 @@
 // the section tracing (plane crossings, sections, clipping to the trim and the neighbours' clearance,
 // leads, contour thinning), PlanRaster itself and the path summaries.
 //
-// Why one file of ~950 lines: PlanRaster (about 300 lines) is one algorithm that uses nearly every helper
+// Why one file of ~980 lines: PlanRaster (about 300 lines) is one algorithm that uses nearly every helper
 // above it, and the helpers are internal to it; splitting the section tracing into its own file would
 // publish a dozen internals (RasterFrame, Section, Domain, TraceSection, ClipSection, LeadArc, ...) in a
 // header for no other reader. The sections follow the order of the planner's steps.
@@ -11,7 +11,9 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <optional>
 #include <unordered_map>
 #include <vector>
@@ -59,6 +61,40 @@ Status ToolpathOptions::Validate() const {
 
 namespace {
 
+// Q as the planner evaluates it: each derivative evaluation remembered by its exact (u, v) in a small
+// direct-mapped table, so the sample a section's Newton solve ends on is not evaluated again by the
+// step-over, the cut point or the clearance checks that follow. A repeat returns what OpenCASCADE
+// returned for the same arguments, so the path is the same bit for bit. One per PlanRaster call (not
+// shared between threads).
+class MemoSurface {
+ public:
+  explicit MemoSurface(const recon::BSplineSurface& q) : q_(q), slots_(kSlots) {}
+  Eigen::Vector3d Point(double u, double v) const { return q_.Point(u, v); }
+  recon::SurfaceDerivatives Derivatives(double u, double v) const {
+    const std::uint64_t bu = std::bit_cast<std::uint64_t>(u), bv = std::bit_cast<std::uint64_t>(v);
+    Slot& slot = slots_[((bu * 0x9E3779B97F4A7C15ULL) ^ (bv * 0xC2B2AE3D27D4EB4FULL)) >> (64 - kSlotBits)];
+    if (!slot.filled || slot.u != bu || slot.v != bv) {
+      slot.d = q_.Derivatives(u, v);
+      slot.u = bu;
+      slot.v = bv;
+      slot.filled = true;
+    }
+    return slot.d;
+  }
+  const recon::Trim* trim() const { return q_.trim(); }
+
+ private:
+  static constexpr int kSlotBits = 13;
+  static constexpr std::size_t kSlots = std::size_t{1} << kSlotBits;
+  struct Slot {
+    std::uint64_t u = 0, v = 0;
+    bool filled = false;
+    recon::SurfaceDerivatives d;
+  };
+  const recon::BSplineSurface& q_;
+  mutable std::vector<Slot> slots_;
+};
+
 // Normal curvature of Q at (u, v) in the parameter direction (du, dv); positive = convex (bends away
 // from n), as in reconstruction/analytic_surface.h.
 double NormalCurvature(const recon::SurfaceDerivatives& d, double du, double dv) {
@@ -78,7 +114,7 @@ double StepOver(double h, double r, double kappa_across) {
 // size r, to find the CL points whose ball can reach such a region.
 class ConcaveRegions {
  public:
-  ConcaveRegions(const recon::BSplineSurface& surface, const recon::ParamDomain& dom, double r) : r_(r) {
+  ConcaveRegions(const MemoSurface& surface, const recon::ParamDomain& dom, double r) : r_(r) {
     constexpr double kSpacing = 0.5;  // mm in parameter space
     const int nu = std::clamp(static_cast<int>(std::ceil(dom.u_span() / kSpacing)) + 1, 9, 801);
     const int nv = std::clamp(static_cast<int>(std::ceil(dom.v_span() / kSpacing)) + 1, 9, 801);
@@ -120,7 +156,7 @@ class ConcaveRegions {
 // so that no point of Q within horizontal distance r lies inside the ball (0 if none does).
 // The window is centred on (u, v) and covers horizontal distance `reach` (1.5 r by default: the ball
 // centre is above the CC point (u, v) within r).
-double DropLift(const recon::BSplineSurface& surface, const recon::ParamDomain& dom, double u, double v,
+double DropLift(const MemoSurface& surface, const recon::ParamDomain& dom, double u, double v,
                 const recon::SurfaceDerivatives& d, const Eigen::Vector3d& b, double r, double reach = 0) {
   // Parameter half-widths that cover horizontal distance r (with a margin for varying speed).
   if (reach <= 0) reach = 1.5 * r;
@@ -176,8 +212,8 @@ struct RasterFrame {
 
 // Solves S(u, v)·m = c, S(u, v)·d = s by Newton from (*u, *v), clamped to the domain. False when it
 // does not converge to 1e-9 mm inside the domain (the point (c, s) is not over Q).
-bool SolveOnPlane(const recon::BSplineSurface& q, const recon::ParamDomain& dom, const RasterFrame& f, double c,
-                  double s, double* u, double* v) {
+bool SolveOnPlane(const MemoSurface& q, const recon::ParamDomain& dom, const RasterFrame& f, double c, double s,
+                  double* u, double* v) {
   for (int it = 0; it < 40; ++it) {
     const recon::SurfaceDerivatives d = q.Derivatives(*u, *v);
     const Eigen::Vector2d residual(d.p.dot(f.m) - c, d.p.dot(f.d) - s);
@@ -223,8 +259,8 @@ constexpr int kEdgeSamples = 128;  // samples per domain edge to find where a pl
 
 // Where plane S·m = c crosses the domain boundary, by sign changes on sampled edges refined by regula
 // falsi (Illinois); exact zeros at samples count too (a plane through a corner or along an edge).
-std::vector<EdgeCrossing> PlaneCrossings(const recon::BSplineSurface& q, const recon::ParamDomain& dom,
-                                         const RasterFrame& f, double c) {
+std::vector<EdgeCrossing> PlaneCrossings(const MemoSurface& q, const recon::ParamDomain& dom, const RasterFrame& f,
+                                         double c) {
   std::vector<EdgeCrossing> out;
   const auto add = [&](const Eigen::Vector2d& uv) {
     const Eigen::Vector3d p = q.Point(uv.x(), uv.y());
@@ -287,7 +323,7 @@ struct Section {
 };
 
 // Curvatures, step-over and centre-path length over the samples of one piece.
-Section PieceGeometry(const recon::BSplineSurface& q, const RasterFrame& f, double c, std::vector<Eigen::Vector2d> uv,
+Section PieceGeometry(const MemoSurface& q, const RasterFrame& f, double c, std::vector<Eigen::Vector2d> uv,
                       std::vector<double> abscissa, double r, double h) {
   Section sec;
   sec.c = c;
@@ -331,8 +367,8 @@ Section PieceGeometry(const recon::BSplineSurface& q, const RasterFrame& f, doub
 // the last crossing reached, and the next piece starts at the next crossing (the part between is
 // outside a non-convex outline). A plane running along a domain edge is one piece; a crossing where
 // the plane only touches the outline (a corner at the first or last plane) is a one-point piece.
-Result<std::vector<Section>> TraceSection(const recon::BSplineSurface& q, const recon::ParamDomain& dom,
-                                          const RasterFrame& f, double c, double r, double h) {
+Result<std::vector<Section>> TraceSection(const MemoSurface& q, const recon::ParamDomain& dom, const RasterFrame& f,
+                                          double c, double r, double h) {
   std::vector<EdgeCrossing> ends = PlaneCrossings(q, dom, f, c);
   std::sort(ends.begin(), ends.end(), [](const EdgeCrossing& a, const EdgeCrossing& b) { return a.s < b.s; });
   std::vector<Section> pieces;
@@ -398,8 +434,8 @@ double MinPlaneStep(const std::vector<Section>& pieces) {
 // that direction (ρ_c = concave radius of Q − r), so ρ is cut to ρ_c/2 where that is smaller; where Q's
 // concave radius is at most r (a lifted region) the lead leaves along n alone. Chords of the arc lie
 // on its inner side, away from Q.
-std::vector<Eigen::Vector3d> LeadArc(const recon::BSplineSurface& q, const ClPoint& end, const Eigen::Vector3d& t,
-                                     double lead_mm, double r) {
+std::vector<Eigen::Vector3d> LeadArc(const MemoSurface& q, const ClPoint& end, const Eigen::Vector3d& t, double lead_mm,
+                                     double r) {
   constexpr int kSegments = 6;
   const recon::SurfaceDerivatives d = q.Derivatives(end.u, end.v);
   const Eigen::Vector3d& n = end.normal;
@@ -431,7 +467,7 @@ std::vector<Eigen::Vector3d> LeadArc(const recon::BSplineSurface& q, const ClPoi
 // neighbouring faces (the ball must stay clear of them). Without a trim every (u, v) is usable.
 class Domain {
  public:
-  Domain(const recon::BSplineSurface& q, double r) : q_(q), trim_(q.trim()), r_(r) {}
+  Domain(const MemoSurface& q, double r) : q_(q), trim_(q.trim()), r_(r) {}
   bool trimmed() const { return trim_ != nullptr && !trim_->natural(); }
   bool has_neighbours() const { return trim_ != nullptr && trim_->has_neighbours(); }
   bool Inside(double u, double v) const { return !trimmed() || trim_->Inside(u, v); }
@@ -463,14 +499,14 @@ class Domain {
   const recon::Trim* trim() const { return trim_; }
 
  private:
-  const recon::BSplineSurface& q_;
+  const MemoSurface& q_;
   const recon::Trim* trim_;
   double r_;
 };
 
 // The runs of usable samples of one section piece, each a new piece whose ends are moved onto the
 // boundary of the usable set by bisection along the plane (to 1e-7 mm in the abscissa).
-std::vector<Section> ClipSection(const recon::BSplineSurface& q, const recon::ParamDomain& dom, const RasterFrame& f,
+std::vector<Section> ClipSection(const MemoSurface& q, const recon::ParamDomain& dom, const RasterFrame& f,
                                  const Section& piece, const Domain& domain, double r, double h, int* blocked) {
   const std::size_t n = piece.uv.size();
   std::vector<char> usable(n);
@@ -536,8 +572,8 @@ std::vector<Section> ClipSection(const recon::BSplineSurface& q, const recon::Pa
 // CC samples of one contour pass: from the dense loop samples `uv` (in order), the subset whose straight
 // ball-centre segments stay within `chord` of every skipped sample's centre and are at most `spacing`
 // long, first and last kept.
-std::vector<Eigen::Vector2d> ThinContour(const recon::BSplineSurface& q, const std::vector<Eigen::Vector2d>& uv,
-                                         double r, double chord, double spacing) {
+std::vector<Eigen::Vector2d> ThinContour(const MemoSurface& q, const std::vector<Eigen::Vector2d>& uv, double r,
+                                         double chord, double spacing) {
   if (uv.size() <= 2) return uv;
   std::vector<Eigen::Vector3d> centre(uv.size());
   for (std::size_t i = 0; i < uv.size(); ++i) {
@@ -568,10 +604,11 @@ std::vector<Eigen::Vector2d> ThinContour(const recon::BSplineSurface& q, const s
 
 }  // namespace
 
-Result<Toolpath> PlanRaster(const recon::BSplineSurface& surface, const ToolpathOptions& options) {
+Result<Toolpath> PlanRaster(const recon::BSplineSurface& q, const ToolpathOptions& options) {
   FL_RETURN_IF_ERROR(options.Validate());
-  if (!surface.valid()) return Status::Internal("PlanRaster: no surface");
-  const recon::ParamDomain dom = surface.domain();
+  if (!q.valid()) return Status::Internal("PlanRaster: no surface");
+  const recon::ParamDomain dom = q.domain();
+  const MemoSurface surface(q);
   const double r = options.tool.radius_mm;
   const double h = options.scallop_um * 1e-3;
   const double chord = options.chord_tolerance_um * 1e-3;
