@@ -107,15 +107,24 @@ class ReportBrowserTest : public ::testing::Test {
   }
   void TearDown() override { fs::remove_all(dir_); }
 
-  // The dumped DOM at width × 1200 px, with every check of the report's own script asserted.
-  void ExpectRendered(const fs::path& html, int width) {
+  // The dumped DOM at width × 1200 px, with every check of the report's own script asserted; returned
+  // with Chromium's wall time for RenderAndPhotograph.
+  struct Dump {
+    std::string dom;
+    double wall_s = 0;
+  };
+  Dump ExpectRendered(const fs::path& html, int width) {
     const std::string report = Slurp(html);
     std::size_t charts = 0;
     for (std::size_t at = report.find("<svg class=\"chart\""); at != std::string::npos;
          at = report.find("<svg class=\"chart\"", at + 1)) {
       ++charts;
     }
-    const std::string dom = Shell(Chromium(dir_ / "profile", width, 1200, "--dump-dom", html));
+    const auto start = std::chrono::steady_clock::now();
+    Dump out;
+    out.dom = Shell(Chromium(dir_ / "profile", width, 1200, "--dump-dom", html));
+    out.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const std::string& dom = out.dom;
     EXPECT_FALSE(dom.empty()) << "chromium printed nothing";
     EXPECT_GE(charts, 5u);
     // The print-only projection is hidden on screen, so it has no size there: every other chart does.
@@ -131,16 +140,16 @@ class ReportBrowserTest : public ::testing::Test {
     }
     EXPECT_EQ(Data(dom, "too-wide"), "none") << "at " << width << " px";
     EXPECT_EQ(Data(dom, "errors"), "none");
+    return out;
   }
 
-  // Screenshots of the page at 900 and 1400 px into build/report-screenshots/<name>-<width>.png: the whole
-  // page up to 8,000 px high (SwiftShader's largest surface is 8,192 px; a taller window renders nothing).
-  void Photograph(const fs::path& html, const std::string& name) {
+  // At 900 and 1400 px: the page rendered (ExpectRendered) and a screenshot into
+  // build/report-screenshots/<name>-<width>.png, the whole page up to 8,000 px high (SwiftShader's largest
+  // surface is 8,192 px; a taller window renders nothing) as the dump measured it.
+  void RenderAndPhotograph(const fs::path& html, const std::string& name) {
     for (int width : {900, 1400}) {
-      const auto start = std::chrono::steady_clock::now();
-      const std::string dom = Shell(Chromium(dir_ / "profile", width, 1200, "--dump-dom", html));
-      const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-      const std::string height = Data(dom, "page-height");
+      const Dump dump = ExpectRendered(html, width);
+      const std::string height = Data(dump.dom, "page-height");
       ASSERT_FALSE(height.empty());
       const fs::path shot = ScreenshotDir() / (name + "-" + std::to_string(width) + ".png");
       fs::remove(shot);
@@ -150,8 +159,8 @@ class ReportBrowserTest : public ::testing::Test {
       EXPECT_EQ(image.width, static_cast<unsigned>(width)) << shot;
       EXPECT_EQ(image.height, static_cast<unsigned>(shot_height)) << shot;
       std::cout << "[report] " << name << " at " << width << " px: " << fs::file_size(html) << " bytes, page " << height
-                << " px high, load finished at " << Data(dom, "render-ms") << " ms (page clock), chromium wall "
-                << wall_s << " s; screenshot " << shot.string() << "\n";
+                << " px high, load finished at " << Data(dump.dom, "render-ms") << " ms (page clock), chromium wall "
+                << dump.wall_s << " s; screenshot " << shot.string() << "\n";
     }
   }
 
@@ -211,8 +220,7 @@ TEST_F(ReportBrowserTest, DemoPartRendersAt900And1400px) {
                                kb.string() + " --no-retain --out " + run.string(),
                            &out),
       0);
-  ExpectRendered(run / "report.html", 900);
-  Photograph(run / "report.html", "demo");
+  RenderAndPhotograph(run / "report.html", "demo");
 }
 
 // A regression part: the blade of data/regress/parts (the part whose tolerance label the PNG charts clipped).
@@ -226,8 +234,7 @@ TEST_F(ReportBrowserTest, RegressionPartRendersAt900And1400px) {
                                      " --no-retain --out " + run.string(),
                                  &out),
             0);
-  ExpectRendered(run / "report.html", 900);
-  Photograph(run / "report.html", "reg-blade-a");
+  RenderAndPhotograph(run / "report.html", "reg-blade-a");
 }
 
 }  // namespace
