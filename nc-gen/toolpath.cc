@@ -61,38 +61,47 @@ Status ToolpathOptions::Validate() const {
 
 namespace {
 
-// Q as the planner evaluates it: each derivative evaluation remembered by its exact (u, v) in a small
-// direct-mapped table, so the sample a section's Newton solve ends on is not evaluated again by the
-// step-over, the cut point or the clearance checks that follow. A repeat returns what OpenCASCADE
-// returned for the same arguments, so the path is the same bit for bit. One per PlanRaster call (not
-// shared between threads).
+// Q as the planner evaluates it: each evaluation remembered by its exact (u, v) in a small
+// direct-mapped table (derivatives and points apart), so the sample a section's Newton solve ends on is
+// not evaluated again by the step-over, the cut point or the clearance checks that follow, and the
+// domain edges' samples, where every plane's crossings are looked for, once per path instead of once
+// per plane. A repeat returns what OpenCASCADE returned for the same arguments, so the path is the same
+// bit for bit. One per PlanRaster call (not shared between threads).
 class MemoSurface {
  public:
-  explicit MemoSurface(const recon::BSplineSurface& q) : q_(q), slots_(kSlots) {}
-  Eigen::Vector3d Point(double u, double v) const { return q_.Point(u, v); }
+  explicit MemoSurface(const recon::BSplineSurface& q) : q_(q), derivatives_(kSlots), points_(kSlots) {}
+  Eigen::Vector3d Point(double u, double v) const {
+    return Remembered(points_, u, v, [&] { return q_.Point(u, v); });
+  }
   recon::SurfaceDerivatives Derivatives(double u, double v) const {
-    const std::uint64_t bu = std::bit_cast<std::uint64_t>(u), bv = std::bit_cast<std::uint64_t>(v);
-    Slot& slot = slots_[((bu * 0x9E3779B97F4A7C15ULL) ^ (bv * 0xC2B2AE3D27D4EB4FULL)) >> (64 - kSlotBits)];
-    if (!slot.filled || slot.u != bu || slot.v != bv) {
-      slot.d = q_.Derivatives(u, v);
-      slot.u = bu;
-      slot.v = bv;
-      slot.filled = true;
-    }
-    return slot.d;
+    return Remembered(derivatives_, u, v, [&] { return q_.Derivatives(u, v); });
   }
   const recon::Trim* trim() const { return q_.trim(); }
 
  private:
   static constexpr int kSlotBits = 13;
   static constexpr std::size_t kSlots = std::size_t{1} << kSlotBits;
+  template <typename T>
   struct Slot {
     std::uint64_t u = 0, v = 0;
     bool filled = false;
-    recon::SurfaceDerivatives d;
+    T value;
   };
+  template <typename T, typename Evaluate>
+  static T Remembered(std::vector<Slot<T>>& table, double u, double v, const Evaluate& evaluate) {
+    const std::uint64_t bu = std::bit_cast<std::uint64_t>(u), bv = std::bit_cast<std::uint64_t>(v);
+    Slot<T>& slot = table[((bu * 0x9E3779B97F4A7C15ULL) ^ (bv * 0xC2B2AE3D27D4EB4FULL)) >> (64 - kSlotBits)];
+    if (!slot.filled || slot.u != bu || slot.v != bv) {
+      slot.value = evaluate();
+      slot.u = bu;
+      slot.v = bv;
+      slot.filled = true;
+    }
+    return slot.value;
+  }
   const recon::BSplineSurface& q_;
-  mutable std::vector<Slot> slots_;
+  mutable std::vector<Slot<recon::SurfaceDerivatives>> derivatives_;
+  mutable std::vector<Slot<Eigen::Vector3d>> points_;
 };
 
 // Normal curvature of Q at (u, v) in the parameter direction (du, dv); positive = convex (bends away
