@@ -64,9 +64,10 @@ namespace {
 // Q as the planner evaluates it: each evaluation remembered by its exact (u, v) in a small
 // direct-mapped table (derivatives and points apart), so the sample a section's Newton solve ends on is
 // not evaluated again by the step-over, the cut point or the clearance checks that follow, and the
-// domain edges' samples, where every plane's crossings are looked for, once per path instead of once
-// per plane. A repeat returns what OpenCASCADE returned for the same arguments, so the path is the same
-// bit for bit. One per PlanRaster call (not shared between threads).
+// domain edges' samples, where every plane's crossings are looked for, are mostly found from the planes
+// before (a slot another evaluation took is evaluated again: only time, never a different answer). A
+// repeat returns what OpenCASCADE returned for the same arguments, so the path is the same bit for bit.
+// One per PlanRaster call (not shared between threads).
 class MemoSurface {
  public:
   explicit MemoSurface(const recon::BSplineSurface& q) : q_(q), derivatives_(kSlots), points_(kSlots) {}
