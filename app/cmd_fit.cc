@@ -117,6 +117,9 @@ void AddFitCommand(CLI::App& root, CommandAction* action) {
   fit->add_option("--name", r.name, "name of the STEP product and face (default: the input's name)");
   fit->add_option("--face", args->face_index, "CAD: 0-based face index (see --list-faces)");
   fit->add_option("--face-name", r.face.name, "CAD: face name");
+  fit->add_flag("--reverse", r.face.reverse,
+                "CAD: turn the face over (Q's normal points away from the material; for a face without a solid "
+                "written with its normal into the material)");
   fit->add_flag("--list-faces", args->list_faces, "CAD: print the faces (index, name, type) as JSON and stop");
   fit->add_option("--grid", args->grid,
                   "grid method: NUxNV, the row-major layout of the point file (NU points per row); for analytic "

@@ -256,11 +256,10 @@ Result<nlohmann::json> RunDiagnose(const DiagnoseArgs& args) {
       eo.plausible = options.plausible;
       const RunFolder& first = folders.front();
       eo.replan = [&first](double turn_deg, double feed_scale) -> Result<std::vector<sim::CutterLocation>> {
-        nc::ToolpathOptions o = first.toolpath.options;
-        o.raster_angle_deg = std::fmod(o.raster_angle_deg + turn_deg, 360.0);
-        o.feed_mm_per_min *= feed_scale;
-        FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::PlanRaster(first.q, o));
-        return nc::CutterLocationsOf(path);
+        std::string skipped;
+        auto cls = nc::ReplannedCutterLocations(first.q, first.toolpath.options, turn_deg, feed_scale, &skipped);
+        if (!skipped.empty()) log::Warn("proposals: {}; that change is not proposed", skipped);
+        return cls;
       };
       FL_ASSIGN_OR_RETURN(const auto found, sim::ProposeExperiments(inputs, diagnosis, baseline, eo));
       for (const auto& p : found) {

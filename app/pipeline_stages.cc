@@ -695,11 +695,10 @@ Result<sim::Diagnosis> DiagnoseFirstCycle(const PartSpec& part, const recon::BSp
     eo.plausible = plausible;
     const nc::ToolpathOptions cut_plan = choice.plan;
     eo.replan = [&q, cut_plan](double turn_deg, double feed_scale) -> Result<std::vector<sim::CutterLocation>> {
-      nc::ToolpathOptions o = cut_plan;
-      o.raster_angle_deg = std::fmod(o.raster_angle_deg + turn_deg, 360.0);
-      o.feed_mm_per_min *= feed_scale;
-      FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::PlanRaster(q, o));
-      return nc::CutterLocationsOf(path);
+      std::string skipped;
+      auto cls = nc::ReplannedCutterLocations(q, cut_plan, turn_deg, feed_scale, &skipped);
+      if (!skipped.empty()) log::Warn("[diagnosis] proposals: {}; that change is not proposed", skipped);
+      return cls;
     };
     // Pooled: designed on the pooled diagnosis from the residuals it was made from — the groups
     // left are those no part split, and a change is judged by what it adds to all the parts.

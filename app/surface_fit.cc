@@ -158,6 +158,7 @@ Result<FitOutcome> FitCad(const FitRequest& request, FitMethod method) {
                       {"face_index", face.info.index},
                       {"face_name", face.info.name},
                       {"surface_type", face.info.surface_type},
+                      {"reversed", request.face.reverse},
                       {"file_unit", face.file_unit},
                       {"unit_of_q", "mm"}}},
                     {"fit", fit.ToJson()}};

@@ -50,6 +50,7 @@ recon::CadFaceSelector FaceOf(const SurfaceFile& file) {
   recon::CadFaceSelector selector;
   if (!file.faces.empty()) selector.index = file.faces.front();
   if (!file.face_names.empty()) selector.name = file.face_names.front();
+  selector.reverse = file.reverse;
   return selector;
 }
 
@@ -95,6 +96,7 @@ json SurfaceFile::ToJson(const std::string& file_name) const {
     out = {{"cad", file_name}, {"sha256", sha256}};
     if (!faces.empty()) out["faces"] = faces;
     if (!face_names.empty()) out["face_names"] = face_names;
+    if (reverse) out["reverse"] = true;
     if (!SingleFace(*this)) {
       out["sample_spacing_mm"] = sample_spacing_mm;
       out["max_deviation_fraction"] = max_deviation_fraction;
@@ -133,8 +135,8 @@ Result<SurfaceFile> ParseSurfaceFile(const JsonFields& s, const std::string& par
   f.kind = cad ? SurfaceFile::Kind::kCad : SurfaceFile::Kind::kPoints;
   const std::string key = cad ? "cad" : "points";
   if (cad) {
-    FL_RETURN_IF_ERROR(
-        s.CheckKnown({"cad", "faces", "face_names", "sha256", "sample_spacing_mm", "max_deviation_fraction"}));
+    FL_RETURN_IF_ERROR(s.CheckKnown(
+        {"cad", "faces", "face_names", "sha256", "sample_spacing_mm", "max_deviation_fraction", "reverse"}));
   } else {
     FL_RETURN_IF_ERROR(s.CheckKnown({"points", "sha256", "method", "poles", "tolerance_mm"}));
   }
@@ -164,8 +166,7 @@ Result<SurfaceFile> ParseSurfaceFile(const JsonFields& s, const std::string& par
   if (cad) {
     if (s.Has("faces")) {
       std::vector<long long> faces;
-      FL_RETURN_IF_ERROR(
-          s.IntegerArray("faces", &faces, std::numeric_limits<int>::min(), std::numeric_limits<int>::max()));
+      FL_RETURN_IF_ERROR(s.IntegerArray("faces", &faces, 0, std::numeric_limits<int>::max()));
       FL_RETURN_IF_ERROR(NonEmpty(s, "faces", faces, "[3, 4, 7] (0-based)"));
       f.faces.assign(faces.begin(), faces.end());
     }
@@ -176,6 +177,12 @@ Result<SurfaceFile> ParseSurfaceFile(const JsonFields& s, const std::string& par
     if (!f.faces.empty() && !f.face_names.empty()) {
       return Status::BadInput(Where{.file = part_source, .field = "surface.faces"},
                               "both \"faces\" and \"face_names\" are given", "choose the faces one way");
+    }
+    FL_RETURN_IF_ERROR(s.OptionalBool("reverse", &f.reverse));
+    if (f.reverse && !SingleFace(f)) {
+      return Status::BadInput(Where{.file = part_source, .field = "surface.reverse"},
+                              "turns one face over; this surface is a region of several faces",
+                              "give one face, or turn the faces over in the CAD system");
     }
     FL_RETURN_IF_ERROR(s.OptionalNumber("sample_spacing_mm", &f.sample_spacing_mm, kPositive));
     FL_RETURN_IF_ERROR(s.OptionalNumber("max_deviation_fraction", &f.max_deviation_fraction,

@@ -22,6 +22,10 @@
 // inserted where the residual exceeds "tolerance_mm"), restricted to the points' parameter box so nothing
 // beyond the data is machined; its fit report travels with Q.
 //
+// A face is machined on the side its normal points to, away from the material: the file's orientation
+// (a solid's face points out of it). "reverse": true turns one face over, for a face without a solid
+// written with its normal into the material; PlanRaster refuses a face that faces down.
+//
 // More fields: "sample_spacing_mm" (region: between the samples on the faces, default 1), "poles"
 // [nu, nv] (scan: control net, default automatic), "sha256" (the file's hash, checked when given).
 
@@ -48,6 +52,7 @@ struct SurfaceFile {
   std::vector<std::string> face_names;  // ... or by name (neither: the file's only face)
   double sample_spacing_mm = 1.0;       // CAD region
   double max_deviation_fraction = 0.1;
+  bool reverse = false;              // CAD, one face: turned over (recon::CadFaceSelector::reverse)
   std::string method = "scattered";  // scan: scattered | adaptive
   int u_poles = 0, v_poles = 0;      // scan: control net (0: automatic)
   double fit_tolerance_mm = 1e-3;    // scan, adaptive: residual limit for knot insertion

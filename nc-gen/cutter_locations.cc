@@ -1,5 +1,9 @@
 #include "nc-gen/cutter_locations.h"
 
+#include <cmath>
+
+#include "core/number_text.h"
+
 namespace formloop::nc {
 
 std::vector<sim::CutterLocation> CutterLocationsOf(const Toolpath& toolpath) {
@@ -40,6 +44,22 @@ std::vector<sim::CutterLocation> CutterLocationsOfProgram(const std::vector<Prog
     previous = &m;
   }
   return out;
+}
+
+Result<std::vector<sim::CutterLocation>> ReplannedCutterLocations(const recon::BSplineSurface& q, ToolpathOptions plan,
+                                                                  double turn_deg, double feed_scale,
+                                                                  std::string* skipped) {
+  plan.raster_angle_deg = std::fmod(plan.raster_angle_deg + turn_deg, 360.0);
+  plan.feed_mm_per_min *= feed_scale;
+  Result<Toolpath> path = PlanRaster(q, plan);
+  if (path.status().code() == StatusCode::kBadInput) {
+    *skipped = "the path at raster angle " + FormatFixed(plan.raster_angle_deg, 1) + " deg" +
+               (feed_scale != 1 ? ", feed x " + FormatFixed(feed_scale, 2) : std::string()) +
+               ", cannot be planned on this part: " + path.status().message();
+    return std::vector<sim::CutterLocation>{};
+  }
+  FL_RETURN_IF_ERROR(path.status());
+  return CutterLocationsOf(*path);
 }
 
 }  // namespace formloop::nc

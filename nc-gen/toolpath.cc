@@ -267,8 +267,15 @@ std::array<std::array<Eigen::Vector2d, 2>, 4> DomainEdges(const recon::ParamDoma
 
 constexpr int kEdgeSamples = 128;  // samples per domain edge to find where a plane crosses it
 
+// A sample of the boundary this near the plane (mm) is on it. Exact zeros are not enough: along a
+// straight domain edge S·m varies by rounding (1e-16 mm on a fitted face, more on a CAD face whose
+// poles were written in decimals), and a first or last plane along such an edge would then meet it at
+// one sample instead of running along it, and the edge's pass would be lost.
+constexpr double kOnPlaneMm = 1e-9;
+
 // Where plane S·m = c crosses the domain boundary, by sign changes on sampled edges refined by regula
-// falsi (Illinois); exact zeros at samples count too (a plane through a corner or along an edge).
+// falsi (Illinois); samples on the plane (kOnPlaneMm) count too (a plane through a corner or along an
+// edge).
 std::vector<EdgeCrossing> PlaneCrossings(const MemoSurface& q, const recon::ParamDomain& dom, const RasterFrame& f,
                                          double c) {
   std::vector<EdgeCrossing> out;
@@ -288,9 +295,10 @@ std::vector<EdgeCrossing> PlaneCrossings(const MemoSurface& q, const recon::Para
     double t0 = 0, g0 = g(0);
     for (int i = 1; i <= kEdgeSamples; ++i) {
       const double t1 = static_cast<double>(i) / kEdgeSamples, g1 = g(t1);
-      if (g0 == 0) add(at(t0));
-      if (g1 == 0) add(at(t1));
-      if ((g0 < 0 && g1 > 0) || (g0 > 0 && g1 < 0)) {
+      const bool on0 = std::abs(g0) <= kOnPlaneMm, on1 = std::abs(g1) <= kOnPlaneMm;
+      if (on0) add(at(t0));
+      if (on1) add(at(t1));
+      if (!on0 && !on1 && (g0 < 0) != (g1 < 0)) {
         double a = t0, b = t1, ga = g0, gb = g1;
         int side = 0;
         for (int it = 0; it < 100 && b - a > 1e-15; ++it) {
@@ -514,6 +522,67 @@ class Domain {
   double r_;
 };
 
+// "(x, y, z) mm at (u, v)" for the messages below.
+std::string WhereOnQ(const Eigen::Vector3d& p, double u, double v) {
+  return "(" + FormatFixed(p.x(), 3) + ", " + FormatFixed(p.y(), 3) + ", " + FormatFixed(p.z(), 3) +
+         ") mm at (u, v) = (" + FormatFixed(u, 4) + ", " + FormatFixed(v, 4) + ")";
+}
+
+// A 3-axis ball-end job cuts Q from above: Q's normal, which points away from the material, must point
+// up. Where it points down (n_z < 0, an undercut) the ball's centre is below the contact point and the
+// shank above the ball (a cylinder of the ball's radius) enters the part by r (1 − √(1 − n_z²)); Q is
+// refused where that exceeds the chord tolerance, and a face whose normal points down all over is refused
+// as facing down (turned over, it may be right). Checked on a 65 × 65 grid of the parameter box (inside
+// the trim) before any section is traced: on a face that faces down the raster would be planned under it,
+// and on an overhang the shank would cut the lip.
+Status CheckFacesTheTool(const MemoSurface& q, const recon::ParamDomain& dom, const Domain& domain, double r,
+                         double chord) {
+  constexpr int kGrid = 65;
+  int inside = 0, down = 0, undercut = 0;
+  double sum_nz = 0, worst_nz = 2, worst_u = 0, worst_v = 0;
+  Eigen::Vector3d worst_p = Eigen::Vector3d::Zero();
+  for (int j = 0; j < kGrid; ++j) {
+    for (int i = 0; i < kGrid; ++i) {
+      const double u = dom.u_min + dom.u_span() * i / (kGrid - 1), v = dom.v_min + dom.v_span() * j / (kGrid - 1);
+      if (!domain.Inside(u, v)) continue;
+      const recon::SurfaceDerivatives d = q.Derivatives(u, v);
+      const double nz = recon::NormalFromDerivatives(d).z();
+      if (!std::isfinite(nz)) continue;  // a degenerate point (a pole of the parameterisation)
+      ++inside;
+      sum_nz += nz;
+      down += nz <= 0;
+      undercut += nz < 0 && r * (1 - std::sqrt(1 - nz * nz)) > chord;
+      if (nz < worst_nz) {
+        worst_nz = nz;
+        worst_u = u;
+        worst_v = v;
+        worst_p = d.p;
+      }
+    }
+  }
+  if (inside > 0 && down == inside) {
+    return Status::BadInput(
+        Where{.field = "surface"},
+        "Q faces down: its normal, which points away from the material, has n_z <= 0 all over the face (mean "
+        "n_z " +
+            FormatFixed(sum_nz / inside, 3) + "), and a 3-axis ball-end job cuts a face from above (+z)",
+        "place the part so that this face looks up (the face in the machine's set-up frame, z up); a face "
+        "without a solid whose orientation in the file is the wrong way round (its material below it) is "
+        "turned with \"reverse\": true in the part's surface (formloop fit --reverse)");
+  }
+  if (undercut == 0) return Status::Ok();
+  const double depth_um = 1000 * r * (1 - std::sqrt(1 - worst_nz * worst_nz));
+  return Status::BadInput(
+      Where{.field = "surface"},
+      "Q turns under itself: its normal points down at " + FormatFixed(100.0 * undercut / inside, 1) +
+          " % of the face, most at " + WhereOnQ(worst_p, worst_u, worst_v) + " (n_z " + FormatFixed(worst_nz, 3) +
+          "), where the shank above a " + FormatFixed(r, 3) + " mm ball would cut into the part (by up to " +
+          FormatFixed(depth_um, 1) +
+          " um, more than the chord tolerance); a 3-axis ball-end cannot reach under an overhang",
+      "choose the faces that look up (formloop fit FILE --list-faces lists them) and machine the others in another "
+      "set-up");
+}
+
 // The runs of usable samples of one section piece, each a new piece whose ends are moved onto the
 // boundary of the usable set by bisection along the plane (to 1e-7 mm in the abscissa).
 std::vector<Section> ClipSection(const MemoSurface& q, const recon::ParamDomain& dom, const RasterFrame& f,
@@ -623,8 +692,9 @@ Result<Toolpath> PlanRaster(const recon::BSplineSurface& q, const ToolpathOption
   const double h = options.scallop_um * 1e-3;
   const double chord = options.chord_tolerance_um * 1e-3;
   const RasterFrame frame(options.raster_angle_deg);
-  const ConcaveRegions concave(surface, dom, r);
   const Domain domain(surface, r);
+  FL_RETURN_IF_ERROR(CheckFacesTheTool(surface, dom, domain, r, chord));
+  const ConcaveRegions concave(surface, dom, r);
   // Where the ball is lifted it rests on Q at up to two points and its centre follows arcs of radius up
   // to r: spacing for the chord tolerance on such an arc, with a margin.
   const double lifted_spacing = 0.6 * std::sqrt(8.0 * chord * r);
@@ -833,7 +903,15 @@ Result<Toolpath> PlanRaster(const recon::BSplineSurface& q, const ToolpathOption
           u = section.uv[j].x() + t * (section.uv[j + 1].x() - section.uv[j].x());
           v = section.uv[j].y() + t * (section.uv[j + 1].y() - section.uv[j].y());
           if (!SolveOnPlane(surface, dom, frame, section.c, s, &u, &v)) {
-            return Status::Internal("PlanRaster: a point between two solved samples of a section did not converge");
+            // Between two samples of the section Q turned too steep to follow along the plane (it passes
+            // the facing check above on its grid, and folds between the grid's samples or outside the trim).
+            const Eigen::Vector3d p = surface.Point(u, v);
+            return Status::BadInput(Where{.field = "surface"},
+                                    "the raster cannot follow Q near " + WhereOnQ(p, u, v) +
+                                        ": Q is nearly vertical or folds over there (on the face or on the "
+                                        "untrimmed surface under it)",
+                                    "choose the faces that look up (formloop fit FILE --list-faces lists them), or "
+                                    "try another raster angle (--raster-angle, toolpath.raster_angle_deg)");
           }
         }
         cut.push_back(cut_point(u, v, at_risk));

@@ -382,7 +382,7 @@ namespace {
 // Q and its trim for face `index` of a loaded file; `chosen` are the faces of the region (the others
 // are the trim's neighbours).
 Result<CadFace> MakeCadFace(const std::filesystem::path& path, const LoadedCad& cad, int index,
-                            const std::vector<int>& chosen) {
+                            const std::vector<int>& chosen, bool reverse = false) {
   TopoDS_Face face = cad.faces[static_cast<std::size_t>(index)];
   CadFace result;
   result.info = cad.infos[static_cast<std::size_t>(index)];
@@ -421,9 +421,10 @@ Result<CadFace> MakeCadFace(const std::filesystem::path& path, const LoadedCad& 
       bspline->Segment(u1, u2, v1, v2);
     }
     double u_offset = 0, u_sign = 1;
-    if (face.Orientation() == TopAbs_REVERSED) {
-      // The face's material side is opposite to S_u × S_v; reverse u so Q's normal points away
-      // from the material as the rest of formloop assumes (u_Q = first + last − u_face).
+    if ((face.Orientation() == TopAbs_REVERSED) != reverse) {
+      // The face's material side is opposite to S_u × S_v (or the user turned the face over); reverse u
+      // so Q's normal points away from the material as the rest of formloop assumes
+      // (u_Q = first + last − u_face).
       bspline->Bounds(bu1, bu2, bv1, bv2);
       bspline->UReverse();
       u_offset = bu1 + bu2;
@@ -452,7 +453,7 @@ Result<CadFace> MakeCadFace(const std::filesystem::path& path, const LoadedCad& 
 Result<CadFace> ReadCadFace(const std::filesystem::path& path, const CadFaceSelector& selector) {
   FL_ASSIGN_OR_RETURN(LoadedCad cad, Load(path));
   FL_ASSIGN_OR_RETURN(const int index, ChooseFace(path, cad.infos, selector));
-  return MakeCadFace(path, cad, index, {index});
+  return MakeCadFace(path, cad, index, {index}, selector.reverse);
 }
 
 Result<std::vector<CadFace>> ReadCadFaces(const std::filesystem::path& path, const CadRegionSelector& selector) {

@@ -76,6 +76,9 @@ struct CadFace {
 struct CadFaceSelector {
   int index = -1;
   std::string name;
+  // Turn the face over: its material on the other side than the file says (a face without a solid,
+  // whose orientation carries no meaning, written with its normal into the material).
+  bool reverse = false;
 };
 
 // Every face of the file, for listing. BadInput (naming the file) when it cannot be read or holds

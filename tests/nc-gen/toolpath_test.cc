@@ -14,7 +14,10 @@
 #include <unistd.h>
 
 #include <gtest/gtest.h>
+#include <Geom_BSplineSurface.hxx>
+#include <gp_Pnt.hxx>
 
+#include "nc-gen/cutter_locations.h"
 #include "nc-gen/toolpath.h"
 #include "nc-gen/toolpath_io.h"
 #include "reconstruction/analytic_surface.h"
@@ -275,6 +278,124 @@ TEST(ToolpathOptionsTest, BadRasterAngleAndLeadAreRefusedNamingTheField) {
   path = PlanRaster(*q, o);
   ASSERT_TRUE(path.ok());
   for (const ClPoint& cl : path->points) EXPECT_EQ(cl.kind, ClKind::kCut);
+}
+
+// A first or last plane that runs along a straight edge of the domain is one pass along the whole edge,
+// also when S·m varies along that edge by rounding, as on a CAD face whose poles were written in
+// decimals (here the boundary poles moved by ±3e-14 mm, two units in the last place of 100). Before the
+// planner counted samples within 1e-9 mm of the plane as on it, only the samples exactly on the extreme
+// plane were, and the edge's pass shrank to one point or to pieces between them.
+TEST(ToolpathEdgeTest, ThePlaneAlongAnEdgeWithRoundingIsOnePassAlongTheWholeEdge) {
+  const auto analytic = recon::MakeReferenceSurface("egg_box");
+  ASSERT_TRUE(analytic.ok());
+  recon::FitReport report;
+  const auto fitted = recon::FitAnalytic(*analytic.value(), 30, 30, {}, 0, 1, &report);
+  ASSERT_TRUE(fitted.ok());
+  Handle(Geom_BSplineSurface) geom = Handle(Geom_BSplineSurface)::DownCast(fitted->geom()->Copy());
+  const int nu = geom->NbUPoles(), nv = geom->NbVPoles();
+  for (int j = 1; j <= nv; ++j) {
+    for (int i = 1; i <= nu; ++i) {
+      if (i != 1 && i != nu && j != 1 && j != nv) continue;
+      gp_Pnt p = geom->Pole(i, j);
+      const double wiggle = ((i + j) % 2 == 0 ? 3e-14 : -3e-14);
+      if (j == 1 || j == nv) p.SetY(p.Y() + wiggle);
+      if (i == 1 || i == nu) p.SetX(p.X() + wiggle);
+      geom->SetPole(i, j, p);
+    }
+  }
+  const recon::BSplineSurface q(geom);
+  const recon::ParamDomain dom = q.domain();
+  for (const double angle : {0.0, 90.0}) {
+    SCOPED_TRACE("raster angle " + std::to_string(angle));
+    ToolpathOptions o = Options();
+    o.raster_angle_deg = angle;
+    o.max_point_spacing_mm = 2;
+    const auto path = PlanRaster(q, o);
+    ASSERT_TRUE(path.ok()) << path.status().ToString();
+    // The cut points' extent along the edge (x for planes of constant y, y for planes of constant x).
+    const auto along = [&](const ClPoint& cl) { return angle == 0.0 ? cl.cc.x() : cl.cc.y(); };
+    const double lo = angle == 0.0 ? dom.u_min : dom.v_min, hi = angle == 0.0 ? dom.u_max : dom.v_max;
+    for (const int pass : {0, path->passes - 1}) {
+      double first = 1e300, last = -1e300;
+      int cuts = 0;
+      for (const ClPoint& cl : path->points) {
+        if (cl.pass != pass || cl.kind != ClKind::kCut) continue;
+        first = std::min(first, along(cl));
+        last = std::max(last, along(cl));
+        ++cuts;
+      }
+      EXPECT_GT(cuts, 20) << "pass " << pass;
+      EXPECT_NEAR(first, lo, 1e-6) << "pass " << pass;
+      EXPECT_NEAR(last, hi, 1e-6) << "pass " << pass;
+    }
+  }
+}
+
+// A 3-axis ball-end job cuts Q from above. A face whose normal (away from the material) points down is
+// refused before any section is traced, and so is a face that folds over part of it, naming where; before
+// this check the first was planned under the face (exit 0, no warning) and the second failed part-way
+// with an internal error.
+recon::BSplineSurface FoldedSurface(double wiggle) {
+  // x(t) = 60 t − wiggle · sin(2π t) over t ∈ [0, 1]: where x decreases with u, n_z < 0.
+  recon::GridSamples g;
+  g.nu = 25;
+  g.nv = 13;
+  g.domain = {0, 60, 0, 60};
+  for (int j = 0; j < g.nv; ++j) {
+    for (int i = 0; i < g.nu; ++i) {
+      const double t = static_cast<double>(i) / (g.nu - 1);
+      g.points.emplace_back(60 * t - wiggle * std::sin(2 * M_PI * t), 60.0 * j / (g.nv - 1), 10 + 3 * t);
+    }
+  }
+  recon::FitReport report;
+  auto q = recon::FitGrid(g, recon::GridFitOptions{}, &report);
+  EXPECT_TRUE(q.ok()) << q.status().ToString();
+  return *q;
+}
+
+TEST(ToolpathFacingTest, AFaceThatFacesDownIsRefused) {
+  const auto analytic = recon::MakeReferenceSurface("egg_box");
+  ASSERT_TRUE(analytic.ok());
+  recon::FitReport report;
+  const auto fitted = recon::FitAnalytic(*analytic.value(), 20, 20, {}, 0, 1, &report);
+  ASSERT_TRUE(fitted.ok());
+  ASSERT_TRUE(PlanRaster(*fitted, Options()).ok());
+  Handle(Geom_BSplineSurface) turned = Handle(Geom_BSplineSurface)::DownCast(fitted->geom()->Copy());
+  turned->UReverse();  // the same points, the normal into what was the air side
+  const auto path = PlanRaster(recon::BSplineSurface(turned), Options());
+  ASSERT_EQ(path.status().code(), StatusCode::kBadInput) << path.status().ToString();
+  EXPECT_NE(path.status().message().find("surface"), std::string::npos) << path.status().message();
+  EXPECT_NE(path.status().message().find("Q faces down"), std::string::npos) << path.status().message();
+  EXPECT_NE(path.status().message().find("\"reverse\": true"), std::string::npos) << path.status().message();
+}
+
+TEST(ToolpathFacingTest, AFaceThatFoldsOverIsRefusedNamingWhere) {
+  // A plain graph (wiggle 5: x increases everywhere) is planned ...
+  ASSERT_TRUE(PlanRaster(FoldedSurface(5), Options()).ok());
+  // ... a fold over about a quarter of the face (dx/dt < 0 where cos 2πt > 60 / (30 π)) is refused.
+  const auto path = PlanRaster(FoldedSurface(15), Options());
+  ASSERT_EQ(path.status().code(), StatusCode::kBadInput) << path.status().ToString();
+  const std::string& m = path.status().message();
+  EXPECT_NE(m.find("turns under itself"), std::string::npos) << m;
+  EXPECT_NE(m.find(" mm at (u, v) = ("), std::string::npos) << m;
+  EXPECT_NE(m.find("--list-faces"), std::string::npos) << m;
+}
+
+// A separating experiment's next part planned at a raster angle Q cannot be cut at is not proposed, with
+// the reason; the diagnosis goes on (before, the planner's error aborted `formloop diagnose` and the
+// run's diagnosis).
+TEST(ToolpathFacingTest, ANextPartThatCannotBePlannedIsSkippedWithTheReason) {
+  std::string skipped;
+  const auto cls = ReplannedCutterLocations(FoldedSurface(15), Options(), 90, 0.5, &skipped);
+  ASSERT_TRUE(cls.ok()) << cls.status().ToString();
+  EXPECT_TRUE(cls->empty());
+  EXPECT_NE(skipped.find("raster angle 90.0 deg, feed x 0.50"), std::string::npos) << skipped;
+  EXPECT_NE(skipped.find("turns under itself"), std::string::npos) << skipped;
+  skipped.clear();
+  const auto fine = ReplannedCutterLocations(FoldedSurface(5), Options(), 90, 1, &skipped);
+  ASSERT_TRUE(fine.ok());
+  EXPECT_FALSE(fine->empty());
+  EXPECT_TRUE(skipped.empty()) << skipped;
 }
 
 }  // namespace

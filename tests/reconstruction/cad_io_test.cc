@@ -167,6 +167,27 @@ TEST_F(CadIoTest, StepRoundTripKeepsTheNameAndTheSurface) {
   EXPECT_TRUE(ReadCadFace(path, CadFaceSelector{}).ok());
 }
 
+// "reverse" turns a face over: the same points, the normal the other way (for a face without a solid
+// written with its normal into the material; the planner cuts the side the normal points to).
+TEST_F(CadIoTest, AReversedFaceHasTheSamePointsAndTheOppositeNormal) {
+  const BSplineSurface q = SaddleQ();
+  const fs::path path = dir_ / "q.step";
+  ASSERT_TRUE(WriteStep(path, q, "saddle_top").ok());
+  const auto as_written = ReadCadFace(path, CadFaceSelector{});
+  const auto turned = ReadCadFace(path, CadFaceSelector{.reverse = true});
+  ASSERT_TRUE(as_written.ok() && turned.ok()) << turned.status().ToString();
+  const ParamDomain d = as_written->surface.domain(), e = turned->surface.domain();
+  for (const double s : {0.1, 0.5, 0.8}) {
+    for (const double t : {0.2, 0.7}) {
+      const double u = d.u_min + s * d.u_span(), v = d.v_min + t * d.v_span();
+      const double u_turned = e.u_max - s * e.u_span();  // u runs the other way
+      EXPECT_LT((as_written->surface.Point(u, v) - turned->surface.Point(u_turned, v)).norm(), 1e-9);
+      EXPECT_LT((as_written->surface.Normal(u, v) + turned->surface.Normal(u_turned, v)).norm(), 1e-9);
+    }
+  }
+  EXPECT_GT(as_written->surface.Normal(d.u_min + 0.5 * d.u_span(), d.v_min + 0.5 * d.v_span()).z(), 0);
+}
+
 TEST_F(CadIoTest, ReadsIgesByIndexAndName) {
   const BSplineSurface q = SaddleQ();
   const ParamDomain d = q.domain();
