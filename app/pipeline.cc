@@ -1,7 +1,9 @@
 #include "app/pipeline.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <memory>
 #include <optional>
 
@@ -70,6 +72,20 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
                       stages::WritePrograms(part, q, plan, std::move(choice.path), experiment, folder));
   summary->probe_points_planned = programs.probing_plan.points.size() + programs.unreachable.size();
   for (const nc::UnreachableProbePoint& u : programs.unreachable) summary->probe_points_left_out.push_back(u.id);
+  const nc::Toolpath& nominal = programs.nominal;
+  summary->gouge_risk_points = nominal.gouge_risk_points;
+  summary->lifted_points = nominal.lifted_points;
+  summary->uncut_min = nominal.lifted_box_min;
+  summary->uncut_max = nominal.lifted_box_max;
+  summary->max_lift_mm = nominal.max_lift_mm;
+  if (nominal.lifted_points > 0) {
+    log::Warn(
+        "[nc] Q is concave below the ball radius ({} mm) at {} CL points: {} CL points are lifted out of Q (by up to "
+        "{:.3f} mm), and the region they cover (x {:.2f} to {:.2f}, y {:.2f} to {:.2f} mm) is left uncut; a "
+        "smaller ball cuts it (toolpath/toolpath.json)",
+        plan.tool.radius_mm, nominal.gouge_risk_points, nominal.lifted_points, nominal.max_lift_mm,
+        nominal.lifted_box_min.x(), nominal.lifted_box_max.x(), nominal.lifted_box_min.y(), nominal.lifted_box_max.y());
+  }
 
   FL_RETURN_IF_ERROR(folder.Begin("6/9: precompensation"));
   FL_ASSIGN_OR_RETURN(stages::FirstCut cut,
@@ -193,6 +209,13 @@ json RunSummary::ToJson() const {
           {"causes", causes},
           {"pooled_cases", pooled_cases},
           {"probing", {{"planned", probe_points_planned}, {"left_out", probe_points_left_out}}},
+          {"toolpath",
+           {{"gouge_risk_points", gouge_risk_points},
+            {"lifted_points", lifted_points},
+            {"max_lift_mm", max_lift_mm},
+            {"uncut_box_mm", lifted_points > 0 ? json{{uncut_min.x(), uncut_min.y(), uncut_min.z()},
+                                                      {uncut_max.x(), uncut_max.y(), uncut_max.z()}}
+                                               : json(nullptr)}}},
           {"loops", loops_json},
           {"within_tolerance", within_tolerance},
           {"loops_to_tolerance", to_tolerance >= 0 ? json(to_tolerance) : json(nullptr)},
@@ -231,7 +254,28 @@ Status CheckRunInputs(const PartSpec& part, const RunOptions& options) {
     }
     if (!linuxcnc && (spec != "virtual" || !part.effects)) {
       const std::string profile = spec == "virtual" ? part.machine_name : spec.substr(8);
-      FL_RETURN_IF_ERROR(ReadMachineProfile(profile, data_dir).status());
+      const Status read = ReadMachineProfile(profile, data_dir).status();
+      if (spec == "virtual" && read.code() == StatusCode::kBadInput &&
+          !std::filesystem::exists(data_dir / "machines" / (profile + ".json"))) {
+        // The part names no effects and its machine has no profile: say which field and what to give.
+        std::string names;
+        std::error_code ec;
+        std::vector<std::string> found;
+        for (const auto& entry : std::filesystem::directory_iterator(data_dir / "machines", ec)) {
+          if (entry.path().extension() == ".json") found.push_back(entry.path().stem().string());
+        }
+        std::sort(found.begin(), found.end());
+        for (const auto& n : found) names += (names.empty() ? "" : ", ") + n;
+        return Status::BadInput(
+            Where{.file = options.part_source, .field = "machine.name"},
+            "the virtual machine takes its effects from machine.effects or from the machine profile machine.name "
+            "names; the part gives no effects and there is no profile '" +
+                profile + "' in " + (data_dir / "machines").string(),
+            "set machine.name to a profile (" + names +
+                "), give machine.effects (docs/formats.md; an empty list is an ideal machine), or run with "
+                "--measured LOG.csv");
+      }
+      FL_RETURN_IF_ERROR(read);
     }
   }
   if (!options.kb.empty()) FL_RETURN_IF_ERROR(kb::ProbeLibrary(options.kb, /*allow_unversioned=*/false).status());

@@ -22,6 +22,7 @@
 #include <string_view>
 #include <vector>
 
+#include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
 #include "app/part.h"
@@ -90,7 +91,12 @@ struct RunSummary {
   std::vector<std::string> pooled_cases;            // earlier cases that diagnosis pooled (RunOptions::pool_cases)
   std::size_t probe_points_planned = 0;             // the probing grid's points before the reach check
   std::vector<std::int64_t> probe_points_left_out;  // ids the probe cannot reach clear of the part
-  std::string retained;                             // "added <uid>", "updated <uid>", "" (not retained)
+  // Where Q is concave below the ball radius: CL points at gouge risk, those lifted out of Q (the region
+  // they cover is left uncut: its box of CC points, mm) and the largest lift (nc::Toolpath).
+  int gouge_risk_points = 0, lifted_points = 0;
+  Eigen::Vector3d uncut_min = Eigen::Vector3d::Zero(), uncut_max = Eigen::Vector3d::Zero();
+  double max_lift_mm = 0;
+  std::string retained;  // "added <uid>", "updated <uid>", "" (not retained)
   std::vector<LoopSummary> loops;
   bool within_tolerance = false;
   std::filesystem::path out;

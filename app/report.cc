@@ -253,6 +253,19 @@ void HeaderSection(std::string& html, const RunData& run) {
         "diagnosis are of the others.</p>\n",
         left_out.size(), Num(Member(Member(s, "probing"), "planned"), 0), Esc(ids));
   }
+  // A region the tool path leaves uncut (Q concave below the ball radius: the ball is lifted out of it).
+  const Json& toolpath = Member(s, "toolpath");
+  const Json& box = Member(toolpath, "uncut_box_mm");
+  if (Member(toolpath, "lifted_points").is_number() && Member(toolpath, "lifted_points").get<double>() > 0 &&
+      box.is_array() && box.size() == 2) {
+    html += fmt::format(
+        "<p class=\"note\"><strong>Region left uncut:</strong> Q is concave below the ball radius there, so {} "
+        "cutter locations are lifted out of it (by up to {} mm) and the region they cover (x {} to {} mm, y {} to "
+        "{} mm) is not cut to Q; a smaller ball cuts it (toolpath/toolpath.json). Deviations there are of the "
+        "lifted cut.</p>\n",
+        Num(Member(toolpath, "lifted_points"), 0), Num(Member(toolpath, "max_lift_mm"), 3), Num(box[0][0], 2),
+        Num(box[1][0], 2), Num(box[0][1], 2), Num(box[1][1], 2));
+  }
   html +=
       "<nav class=\"toc\"><a href=\"#view3d\">3-D view</a> <a href=\"#loops\">Loops</a> <a "
       "href=\"#deviations\">Deviations</a> <a href=\"#spatial\">Spatial analysis</a>" +

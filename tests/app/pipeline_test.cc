@@ -307,6 +307,34 @@ TEST_F(PipelineTest, AParametricSurfaceWithNoSurfaceIsRefusedNamingIt) {
   }
 }
 
+// Where Q is concave below the ball radius the ball is lifted out of it and that region is left uncut:
+// the run says so in its summary and its report (before, only toolpath/toolpath.json held the counts and
+// the log and report were silent, while `nc path` warned).
+TEST_F(PipelineTest, ARegionLeftUncutIsInTheSummaryAndTheReport) {
+  const Json json = Json::parse(R"({"name": "concave", "surface": {"reference": "egg_box"}, "tolerance_mm": 0.5,
+    "tool": {"number": 1, "radius_mm": 25}, "fit": {"samples_u": 20, "samples_v": 20, "check_points": 100},
+    "machine": {"name": "vm-mill-a"}, "probing": {"grid": [6, 6]}, "loops": {"max": 1},
+    "toolpath": {"scallop_um": 200, "chord_tolerance_um": 20, "max_point_spacing_mm": 4}})");
+  const auto part = ParsePart(json, "concave.json");
+  ASSERT_TRUE(part.ok()) << part.status().ToString();
+  RunOptions o = Options("concave");
+  o.kb.clear();
+  ASSERT_TRUE(RunPart(*part, o).ok());
+  const Json summary = ReadJsonFile(dir_ / "concave" / "summary.json").value();
+  const Json& toolpath = summary.at("toolpath");
+  const Json report = ReadJsonFile(dir_ / "concave" / "toolpath" / "toolpath.json").value();
+  EXPECT_GT(toolpath.at("lifted_points").get<int>(), 0);
+  EXPECT_EQ(toolpath.at("lifted_points"), report.at("lifted_points"));
+  EXPECT_GT(toolpath.at("max_lift_mm").get<double>(), 0);
+  ASSERT_EQ(toolpath.at("uncut_box_mm").size(), 2u);
+  const std::string html = ReadFile(dir_ / "concave" / "report.html").value();
+  EXPECT_NE(html.find("Region left uncut:"), std::string::npos);
+  // A part with no such region says nothing of it.
+  ASSERT_TRUE(RunPart(Part("reg-dome-a"), Options("dome")).ok());
+  EXPECT_EQ(ReadJsonFile(dir_ / "dome" / "summary.json").value().at("toolpath").at("lifted_points"), 0);
+  EXPECT_EQ(ReadFile(dir_ / "dome" / "report.html").value().find("Region left uncut"), std::string::npos);
+}
+
 TEST_F(PipelineTest, MachineProfilesAreCheckedWithTheField) {
   Json profile = ReadJsonFile(kData / "machines" / "vm-mill-a.json").value();
   EXPECT_TRUE(MachineProfile::FromJson(profile, "p.json").ok());

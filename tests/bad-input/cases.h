@@ -347,6 +347,21 @@ inline std::vector<Case> AllCases() {
           .File("c.igs", FuzzFinding("fuzz_iges/crash-occt-igesread-out-of-bounds.igs"))
           .File("p.json", PartWith("/surface", {{"cad", "c.igs"}, {"faces", {0}}}))
           .ThirdPartyCrash(),
+      // A negative face index (-1 used to pass as "no face given"), "reverse" on a region of several faces.
+      C("part_cad_face_negative", "part JSON", "run p.json --out r", 2, {"p.json", "surface.faces[0]"})
+          .Copy("Q.step")
+          .File("p.json", PartWith("/surface", {{"cad", "Q.step"}, {"faces", {-1}}})),
+      C("part_cad_reverse_region", "part JSON", "run p.json --out r", 2, {"p.json", "surface.reverse"})
+          .Copy("Q.step")
+          .File("p.json", PartWith("/surface", {{"cad", "Q.step"}, {"faces", {0, 0}}, {"reverse", true}})),
+      // The virtual machine with neither machine.effects nor a profile named by machine.name.
+      C("part_machine_without_profile", "part JSON", "run p.json --out r", 2, {"p.json", "machine.name", "vm-mill-a"})
+          .File("p.json",
+                [] {
+                  nlohmann::json part = nlohmann::json::parse(LeanPart());
+                  part["machine"].erase("effects");
+                  return part.dump(2) + "\n";
+                }()),
       // A reader past the time limit (--cad-timeout-s; 1 us expires before any reader answers) and a limit
       // that is no number of seconds.
       C("step_reader_time_limit_fit", "STEP/IGES", "--cad-timeout-s 0.000001 fit c.step --out q.step", 2,
