@@ -117,6 +117,7 @@ void AddFitCommand(CLI::App& root, CommandAction* action) {
   fit->add_option("--name", r.name, "name of the STEP product and face (default: the input's name)");
   fit->add_option("--face", args->face_index, "CAD: 0-based face index (see --list-faces)");
   fit->add_option("--face-name", r.face.name, "CAD: face name");
+  AddForceFlag(fit, &r.force);
   fit->add_flag("--list-faces", args->list_faces, "CAD: print the faces (index, name, type) as JSON and stop");
   fit->add_option("--grid", args->grid,
                   "grid method: NUxNV, the row-major layout of the point file (NU points per row); for analytic "
@@ -167,6 +168,7 @@ void AddFitCommand(CLI::App& root, CommandAction* action) {
                    "deviations (.csv .ply .xyz .pcd): the points with the normals of Q and the columns "
                    "deviation_mm, foot_u, foot_v (parameters of the foot point), foot_x, foot_y, foot_z, on_boundary")
       ->required();
+  AddForceFlag(project, &project_args->force);
   project->callback([action, project_args, project_face] {
     *action = [project_args, project_face] {
       ProjectRequest request = *project_args;
