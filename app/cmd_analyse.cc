@@ -47,7 +47,7 @@
 #include "core/json_io.h"
 #include "core/log.h"
 #include "core/number_text.h"
-#include "core/output_folder.h"
+#include "core/output_file.h"
 #include "core/point_io.h"
 #include "metrology/decomposition.h"
 #include "metrology/morans_i.h"
@@ -100,6 +100,7 @@ struct MoranArgs {
   std::uint64_t seed = 1;
   std::string islands = "refuse";
   std::string lisa_out;
+  bool force = false;
   double alpha = 0.05;
   int lisa_permutations = 999;
 };
@@ -148,7 +149,7 @@ Status RunMoran(const MoranArgs& args) {
                             "must lie in 0 .. " + std::to_string(kMaxPermutations), "use e.g. 999, or 0");
   }
   FL_RETURN_IF_ERROR(
-      CheckOutputsNotInputs({{"--lisa", args.lisa_out}}, {{"--points", args.points}, {"--weights", args.gal}}));
+      CheckOutputFiles({{"--lisa", args.lisa_out}}, {{"--points", args.points}, {"--weights", args.gal}}, args.force));
   FL_ASSIGN_OR_RETURN(const WeightStyle style, metrology::ParseWeightStyle(args.style, "--style"));
   FL_ASSIGN_OR_RETURN(const IslandPolicy policy, metrology::ParseIslandPolicy(args.islands, "--islands"));
   FL_ASSIGN_OR_RETURN(const CsvTable table, ReadCsvTable(args.points));
@@ -241,6 +242,7 @@ Status RunMoran(const MoranArgs& args) {
             y, weights.value(),
             {.islands = policy, .permutations = args.lisa_permutations, .seed = args.seed, .alpha = args.alpha}));
     std::ostringstream csv;
+    csv << "# formloop analyse moran: local Moran's I (LISA) per point\n";
     csv << "id,value,I_i,lag,expected,variance,z,p_analytical,p_sim,quadrant,cluster\n";
     auto num = [](double v) { return std::isfinite(v) ? FormatExact(v) : std::string(); };
     for (long i = 0; i < n; ++i) {
@@ -555,6 +557,7 @@ void AddAnalyseCommand(CLI::App& root, CommandAction* action) {
       ->add_option("--islands", args->islands,
                    "points without neighbours: refuse (error), drop (remove them), zero (zero rows, n kept)")
       ->capture_default_str();
+  AddForceFlag(moran, &args->force);
   moran->add_option("--lisa", args->lisa_out,
                     "write local Moran per point (I_i, E, Var, z, p, cluster HH/LL/HL/LH) to this CSV");
   moran->add_option("--alpha", args->alpha, "LISA: significance level of the cluster map (p < alpha)")

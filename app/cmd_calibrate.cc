@@ -20,7 +20,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/command.h"
-#include "core/output_folder.h"
+#include "core/output_file.h"
 #include "metrology/probe.h"
 #include "metrology/probe_calibration.h"
 
@@ -37,12 +37,13 @@ Status PrintJson(const nlohmann::json& json, const std::string& command) {
 struct SphereArgs {
   std::string log;
   std::string out;
+  bool force = false;
   metrology::SphereCalibrationOptions options;
 };
 
 Status CalibrateSphere(const SphereArgs& args) {
   FL_RETURN_IF_ERROR(args.options.Validate());
-  FL_RETURN_IF_ERROR(CheckOutputsNotInputs({{"--out", args.out}}, {{"LOG", args.log}}));
+  FL_RETURN_IF_ERROR(CheckOutputFiles({{"--out", args.out}}, {{"LOG", args.log}}, args.force));
   FL_ASSIGN_OR_RETURN(const metrology::ProbeLog log, metrology::ReadProbeLog(args.log));
   FL_ASSIGN_OR_RETURN(const metrology::SphereCalibrationReport report, metrology::CalibrateOnSphere(log, args.options));
   nlohmann::json json = report.ToJson();
@@ -57,6 +58,7 @@ Status CalibrateSphere(const SphereArgs& args) {
 
 struct SynthArgs {
   std::string out;
+  bool force = false;
   metrology::SphereLogOptions options;
   double amplitude_um = 5.0;
   double phase_deg = 0.0;
@@ -72,6 +74,7 @@ Status SynthSphere(SynthArgs args) {
   o.probe.ball_radius_mm = args.ball_radius_mm;
   o.probe.pretravel_mm = args.pretravel_um * 1e-3;
   o.probe.lobing = metrology::TriLobe(args.amplitude_um * 1e-3, args.phase_deg * std::numbers::pi / 180);
+  FL_RETURN_IF_ERROR(CheckOutputFiles({{"--out", args.out}}, {}, args.force));
   FL_ASSIGN_OR_RETURN(const metrology::ProbeLog log, metrology::GenerateSphereProbeLog(o));
   FL_RETURN_IF_ERROR(metrology::WriteProbeLog(args.out, log));
   return PrintJson({{"log", args.out},
@@ -113,6 +116,7 @@ void AddCalibrateCommand(CLI::App& root, CommandAction* action) {
                    "sit at too few elevations)")
       ->capture_default_str();
   sphere->add_option("--out", sphere_args->out, "probe profile to write (JSON)");
+  AddForceFlag(sphere, &sphere_args->force);
   sphere->callback([action, sphere_args] { *action = [sphere_args] { return CalibrateSphere(*sphere_args); }; });
 
   auto synth_args = std::make_shared<SynthArgs>();
@@ -121,6 +125,7 @@ void AddCalibrateCommand(CLI::App& root, CommandAction* action) {
       "Write a synthetic standard-sphere probe log (ISO 10360-5 pattern: pole and rings at 0, 22.5, 45, 67.5 deg) "
       "with a known tri-lobe pretravel and Gaussian noise, to try `calibrate sphere` on.");
   synth->add_option("--out", synth_args->out, "probe log to write (CSV)")->required();
+  AddForceFlag(synth, &synth_args->force);
   synth->add_option("--points", synth_args->options.points, "number of points, 5..10000 (ISO: 25)")
       ->capture_default_str();
   synth->add_option("--amplitude-um", synth_args->amplitude_um, "tri-lobe amplitude, µm")->capture_default_str();

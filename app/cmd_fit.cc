@@ -120,6 +120,7 @@ void AddFitCommand(CLI::App& root, CommandAction* action) {
   fit->add_flag("--reverse", r.face.reverse,
                 "CAD: turn the face over (Q's normal points away from the material; for a face without a solid "
                 "written with its normal into the material)");
+  AddForceFlag(fit, &r.force);
   fit->add_flag("--list-faces", args->list_faces, "CAD: print the faces (index, name, type) as JSON and stop");
   fit->add_option("--grid", args->grid,
                   "grid method: NUxNV, the row-major layout of the point file (NU points per row); for analytic "
@@ -170,6 +171,7 @@ void AddFitCommand(CLI::App& root, CommandAction* action) {
                    "deviations (.csv .ply .xyz .pcd): the points with the normals of Q and the columns "
                    "deviation_mm, foot_u, foot_v (parameters of the foot point), foot_x, foot_y, foot_z, on_boundary")
       ->required();
+  AddForceFlag(project, &project_args->force);
   project->callback([action, project_args, project_face] {
     *action = [project_args, project_face] {
       ProjectRequest request = *project_args;

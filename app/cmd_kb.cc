@@ -42,7 +42,7 @@
 #include "app/route_calibration.h"
 #include "core/json_io.h"
 #include "core/log.h"
-#include "core/output_folder.h"
+#include "core/output_file.h"
 #include "kb/library.h"
 #include "kb/library_url.h"
 #include "kb/schema.h"
@@ -60,6 +60,7 @@ struct KbArgs {
   std::string family;
   std::string rules;
   bool replace = false;
+  bool force = false;
   bool json = false;
   bool starter = false;
   std::string data;
@@ -234,11 +235,12 @@ void AddKbCommand(CLI::App& root, CommandAction* action) {
 
   CLI::App* export_cmd = PathCommand(kb, "export", "Export the library as deterministic JSON Lines.", args.get());
   export_cmd->add_option("--out", args->out, "output file (written through a temporary file and renamed)")->required();
+  AddForceFlag(export_cmd, &args->force);
   export_cmd->callback([args, action] {
     *action = [args]() -> Status {
-      FL_RETURN_IF_ERROR(
-          CheckOutputsNotInputs({{"--out", args->out}},
-                                {{"PATH", args->path}, {"PATH", args->path + "-wal"}, {"PATH", args->path + "-shm"}}));
+      FL_RETURN_IF_ERROR(CheckOutputFiles(
+          {{"--out", args->out}}, {{"PATH", args->path}, {"PATH", args->path + "-wal"}, {"PATH", args->path + "-shm"}},
+          args->force));
       FL_ASSIGN_OR_RETURN(auto library, kb::Library::Open(args->path));
       FL_RETURN_IF_ERROR(library->ExportToFile(args->out));
       FL_ASSIGN_OR_RETURN(kb::LibraryStats stats, library->Stats());

@@ -42,7 +42,7 @@
 #include "core/atomic_file.h"
 #include "core/json_io.h"
 #include "core/log.h"
-#include "core/output_folder.h"
+#include "core/output_file.h"
 #include "core/point_io.h"
 
 namespace formloop::app {
@@ -104,6 +104,7 @@ struct EmulateArgs {
   std::string host = "127.0.0.1";
   int port = 0;
   std::string ready_file, record;
+  bool force = false;
   std::string dialect = "fanuc", layout = "packed", precision = "double", latency_dist = "uniform";
   int points = 100, runs = 1, base = -1;
   std::uint64_t seed = 1;
@@ -230,6 +231,7 @@ Result<ControllerOptions> EmulatorOptions(const EmulateArgs& a) {
 
 Status Emulate(const EmulateArgs& a) {
   FL_ASSIGN_OR_RETURN(const ControllerOptions options, EmulatorOptions(a));
+  FL_RETURN_IF_ERROR(CheckOutputFiles({{"--ready-file", a.ready_file}, {"--record", a.record}}, {}, a.force));
   EmulatorServerOptions so;
   so.host = a.host;
   so.port = a.port;
@@ -238,8 +240,9 @@ Status Emulate(const EmulateArgs& a) {
   FL_ASSIGN_OR_RETURN(auto server, EmulatorServer::Start(options, so));
   const std::string address = a.host + ":" + std::to_string(server->port());
   if (!a.ready_file.empty()) {
-    FL_RETURN_IF_ERROR(
-        WriteJsonFile(a.ready_file, {{"address", address}, {"port", server->port()}, {"pid", ::getpid()}}));
+    FL_RETURN_IF_ERROR(WriteJsonFile(
+        a.ready_file,
+        {{"address", address}, {"port", server->port()}, {"pid", ::getpid()}, {"generator", kGeneratorName}}));
   }
   log::Info("link emulate: {} controller on {}, {} runs of {} points, block {}{} ({})", a.dialect, address, a.runs,
             a.points, a.dialect == "sinumerik" ? "R" : (a.dialect == "linuxcnc" ? "E" : "#"),
@@ -305,6 +308,7 @@ struct BlockArgs {
 
 struct CollectArgs {
   std::string address, out, journal, plan, probe_log;
+  bool force = false;
   BlockArgs block;
   int expect = 0, runs = 1;
   double poll_ms = 10, visibility_timeout_s = 2, idle_timeout_s = 600, reconnect_min_s = 0.5, reconnect_max_s = 8;
@@ -348,6 +352,8 @@ Status CollectCommand(const CollectArgs& a) {
   // No output onto an input or onto another output (core/output_folder.h).
   FL_RETURN_IF_ERROR(CheckOutputsNotInputs({{"--out", a.out}, {"--journal", o.journal}, {"--probe-log", a.probe_log}},
                                            {{"--plan", a.plan}}));
+  // The journal is resumed on purpose (cnc/journal.h refuses a file that is not one); the others are outputs.
+  FL_RETURN_IF_ERROR(CheckOutputFiles({{"--out", a.out}, {"--probe-log", a.probe_log}}, {}, a.force));
   TcpTransport transport(host, port, TcpTransportOptions{2.0, a.call_timeout_s});
   RealClock clock;
   FL_ASSIGN_OR_RETURN(const CollectorReport report, Collect(transport, clock, o));
@@ -528,6 +534,7 @@ void AddLinkCommand(CLI::App& root, CommandAction* action) {
   emulate->add_option("--host", e->host, "address to listen on")->capture_default_str();
   emulate->add_option("--ready-file", e->ready_file, "JSON file written once the port is open: {address, port, pid}");
   emulate->add_option("--record", e->record, "CSV of every point the program handed over (the emulator's own record)");
+  AddForceFlag(emulate, &e->force);
   emulate->add_option("--dialect", e->dialect, "machine-side program: fanuc, linuxcnc or sinumerik")
       ->capture_default_str();
   emulate->add_option("--layout", e->layout, "block layout: packed or split")->capture_default_str();
@@ -606,6 +613,7 @@ void AddLinkCommand(CLI::App& root, CommandAction* action) {
   collect->add_flag("--no-fsync", c->no_fsync, "do not flush the journal to disk per point (measurements only)");
   collect->add_option("--plan", c->plan, "probing plan (JSON or CSV) of the measuring program, for --probe-log");
   collect->add_option("--probe-log", c->probe_log, "probe log (id,x,y,z,ax,ay,az,t) of the last COMPLETE run");
+  AddForceFlag(collect, &c->force);
   collect->add_option("--ball-radius-mm", c->ball_radius_mm, "stylus ball radius the program was written for")
       ->capture_default_str();
   collect->callback([action, c] { *action = [c] { return CollectCommand(*c); }; });

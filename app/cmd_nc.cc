@@ -23,7 +23,7 @@
 #include "core/atomic_file.h"
 #include "core/log.h"
 #include "core/number_text.h"
-#include "core/output_folder.h"
+#include "core/output_file.h"
 #include "core/work_estimate.h"
 #include "metrology/probe.h"
 #include "metrology/probing_plan.h"
@@ -152,6 +152,7 @@ struct PathArgs {
   std::string out;
   std::string toolpath;
   std::string report;
+  bool force = false;
 };
 
 Status PlanAndPost(const PathArgs& input) {
@@ -165,9 +166,8 @@ Status PlanAndPost(const PathArgs& input) {
   FL_RETURN_IF_ERROR(args.machine.CheckFeed("--feed", args.path.feed_mm_per_min));
   FL_RETURN_IF_ERROR(args.machine.CheckFeed("--plunge-feed", args.path.plunge_feed_mm_per_min));
   FL_RETURN_IF_ERROR(args.machine.CheckSpindle(args.path.spindle_rpm));
-  FL_RETURN_IF_ERROR(
-      CheckOutputsNotInputs({{"--out", args.out}, {"--toolpath", args.toolpath}, {"--report", args.report}},
-                            {{"--surface", args.surface.surface}}));
+  FL_RETURN_IF_ERROR(CheckOutputFiles({{"--out", args.out}, {"--toolpath", args.toolpath}, {"--report", args.report}},
+                                      {{"--surface", args.surface.surface}}, args.force));
   FL_ASSIGN_OR_RETURN(const recon::CadFace face, args.surface.Read());
   FL_RETURN_IF_ERROR(args.path.Validate());
   const nc::RasterEstimate estimate = nc::EstimateRaster(face.surface, args.path);
@@ -195,6 +195,7 @@ Status PlanAndPost(const PathArgs& input) {
     json["program"] = args.out;
     json["toolpath_file"] = args.toolpath;
     json["cl_points"] = path.points.size();
+    json["generator"] = kGeneratorName;
     report->stream() << json.dump(2) << "\n";
   }
   if (!args.toolpath.empty()) FL_RETURN_IF_ERROR(nc::WriteToolpathFile(args.toolpath, path));
@@ -218,13 +219,14 @@ struct PostArgs {
   std::string toolpath;
   MachineArgs machine;
   std::string out;
+  bool force = false;
 };
 
 // A planned tool path (from `nc path --toolpath`) posted for a controller; the machine-limit check runs
 // on the move list first, so a refusal writes nothing.
 Status PostToolpath(const PostArgs& args) {
   FL_RETURN_IF_ERROR(args.machine.Validate());
-  FL_RETURN_IF_ERROR(CheckOutputsNotInputs({{"--out", args.out}}, {{"--toolpath", args.toolpath}}));
+  FL_RETURN_IF_ERROR(CheckOutputFiles({{"--out", args.out}}, {{"--toolpath", args.toolpath}}, args.force));
   FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::ReadToolpathFile(args.toolpath));
   FL_ASSIGN_OR_RETURN(const nc::ToolpathMoves moves, nc::ToolpathMoves::Of(path));
   FL_ASSIGN_OR_RETURN(const std::string program,
@@ -239,10 +241,12 @@ struct CompensateArgs {
   std::string toolpath, field, nominal, out, side;
   double lambda = 0;
   double max_offset_um = 200;
+  bool force = false;
   MachineArgs machine;
   ShopProgramArgs shop;  // --program: a program formloop did not write
   ShopProgramArgs Shop() const {
     ShopProgramArgs s = shop;
+    s.force = force;
     s.field = field;
     s.lambda = lambda;
     s.out = out;
@@ -271,9 +275,9 @@ Status CompensateProgram(const CompensateArgs& args) {
     return Status::BadInput(Where{.field = "--max-offset-um"}, "must lie in (0, 5000] um",
                             "a compensation offset is a few to a few hundred um; use e.g. 200");
   }
-  FL_RETURN_IF_ERROR(
-      CheckOutputsNotInputs({{"--out", args.out}, {"--side", args.side}},
-                            {{"--toolpath", args.toolpath}, {"--field", args.field}, {"--nominal", args.nominal}}));
+  FL_RETURN_IF_ERROR(CheckOutputFiles(
+      {{"--out", args.out}, {"--side", args.side}},
+      {{"--toolpath", args.toolpath}, {"--field", args.field}, {"--nominal", args.nominal}}, args.force));
   FL_ASSIGN_OR_RETURN(const nc::Toolpath path, nc::ReadToolpathFile(args.toolpath));
   FL_ASSIGN_OR_RETURN(nc::DeviationField field, nc::ReadDeviationField(args.field, {.smoothing = args.lambda}));
   const nc::PostOptions post = args.machine.Post("formloop nc compensate " + args.toolpath);
@@ -324,6 +328,7 @@ struct ProbeArgs {
   double curvature_weight = 1.0;
   double inset_fraction = 0.05;
   std::string out;
+  bool force = false;
 };
 
 Status PlanAndPostProbing(const ProbeArgs& args) {
@@ -385,7 +390,7 @@ Status PlanAndPostProbing(const ProbeArgs& args) {
   }
   std::vector<NamedPath> outputs;
   for (const auto& path : paths) outputs.push_back({"--out", path});
-  FL_RETURN_IF_ERROR(CheckOutputsNotInputs(outputs, {{"--surface", args.surface.surface}}));
+  FL_RETURN_IF_ERROR(CheckOutputFiles(outputs, {{"--surface", args.surface.surface}}, args.force));
   for (std::size_t b = 0; b < programs.size(); ++b) FL_RETURN_IF_ERROR(WriteFileAtomic(paths[b], programs[b]));
   log::Info("nc probe: {} points, {} {} program(s) -> {}{}", plan.points.size(), programs.size(), args.machine.dialect,
             paths.front().string(),
@@ -475,6 +480,7 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
   path->add_option("--toolpath", path_args->toolpath,
                    "the planned path as a CSV file (for `nc post`, `nc compensate`)");
   path->add_option("--report", path_args->report, "tool-path report (JSON): passes, step-over, lifted region");
+  AddForceFlag(path, &path_args->force);
   path->callback([action, path_args] { *action = [path_args] { return PlanAndPost(*path_args); }; });
 
   auto post_args = std::make_shared<PostArgs>();
@@ -482,6 +488,7 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
   post->add_option("--toolpath", post_args->toolpath, "the tool-path file")->required();
   AddMachineOptions(post, &post_args->machine);
   post->add_option("--out", post_args->out, "the program")->required();
+  AddForceFlag(post, &post_args->force);
   post->callback([action, post_args] { *action = [post_args] { return PostToolpath(*post_args); }; });
 
   auto comp_args = std::make_shared<CompensateArgs>();
@@ -515,6 +522,7 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
   comp->add_option("--side", comp_args->side,
                    "the side file: CSV for a .csv name, else compact binary (docs/formats.md)")
       ->required();
+  AddForceFlag(comp, &comp_args->force);
   comp->callback([action, comp_args] { *action = [comp_args] { return CompensateProgram(*comp_args); }; });
 
   auto probe_args = std::make_shared<ProbeArgs>();
@@ -564,6 +572,7 @@ void AddNcCommand(CLI::App& root, CommandAction* action) {
                    "stylus-ball centre)")
       ->capture_default_str();
   probe->add_option("--out", probe_args->out, "the program")->required();
+  AddForceFlag(probe, &probe_args->force);
   probe->callback([action, probe_args] { *action = [probe_args] { return PlanAndPostProbing(*probe_args); }; });
 
   AddNcDistributeCommand(nc, action);

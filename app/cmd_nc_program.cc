@@ -18,6 +18,7 @@
 #include "app/command.h"
 #include "core/atomic_file.h"
 #include "core/log.h"
+#include "core/output_file.h"
 #include "core/point_io.h"
 #include "nc-gen/deviation_field.h"
 #include "nc-gen/path_deviation.h"
@@ -32,6 +33,7 @@ struct DistributeArgs {
   std::string program, deviations, out, report, dialect = "linuxcnc", deviation_frame = "workpiece";
   nc::DistributeOptions options;
   bool no_count_rapids = false;
+  bool force = false;
 };
 
 Status Distribute(const DistributeArgs& input) {
@@ -43,6 +45,8 @@ Status Distribute(const DistributeArgs& input) {
                             "use workpiece or program");
   }
   args.options.deviation_frame_program = args.deviation_frame == "program";
+  FL_RETURN_IF_ERROR(CheckOutputFiles({{"--out", args.out}, {"--report", args.report}},
+                                      {{"PROGRAM", args.program}, {"--deviations", args.deviations}}, args.force));
   FL_ASSIGN_OR_RETURN(const nc::DeviationTable table, nc::ReadDeviationTable(args.deviations));
   // The report waits in its temporary file until the program is in place: both or neither.
   std::unique_ptr<AtomicFile> report_file;
@@ -53,7 +57,9 @@ Status Distribute(const DistributeArgs& input) {
   FL_ASSIGN_OR_RETURN(const nc::DistributeReport report,
                       nc::DistributeProgram(args.program, args.out, table, args.options));
   if (report_file != nullptr) {
-    report_file->stream() << report.ToJson().dump(2) << "\n";
+    nlohmann::json json = report.ToJson();
+    json["generator"] = kGeneratorName;
+    report_file->stream() << json.dump(2) << "\n";
     FL_RETURN_IF_ERROR(report_file->Commit());
   }
   nlohmann::json summary = report.ToJson();
@@ -114,6 +120,7 @@ void AddNcDistributeCommand(CLI::App* nc, CommandAction* action) {
   cmd->add_option("--marker-start", o.marker_start, "M-code of the region start")->capture_default_str();
   cmd->add_option("--marker-end", o.marker_end, "M-code of the region end")->capture_default_str();
   cmd->add_option("--marker-key", o.marker_key, "M-code of a key point")->capture_default_str();
+  AddForceFlag(cmd, &args->force);
   cmd->callback([action, args] { *action = [args] { return Distribute(*args); }; });
 }
 
@@ -131,6 +138,9 @@ Status CompensateShopProgram(const ShopProgramArgs& args) {
   options.decimals_inch = args.decimals + 1;  // the same least input increment class in inch (0.001 mm ~ 0.0001 in)
   options.max_offset_um = args.max_offset_um;
   FL_RETURN_IF_ERROR(options.Validate());
+  FL_RETURN_IF_ERROR(CheckOutputFiles(
+      {{"--out", args.out}, {"--side", args.side}},
+      {{"--program", args.program}, {"--surface", args.surface}, {"--field", args.field}}, args.force));
   FL_ASSIGN_OR_RETURN(
       const recon::CadFace face,
       recon::ReadCadFace(args.surface, recon::CadFaceSelector{.index = args.face_index, .name = args.face_name}));

@@ -12,7 +12,7 @@
 #include "app/command.h"
 #include "app/report.h"
 #include "core/log.h"
-#include "core/output_folder.h"
+#include "core/output_file.h"
 
 namespace formloop::app {
 namespace {
@@ -21,6 +21,7 @@ struct ReportArgs {
   std::string run_dir;
   std::string out;  // empty: RUN_DIR/report.html (RUN_DIR/overview.html with --batch)
   bool batch = false;
+  bool force = false;
 };
 
 // Every file of the folder the report reads from (its own report.html aside): none may be overwritten.
@@ -43,6 +44,10 @@ Status RunReport(const ReportArgs& args) {
                             "give a file name ending in .html");
   }
   FL_RETURN_IF_ERROR(CheckOutputsNotInputs({{"--out", out}}, FolderInputs(args.run_dir, own)));
+  // Without --out the report is the folder's own: (re)writing it is what the command is for, in a folder formloop
+  // wrote. Any other file is replaced only with --force and only when formloop wrote it (core/output_file.h).
+  const bool own_report = args.out.empty() && OutputFolder::HasMarker(args.run_dir);
+  if (!own_report) FL_RETURN_IF_ERROR(CheckReplaceable(out, args.force, "--out"));
   FL_RETURN_IF_ERROR(args.batch ? WriteBatchOverview(args.run_dir, out) : WriteRunReport(args.run_dir, out));
   log::Info("report written: {}", out.string());
   std::cout << nlohmann::json{{"report", out.string()}}.dump() << std::endl;
@@ -66,6 +71,7 @@ void AddReportCommand(CLI::App& root, CommandAction* action) {
   cmd->add_flag("--batch", args->batch,
                 "RUN_DIR is a batch folder of `formloop run` or the output of `formloop regress`: write the plant "
                 "overview linking each part's report");
+  AddForceFlag(cmd, &args->force);
   cmd->callback([args, action] { *action = [args] { return RunReport(*args); }; });
 }
 

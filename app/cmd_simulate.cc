@@ -24,6 +24,7 @@ void AddSimulateCommand(CLI::App& root, CommandAction* action) {
                   "approaches it planned");
   cmd->add_option("--out", args->out, "probe log to write (CSV: id,x,y,z,ax,ay,az,t)")->required();
   cmd->add_option("--truth", args->truth, "also write what was injected at each point (JSON)");
+  AddForceFlag(cmd, &args->force);
   cmd->add_option("--seed", args->seed, "noise seed")->default_val(1);
   cmd->callback([args, action] { *action = [args] { return RunSimulate(*args); }; });
 }

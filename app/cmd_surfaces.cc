@@ -13,6 +13,7 @@
 #include "app/command.h"
 #include "app/surface_fit.h"
 #include "core/log.h"
+#include "core/output_file.h"
 #include "core/point_io.h"
 #include "core/work_estimate.h"
 #include "reconstruction/analytic_surface.h"
@@ -44,6 +45,7 @@ struct SampleArgs {
   int nu = 101;
   int nv = 101;
   std::string out;
+  bool force = false;
 };
 
 Status CheckGrid(int nu, int nv) {
@@ -64,6 +66,7 @@ Status SampleSurface(const SampleArgs& args) {
       "", "--nu/--nv"));
   FL_ASSIGN_OR_RETURN(auto surface, recon::MakeReferenceSurface(args.name));
   FL_RETURN_IF_ERROR(PointFormatFromPath(args.out).status());  // reject the extension before sampling
+  FL_RETURN_IF_ERROR(CheckOutputFiles({{"--out", args.out}}, {}, args.force));
   const PointSet points = recon::SampleGridPoints(*surface, args.nu, args.nv);
   FL_RETURN_IF_ERROR(WritePoints(args.out, points));
   log::Info("sampled {} on {} x {} points -> {}", args.name, args.nu, args.nv, args.out);
@@ -77,6 +80,7 @@ struct ExportArgs {
   int nv = 61;
   double tolerance_mm = 1e-4;
   std::string report;
+  bool force = false;
 };
 
 // Fit check: 1000 seeded random points inside the domain (fixed seed: the report is reproducible).
@@ -100,6 +104,7 @@ Status ExportSurface(const ExportArgs& args) {
   request.out_step = args.out;
   request.out_report = args.report;
   request.name = args.name;
+  request.force = args.force;
   return RunFit(request);
 }
 
@@ -129,6 +134,7 @@ void AddSurfacesCommand(CLI::App& root, CommandAction* action) {
   sample->add_option("--nv", sample_args->nv, "samples along v (corners included)")->capture_default_str();
   sample->add_option("--out", sample_args->out, "output point file; format from the extension: .csv .ply .xyz .pcd")
       ->required();
+  AddForceFlag(sample, &sample_args->force);
   sample->callback([action, sample_args] { *action = [sample_args] { return SampleSurface(*sample_args); }; });
 
   auto export_args = std::make_shared<ExportArgs>();
@@ -143,6 +149,7 @@ void AddSurfacesCommand(CLI::App& root, CommandAction* action) {
   exp->add_option("--tolerance-mm", export_args->tolerance_mm, "approximation tolerance handed to OpenCASCADE, mm")
       ->capture_default_str();
   exp->add_option("--report", export_args->report, "write the fit report (JSON) to this file");
+  AddForceFlag(exp, &export_args->force);
   exp->callback([action, export_args] { *action = [export_args] { return ExportSurface(*export_args); }; });
 }
 

@@ -18,6 +18,12 @@ namespace formloop::app {
 
 using CommandAction = std::function<Status()>;
 
+// `--force` of a command that writes files: an output file that exists is replaced only with it, and only when
+// formloop wrote it (core/output_file.h); without it the command refuses and writes nothing.
+inline CLI::Option* AddForceFlag(CLI::App* cmd, bool* force) {
+  return cmd->add_flag("--force", *force, "replace an output file that exists, when formloop wrote it");
+}
+
 void AddRunCommand(CLI::App& root, CommandAction* action);
 void AddRegressCommand(CLI::App& root, CommandAction* action);
 void AddSurfacesCommand(CLI::App& root, CommandAction* action);
@@ -39,6 +45,7 @@ struct ShopProgramArgs {
   std::string program, surface, face_name, field, out, side, dialect = "linuxcnc";
   int face_index = -1;
   int decimals = 4;
+  bool force = false;  // --force: replace output files formloop wrote
   double lambda = 0, ball_radius_mm = 0, chord_tol_mm = 0.001, contact_tol_mm = 0.01, max_offset_um = 200;
 };
 Status CompensateShopProgram(const ShopProgramArgs& args);

@@ -14,7 +14,7 @@
 #include "core/atomic_file.h"
 #include "core/json_io.h"
 #include "core/log.h"
-#include "core/output_folder.h"
+#include "core/output_file.h"
 #include "core/point_io.h"
 #include "kb/library.h"
 #include "nc-gen/cutter_locations.h"
@@ -93,7 +93,7 @@ Status RunSimulate(const SimulateArgs& args) {
   std::vector<NamedPath> inputs = RunFolderInputs("--run", args.run);
   inputs.push_back({"--model", args.model});
   inputs.push_back({"--probe-plan", args.probe_plan});
-  FL_RETURN_IF_ERROR(CheckOutputsNotInputs({{"--out", args.out}, {"--truth", args.truth}}, inputs));
+  FL_RETURN_IF_ERROR(CheckOutputFiles({{"--out", args.out}, {"--truth", args.truth}}, inputs, args.force));
   FL_ASSIGN_OR_RETURN(const RunFolder run, ReadRunFolder(args.run));
   FL_ASSIGN_OR_RETURN(const sim::Model model, sim::ReadModel(args.model));
   FL_ASSIGN_OR_RETURN(const PlanWithApproaches plan, PlanFor(run, args.probe_plan));
@@ -122,6 +122,7 @@ Status RunSimulate(const SimulateArgs& args) {
     }
     truth["points"] = points;
     truth["seed"] = args.seed;
+    truth["generator"] = kGeneratorName;
     FL_RETURN_IF_ERROR(WriteJsonFile(args.truth, truth));
   }
   const Status written = metrology::WriteProbeLog(args.out, result.log);

@@ -18,6 +18,7 @@ struct SimulateArgs {
   std::string out;         // LOG.csv
   std::string truth;       // optional: what was injected, per point, JSON
   std::uint64_t seed = 1;
+  bool force = false;  // --force: replace output files formloop wrote (core/output_file.h)
 };
 // Writes the probe log the machine would report (and the truth file when asked), both or neither.
 Status RunSimulate(const SimulateArgs& args);

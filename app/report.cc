@@ -618,6 +618,7 @@ Result<std::string> RenderRunReport(const fs::path& run_dir) {
   FL_ASSIGN_OR_RETURN(RunData run, LoadRun(run_dir));
   const double scale = ReportScale(run);
   std::string html = "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n";
+  html += "<meta name=\"generator\" content=\"formloop\">\n";  // formloop's marker (core/output_file.h)
   html += "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n";
   html += "<title>formloop report: " + Esc(StringOr(Member(run.summary, "part"), "")) + "</title>\n";
   html += kStyle;

@@ -110,6 +110,7 @@ Result<std::string> RenderBatchOverview(const fs::path& dir) {
     within += Member(*p.summary, "within_tolerance") == Json(true);
   }
   std::string html = "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n";
+  html += "<meta name=\"generator\" content=\"formloop\">\n";  // formloop's marker (core/output_file.h)
   html += "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n";
   html += "<title>formloop plant overview: " + Esc(name) + "</title>\n";
   html += R"(<style>

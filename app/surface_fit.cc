@@ -8,7 +8,7 @@
 
 #include "core/atomic_file.h"
 #include "core/log.h"
-#include "core/output_folder.h"
+#include "core/output_file.h"
 #include "core/point_io.h"
 #include "core/random.h"
 #include "core/work_estimate.h"
@@ -65,8 +65,8 @@ Status CheckOutputs(const FitRequest& request) {
                             "name it *.json");
   }
   const bool file_input = request.input.rfind("analytic:", 0) != 0;
-  return CheckOutputsNotInputs({{"--out", request.out_step}, {"--report", request.out_report}},
-                               {{"INPUT", file_input ? request.input : std::string()}});
+  return CheckOutputFiles({{"--out", request.out_step}, {"--report", request.out_report}},
+                          {{"INPUT", file_input ? request.input : std::string()}}, request.force);
 }
 
 // A row-major grid layout for `n` points: the requested one, or a square one when none is given.
@@ -327,7 +327,9 @@ Status RunFit(const FitRequest& request) {
   if (!request.out_report.empty()) {
     report = std::make_unique<AtomicFile>(request.out_report);
     FL_RETURN_IF_ERROR(report->open_status());
-    report->stream() << outcome.report.dump(2) << "\n";
+    nlohmann::json json = outcome.report;
+    json["generator"] = kGeneratorName;
+    report->stream() << json.dump(2) << "\n";
   }
   FL_RETURN_IF_ERROR(recon::WriteStep(request.out_step, outcome.surface, name));
   if (report != nullptr) {
@@ -353,8 +355,8 @@ Result<ProjectOutcome> ProjectPoints(const ProjectRequest& request) {
     return Status::BadInput(Where{.field = "--out"}, "no output file given", "add --out deviations.csv");
   }
   FL_RETURN_IF_ERROR(PointFormatFromPath(request.out).status());
-  FL_RETURN_IF_ERROR(
-      CheckOutputsNotInputs({{"--out", request.out}}, {{"--surface", request.surface}, {"--points", request.points}}));
+  FL_RETURN_IF_ERROR(CheckOutputFiles({{"--out", request.out}},
+                                      {{"--surface", request.surface}, {"--points", request.points}}, request.force));
   FL_ASSIGN_OR_RETURN(const recon::CadFace face, recon::ReadCadFace(request.surface, request.face));
   FL_ASSIGN_OR_RETURN(PointSet set, ReadPoints(request.points));
   if (set.empty()) return Status::BadInput(Where{.file = request.points}, "the file holds no points");

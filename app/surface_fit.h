@@ -51,6 +51,7 @@ struct FitRequest {
   std::string out_step;                // required
   std::string out_report;              // optional
   std::string name;                    // STEP product and face name; default: from the input
+  bool force = false;                  // --force: replace output files formloop wrote (core/output_file.h)
 };
 
 struct FitOutcome {
@@ -68,6 +69,7 @@ struct ProjectRequest {
   recon::CadFaceSelector face;
   std::string points;  // point file
   std::string out;     // deviations: .csv .ply .xyz .pcd
+  bool force = false;  // --force: replace an output file formloop wrote (core/output_file.h)
 };
 
 // Foot points of every input point: the output keeps the input points, ids and times, sets the

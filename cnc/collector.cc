@@ -606,6 +606,7 @@ Result<SelfTestReport> RunSelfTest(MacroTransport& transport, const BlockLayout&
 
 Status WriteCollection(const std::filesystem::path& path, const std::vector<Session>& sessions) {
   std::ostringstream out;
+  out << "# formloop link collect: every point collected, per session\n";
   out << "session,q,status,id,data0,data1,data2,vx,vy,vz,dx_mm,dy_mm,dz_mm,flags,t_s\n";
   for (std::size_t k = 0; k < sessions.size(); ++k) {
     const Session& s = sessions[k];

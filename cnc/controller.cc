@@ -498,6 +498,7 @@ void Controller::Submit(const ApiRequest& request, std::function<void(const ApiR
 
 Status Controller::WriteRecord(const std::filesystem::path& path) const {
   std::ostringstream out;
+  out << "# formloop link emulate: every point the measuring program handed over\n";
   out << "run,q,id,data0,data1,data2,dx_mm,dy_mm,dz_mm,t_s,corrupted\n";
   for (const auto& r : record_) {
     out << r.run << "," << FormatExact(r.q) << "," << r.id << "," << FormatExact(r.data[0]) << ","

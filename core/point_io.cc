@@ -389,7 +389,8 @@ Status WriteCsv(const std::filesystem::path& path, const PointSet& points, const
   const std::string file = path.string();
   FL_RETURN_IF_ERROR(points.Validate(file));
   FL_RETURN_IF_ERROR(CheckScalarNames(file, points, /*allow_inner_space=*/true, "CSV"));
-  std::string out = "x,y,z";
+  std::string out = kPointFileMarker;
+  out += "x,y,z";
   if (points.has_normals()) out += ",nx,ny,nz";
   if (points.has_ids()) out += ",id";
   if (points.has_times()) out += ",t";
@@ -456,7 +457,7 @@ Status WriteXyz(const std::filesystem::path& path, const PointSet& points, const
     log::Warn("{}: XYZ holds positions and normals only; ids, times and scalars are not written (use CSV or PLY)",
               file);
   }
-  std::string out;
+  std::string out = kPointFileMarker;
   out.reserve(points.size() * (points.has_normals() ? 6 : 3) * 16);
   for (std::size_t i = 0; i < points.size(); ++i) {
     AppendTextRow(points, i, ' ', options.precision, /*with_attributes=*/false, &out);

@@ -30,6 +30,10 @@ enum class PointFormat { kCsv, kXyz, kPly, kPcd };
 // From the extension (.csv .xyz .txt .ply .pcd, case-insensitive); BadInput names the path otherwise.
 Result<PointFormat> PointFormatFromPath(const std::filesystem::path& path);
 
+// The comment formloop writes as the first line of its CSV and XYZ point files and after PCD's first line: its
+// marker as the writer of the file (core/output_file.h). Every reader skips '#' lines.
+inline constexpr const char* kPointFileMarker = "# formloop point file\n";
+
 struct PointWriteOptions {
   bool binary = true;  // PLY and PCD: binary (little-endian) rather than ASCII
   int precision = 9;   // CSV/XYZ/ASCII PLY/ASCII PCD: digits after the decimal point (mm -> 1 nm at 6);

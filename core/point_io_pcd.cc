@@ -634,6 +634,8 @@ Status WritePcdQuiet(const std::filesystem::path& path, const PointSet& points, 
       out += '\n';
     }
   }
+  // formloop's marker after PCL's "# .PCD v0.7" line (readers skip '#' lines in the header).
+  out.insert(out.find('\n') + 1, kPointFileMarker);
   return WriteFileAtomic(path, out, /*binary=*/true);
 }
 

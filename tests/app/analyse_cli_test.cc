@@ -104,6 +104,8 @@ TEST_F(AnalyseCliTest, ResidualMoranAndLisaTable) {
   std::ifstream in(lisa);
   std::string line;
   std::getline(in, line);
+  EXPECT_EQ(line.rfind("# formloop", 0), 0u) << line;  // the marker (core/output_file.h)
+  std::getline(in, line);
   EXPECT_EQ(line, "id,value,I_i,lag,expected,variance,z,p_analytical,p_sim,quadrant,cluster");
   int rows = 0, significant = 0;
   while (std::getline(in, line)) {
@@ -153,12 +155,12 @@ TEST_F(AnalyseCliTest, OneAndTwoThreadsGiveTheSameBytes) {
   const std::string csv = Write("points.csv", text.str());
   std::string outputs[2], tables[2];
   for (int threads : {1, 2}) {
-    const std::string lisa = (dir_ / "lisa.csv").string();  // one name: stdout names it
+    const std::string lisa = (dir_ / "lisa.csv").string();  // one name: stdout names it; --force replaces the first
     std::string err;
-    const int code =
-        testing::RunFormloop("--threads " + std::to_string(threads) + " analyse moran --points " + csv +
-                                 " --value z --coords u,v --knn 8 --style W --lisa " + lisa + " --lisa-permutations 0",
-                             &outputs[threads - 1], &err);
+    const int code = testing::RunFormloop("--threads " + std::to_string(threads) + " analyse moran --points " + csv +
+                                              " --value z --coords u,v --knn 8 --style W --lisa " + lisa +
+                                              " --lisa-permutations 0 --force",
+                                          &outputs[threads - 1], &err);
     ASSERT_EQ(code, 0) << err;
     std::ifstream in(lisa);
     tables[threads - 1] = std::string(std::istreambuf_iterator<char>(in), {});

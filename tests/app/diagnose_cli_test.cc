@@ -77,9 +77,10 @@ TEST_F(DiagnoseCliTest, SimulateThenDiagnoseNamesTheHiddenEffectAndMeasuresTheGa
   const fs::path baseline = WriteModel("baseline.json", R"({"format": "formloop-model", "version": 1, "effects": [
       {"name": "noise", "parameters": {"surface_sigma_um": 0.5, "probe_sigma_um": 0.5}}]})");
   std::string out, err;
+  // Each part its own truth file: an output that exists is refused (core/output_file.h).
   for (const auto& [run, log] : {std::pair{run1, dir_ / "log1.csv"}, std::pair{run2, dir_ / "log2.csv"}}) {
     ASSERT_EQ(RunFormloop("simulate --run " + run.string() + " --model " + machine.string() + " --out " + log.string() +
-                              " --truth " + (dir_ / "truth.json").string() + " --seed 7",
+                              " --truth " + log.string() + ".truth.json --seed 7",
                           &out, &err),
               0)
         << err;

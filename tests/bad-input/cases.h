@@ -164,6 +164,41 @@ inline std::vector<Case> AllCases() {
         {"log.csv"})
           .File("an/log.csv", [](const Fixtures& f) { return f.Read("log.csv"); }),
 
+      // ---- an output file that exists: refused without --force, and with it unless formloop wrote it
+      C("nc_path_out_exists", "output file", "nc path --surface {F}/Q.step --out notes.txt", 2,
+        {"notes.txt: field '--out': already exists", "--force"})
+          .File("notes.txt", "my notes\n"),
+      C("nc_path_force_user_file", "output file", "nc path --surface {F}/Q.step --out notes.txt --force", 2,
+        {"notes.txt", "formloop did not write it"})
+          .File("notes.txt", "my notes\n"),
+      C("nc_path_toolpath_force_user_file", "output file", "nc path --surface {F}/Q.step --toolpath notes.txt --force",
+        2, {"notes.txt", "--toolpath", "did not write"})
+          .File("notes.txt", "x,y,z\n1,2,3\n"),
+      C("nc_probe_force_user_part", "output file", "nc probe --surface {F}/Q.step --out p.json --force", 2,
+        {"p.json", "did not write"})
+          .File("p.json", LeanPart()),
+      C("fit_force_user_step", "output file", "fit analytic:saddle --out user.step --force", 2,
+        {"user.step", "did not write"})
+          .File("user.step", "ISO-10303-21;\nHEADER;\nFILE_NAME('u','t',(''),(''),'','OtherCAD','');\nENDSEC;\n"),
+      C("report_force_user_html", "output file", "report run --out mine.html --force", 2,
+        {"mine.html", "did not write"})
+          .Copy("run")
+          .File("mine.html", "<!DOCTYPE html>\n<html><head><title>mine</title></head></html>\n"),
+      C("project_out_exists", "output file", kProject + "scan.csv --out user.csv", 2, {"user.csv", "already exists"})
+          .Copy("scan.csv")
+          .File("user.csv", "a,b\n1,2\n"),
+      C("calibrate_force_user_json", "output file",
+        "calibrate sphere sphere.csv --radius 12.5 --ball 1 --out p3.json --force", 2, {"p3.json", "did not write"})
+          .Copy("sphere.csv")
+          .File("p3.json", "{\"format\": \"my-part\", \"generator\": \"me\"}\n"),
+      C("kb_export_force_user_file", "output file", "kb export kb.sqlite --out user.jsonl --force", 2,
+        {"user.jsonl", "did not write"})
+          .Copy("kb.sqlite")
+          .File("user.jsonl", "{\"type\": \"mine\"}\n"),
+      C("surfaces_sample_out_is_folder", "output file", "surfaces sample saddle --nu 3 --nv 3 --out d.csv --force", 2,
+        {"d.csv", "is a folder"})
+          .Setup("mkdir d.csv"),
+
       // ---- an output onto an input (item 2)
       C("kb_export_onto_library", "output path", "kb export kb.sqlite --out kb.sqlite", 2, {"kb.sqlite", "--out"})
           .Copy("kb.sqlite"),

@@ -327,7 +327,7 @@ inline fs::path EnsureFixtures(const std::string& binary, const fs::path& root, 
     std::string field = "u,v,ds_um\n";
     std::stringstream rows(ReadText(dir / "run" / "loop-0" / "deviations.csv"));
     std::string line;
-    std::getline(rows, line);
+    while (std::getline(rows, line) && line.rfind('#', 0) == 0) continue;  // formloop's marker; `line` = the header
     int n = 0;
     while (std::getline(rows, line) && n < 64) {
       std::vector<std::string> cells;

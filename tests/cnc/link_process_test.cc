@@ -38,7 +38,7 @@ std::vector<std::vector<std::string>> ReadCsv(const std::filesystem::path& path)
   std::ifstream in(path);
   std::vector<std::vector<std::string>> rows;
   std::string line;
-  std::getline(in, line);  // header
+  while (std::getline(in, line) && line.rfind('#', 0) == 0) continue;  // formloop's marker; `line` = the header
   while (std::getline(in, line)) {
     std::vector<std::string> cells;
     std::stringstream s(line);
