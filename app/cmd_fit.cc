@@ -5,6 +5,7 @@
 //   formloop fit CAD --list-faces                          faces of a CAD file as JSON on stdout
 //   formloop project --surface Q.step --points P.csv --out deviations.csv|.ply
 
+#include <cmath>
 #include <iostream>
 #include <memory>
 #include <string>
@@ -32,7 +33,13 @@ Status ListFaces(const std::string& path) {
   FL_ASSIGN_OR_RETURN(const auto faces, recon::ListCadFaces(path));
   nlohmann::json list = nlohmann::json::array();
   for (const recon::CadFaceInfo& face : faces) {
-    list.push_back({{"index", face.index}, {"name", face.name}, {"surface_type", face.surface_type}});
+    nlohmann::json entry = {{"index", face.index}, {"name", face.name}, {"surface_type", face.surface_type}};
+    entry["box_min_mm"] = {face.box_min_mm[0], face.box_min_mm[1], face.box_min_mm[2]};
+    entry["box_max_mm"] = {face.box_max_mm[0], face.box_max_mm[1], face.box_max_mm[2]};
+    entry["area_mm2"] = face.area_mm2;
+    // Which way the face looks (away from the material): a 3-axis job cuts faces that look up.
+    entry["mean_normal_z"] = std::isfinite(face.mean_normal_z) ? nlohmann::json(face.mean_normal_z) : nullptr;
+    list.push_back(entry);
   }
   std::cout << list.dump(2) << "\n";
   std::cout.flush();
@@ -121,7 +128,8 @@ void AddFitCommand(CLI::App& root, CommandAction* action) {
                 "CAD: turn the face over (Q's normal points away from the material; for a face without a solid "
                 "written with its normal into the material)");
   AddForceFlag(fit, &r.force);
-  fit->add_flag("--list-faces", args->list_faces, "CAD: print the faces (index, name, type) as JSON and stop");
+  fit->add_flag("--list-faces", args->list_faces,
+                "CAD: print the faces (index, name, type, bounding box, area, mean normal z) as JSON and stop");
   fit->add_option("--grid", args->grid,
                   "grid method: NUxNV, the row-major layout of the point file (NU points per row); for analytic "
                   "input the samples per side (default 50x50)");

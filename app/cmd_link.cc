@@ -458,6 +458,7 @@ struct ProgramArgs {
   int base = -1, decimals = -1;
   double dwell_ms = 20, ball_radius_mm = 1, clearance_mm = 3, search_mm = 2, feed = 200, safe_z_mm = 50;
   double arm_timeout_s = 60, ack_timeout_s = 10;
+  bool force = false;
 };
 
 Status ProgramCommand(const ProgramArgs& a) {
@@ -481,6 +482,11 @@ Status ProgramCommand(const ProgramArgs& a) {
   FL_RETURN_IF_ERROR(ReadMacroProgram(o.dialect, program.files)
                          .status()
                          .WithContext("link program: the written program does not read back"));
+  // The folder may hold the shop's own programs: a file of the same name is replaced only with --force and
+  // only when formloop wrote it (core/output_file.h), checked for every file before any is written.
+  for (const auto& f : program.files) {
+    FL_RETURN_IF_ERROR(CheckReplaceable(std::filesystem::path(a.out) / f.name, a.force, "--out"));
+  }
   FL_RETURN_IF_ERROR(MakeDirectories(a.out));
   nlohmann::json files = nlohmann::json::array();
   for (const auto& f : program.files) {
@@ -634,6 +640,7 @@ void AddLinkCommand(CLI::App& root, CommandAction* action) {
       "Write the machine side of the handshake for a probing plan: Fanuc macro B, LinuxCNC O-codes or Sinumerik R.");
   program->add_option("--plan", p->plan, "probing plan (JSON or CSV), ids 1..N, N <= 2000")->required();
   program->add_option("--out", p->out, "folder for the program file(s)")->required();
+  AddForceFlag(program, &p->force);
   program->add_option("--dialect", p->dialect, "fanuc, linuxcnc or sinumerik")->capture_default_str();
   program->add_option("--layout", p->layout, "packed or split")->capture_default_str();
   program->add_option("--base", p->base, "block base address (-1: the dialect's default)")->capture_default_str();

@@ -15,6 +15,7 @@
 #include "core/log.h"
 #include "kb/schema.h"
 #include "metrology/probe.h"
+#include "retrieval/features.h"
 #include "retrieval/starter.h"
 
 namespace formloop::app {
@@ -278,7 +279,19 @@ Status CheckRunInputs(const PartSpec& part, const RunOptions& options) {
       FL_RETURN_IF_ERROR(read);
     }
   }
-  if (!options.kb.empty()) FL_RETURN_IF_ERROR(kb::ProbeLibrary(options.kb, /*allow_unversioned=*/false).status());
+  if (!options.kb.empty()) {
+    FL_RETURN_IF_ERROR(kb::ProbeLibrary(options.kb, /*allow_unversioned=*/false).status());
+    // The retrieval description's concepts and bands, before the run folder exists (a shape_family typo
+    // used to fail after the surface fit, leaving DIR.failed).
+    FL_ASSIGN_OR_RETURN(const retrieval::FacetTaxonomies taxonomies,
+                        retrieval::FacetTaxonomies::Load(data_dir / "taxonomies"));
+    const auto classified = retrieval::ClassifyPart(DescriptionOf(part, part.toolpath), taxonomies);
+    if (!classified.ok()) {
+      return Status(classified.status().code(),
+                    options.part_source + ": " + classified.status().message() +
+                        " (the part's retrieval description: material, shape_family, finish_ra_um, machine.class)");
+    }
+  }
   // The size of the job: a scallop typed in the wrong unit is refused here.
   return CheckPartWork(part, part.toolpath, options.part_source);
 }

@@ -131,6 +131,11 @@ Result<int> CsvTable::Column(std::string_view name, const std::string& field) co
 Status CsvTable::Number(std::size_t row, int column, double* value) const {
   const std::string& cell = rows[row][static_cast<std::size_t>(column)];
   if (ParseDouble(cell, value) && std::isfinite(*value)) return Status::Ok();
+  if (NumberBeyondDoubleRange(cell)) {
+    return Status::BadInput(
+        Where{.file = source, .line = lines[row], .field = header[static_cast<std::size_t>(column)]},
+        "'" + cell + "' is beyond the range of a double (1e-308 to 1e308)", "check the value and its unit");
+  }
   return Status::BadInput(Where{.file = source, .line = lines[row], .field = header[static_cast<std::size_t>(column)]},
                           "'" + cell + "' is not a finite number",
                           "write a decimal number such as 1.25 (no empty cells, NaN or units)");

@@ -57,4 +57,16 @@ bool ParseDouble(std::string_view text, double* value) {
   return true;
 }
 
+bool NumberBeyondDoubleRange(std::string_view text) {
+  const char* first = text.data();
+  const char* last = text.data() + text.size();
+  if (first != last && *first == '+') {
+    ++first;
+    if (first != last && (*first == '-' || *first == '+')) return false;
+  }
+  double parsed = 0;
+  const auto [ptr, ec] = std::from_chars(first, last, parsed);
+  return ec == std::errc::result_out_of_range && ptr == last;
+}
+
 }  // namespace formloop

@@ -19,5 +19,8 @@ std::string FormatSignificant(double value, int digits = 6);
 // Parses the whole string as a finite or non-finite double; false on anything else (" 1", "1x", "").
 // A leading '+' is accepted.
 bool ParseDouble(std::string_view text, double* value);
+// True when text is a number in ParseDouble's syntax whose magnitude a double cannot hold ("1e400",
+// "1e-400"), so a reader can say so instead of "not a number".
+bool NumberBeyondDoubleRange(std::string_view text);
 
 }  // namespace formloop

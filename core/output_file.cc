@@ -62,10 +62,13 @@ std::vector<std::string_view> Lines(std::string_view text, std::size_t count) {
 bool TextMarker(std::string_view head) {
   for (std::string_view line : Lines(head, kMarkerLines)) {
     line = TrimLeft(line);
-    // Heidenhain numbers every block: "1 ; formloop nc path Q.step".
+    // Heidenhain numbers every block: "1 ; formloop nc path Q.step"; a Fanuc program number or a block
+    // number may come first: "O1000 (FORMLOOP MEASURING PROGRAM ...", "N10 (formloop ...".
     std::size_t digits = 0;
+    if (!line.empty() && (line[0] == 'O' || line[0] == 'N')) digits = 1;
+    const std::size_t first_digit = digits;
     while (digits < line.size() && std::isdigit(static_cast<unsigned char>(line[digits]))) ++digits;
-    if (digits > 0 && digits < line.size() && line[digits] == ' ') line = TrimLeft(line.substr(digits));
+    if (digits > first_digit && digits < line.size() && line[digits] == ' ') line = TrimLeft(line.substr(digits));
     for (std::string_view prefix : {"(formloop", "; formloop", ";formloop", "# formloop", "#formloop"}) {
       if (StartsWithNoCase(line, prefix)) {
         const std::string_view rest = line.substr(prefix.size());

@@ -175,6 +175,18 @@ Status StagedOutputFolder::Open(const fs::path& out, const std::string& option, 
   FL_RETURN_IF_ERROR(CheckOutputsNotInputs({}, inputs, {{option, out}}));
   std::error_code ec;
   if (!replace && fs::exists(fs::symlink_status(out, ec))) {
+    // Say what --force would do: replace a folder formloop made, nothing else (CheckReplaceable below).
+    if (!fs::is_directory(fs::symlink_status(out, ec))) {
+      return Status::BadInput(Where{.file = out.string(), .field = option},
+                              "is a file, not a folder; the command writes a folder there",
+                              "choose another folder name");
+    }
+    if (!OutputFolder::HasMarker(out)) {
+      return Status::BadInput(Where{.file = out.string(), .field = option},
+                              "the output folder already exists and formloop did not make it; formloop replaces "
+                              "only folders it made, even with --force",
+                              "choose another folder, or move or remove it yourself");
+    }
     return Status::BadInput(Where{.file = out.string(), .field = option}, "the output folder already exists",
                             "choose another folder, or pass --force to replace it");
   }

@@ -65,6 +65,10 @@ Status ParseNumberField(std::string_view text, const std::string& file, long lin
   if (text.empty()) {
     return Status::BadInput(where, "value is empty", "write a number in every column of every row");
   }
+  if (NumberBeyondDoubleRange(text)) {
+    return Status::BadInput(where, "value " + Quote(text) + " is beyond the range of a double (1e-308 to 1e308)",
+                            "check the value and its unit");
+  }
   if (!ParseDouble(text, value)) {
     return Status::BadInput(where, "value " + Quote(text) + " is not a number",
                             "write a decimal number with a '.' decimal point and no thousands separator, "

@@ -726,7 +726,22 @@ Result<ImportReport> Library::ImportText(const std::string& text, const std::str
     if (line.empty()) continue;
     const Where where{.file = source, .line = line_no};
     json j = json::parse(line, nullptr, /*allow_exceptions=*/false);
-    if (j.is_discarded() || !j.is_object()) return Status::BadInput(where, "is not a JSON object");
+    if (j.is_discarded()) {
+      // Say where the text stops making sense: a line cut short (a truncated copy) ends inside a value.
+      std::string detail;
+      try {
+        const json unused = json::parse(line);
+      } catch (const json::parse_error& e) {
+        detail = " (at byte " + std::to_string(e.byte) + " of " + std::to_string(line.size()) + ")";
+      }
+      return Status::BadInput(where, "is not valid JSON" + detail,
+                              "every line of a `formloop kb export` file is one JSON object; a line cut short "
+                              "means the file was truncated: export the library again, nothing was imported");
+    }
+    if (!j.is_object()) {
+      return Status::BadInput(where, "is JSON but not an object",
+                              "every line of a `formloop kb export` file is one JSON object; nothing was imported");
+    }
     if (!have_header) {
       if (!j.contains("format") || j["format"] != kExportFormatName) {
         return Status::BadInput(where, std::string("the first line is not a ") + kExportFormatName + " header",

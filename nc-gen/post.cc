@@ -42,8 +42,10 @@ Status CheckTravel(const MachineLimits& limits, const Eigen::Vector3d& tip, cons
       return Status::SafetyLimit(what + ": " + kAxis[a] + " " + FormatFixed(tip[a], 4) + " mm is outside the travel " +
                                  FormatFixed(limits.travel_min_mm[a], 3) + " .. " +
                                  FormatFixed(limits.travel_max_mm[a], 3) +
-                                 " mm; no program was written. Fix: move the work offset or check the part and "
-                                 "machine limits");
+                                 " mm; no program was written. Fix: the program is in Q's coordinates (the CAD "
+                                 "file's frame): place the part within the travel (the face in the machine's set-up "
+                                 "frame), or give the machine's real travel (machine.travel_min_mm/travel_max_mm, "
+                                 "--travel-mm) if these limits are not the machine's");
     }
   }
   return Status::Ok();

@@ -8,10 +8,15 @@
 #include <sstream>
 #include <system_error>
 
+#include <BRepAdaptor_Surface.hxx>
+#include <BRepBndLib.hxx>
 #include <BRepBuilderAPI_NurbsConvert.hxx>
+#include <BRepGProp.hxx>
 #include <BRepTools.hxx>
 #include <BRep_Tool.hxx>
 #include <BinTools.hxx>
+#include <Bnd_Box.hxx>
+#include <GProp_GProps.hxx>
 #include <Geom_BSplineSurface.hxx>
 #include <IFSelect_ReturnStatus.hxx>
 #include <IGESControl_Reader.hxx>
@@ -374,6 +379,44 @@ bool IsCadPath(const std::filesystem::path& path) { return CadFormatFromPath(pat
 
 Result<std::vector<CadFaceInfo>> ListCadFaces(const std::filesystem::path& path) {
   FL_ASSIGN_OR_RETURN(LoadedCad cad, Load(path));
+  // Where each face is and which way it looks, so a face can be chosen without fitting each one.
+  for (std::size_t k = 0; k < cad.faces.size() && k < cad.infos.size(); ++k) {
+    const TopoDS_Face& face = cad.faces[k];
+    CadFaceInfo& info = cad.infos[k];
+    try {
+      Bnd_Box box;
+      BRepBndLib::Add(face, box);
+      if (!box.IsVoid())
+        box.Get(info.box_min_mm[0], info.box_min_mm[1], info.box_min_mm[2], info.box_max_mm[0], info.box_max_mm[1],
+                info.box_max_mm[2]);
+      GProp_GProps props;
+      BRepGProp::SurfaceProperties(face, props);
+      info.area_mm2 = props.Mass();
+      // The normal's z, area-weighted over a 17 x 17 grid of the face's parameter box (its trim not applied),
+      // oriented away from the material as the face is oriented in the file.
+      BRepAdaptor_Surface surface(face);
+      double u1, u2, v1, v2;
+      BRepTools::UVBounds(face, u1, u2, v1, v2);
+      double weighted = 0, weight = 0;
+      constexpr int kGrid = 17;
+      for (int j = 0; j < kGrid; ++j) {
+        for (int i = 0; i < kGrid; ++i) {
+          gp_Pnt p;
+          gp_Vec du, dv;
+          surface.D1(u1 + (u2 - u1) * i / (kGrid - 1), v1 + (v2 - v1) * j / (kGrid - 1), p, du, dv);
+          gp_Vec n = du.Crossed(dv);
+          const double dA = n.Magnitude();
+          if (!(dA > 0)) continue;
+          if (face.Orientation() == TopAbs_REVERSED) n.Reverse();
+          weighted += n.Z();  // = (n_z / |n|) · dA
+          weight += dA;
+        }
+      }
+      if (weight > 0) info.mean_normal_z = weighted / weight;
+    } catch (const Standard_Failure&) {
+      // A face OpenCASCADE cannot measure is still listed; its box, area and normal stay unknown.
+    }
+  }
   return cad.infos;
 }
 

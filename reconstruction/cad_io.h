@@ -34,6 +34,7 @@
 // factor 25.4) is refused, naming the field.
 
 #include <filesystem>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -60,6 +61,12 @@ struct CadFaceInfo {
   int index = 0;             // 0-based, TopExp_Explorer order
   std::string name;          // "" when the file gives none
   std::string surface_type;  // OpenCASCADE type of the underlying surface, e.g. "Geom_Plane"
+  // ListCadFaces only (to choose a face without fitting each): the face's bounding box (mm, from its
+  // triangulation-free BRepBndLib box, so a little larger than the face), its area (mm²) and the mean of
+  // its normal's z over the face (away from the material: +1 faces up, −1 down; NaN when not computed).
+  double box_min_mm[3] = {0, 0, 0}, box_max_mm[3] = {0, 0, 0};
+  double area_mm2 = 0;
+  double mean_normal_z = std::numeric_limits<double>::quiet_NaN();
 };
 
 struct CadFace {

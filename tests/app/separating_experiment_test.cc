@@ -197,13 +197,16 @@ TEST_F(SeparatingExperimentTest, TheNextPartIsProbedWithTheLibrarysTiltedReprobe
   // A run folder whose approach file is not of the JSON plan's points is refused naming the file and row.
   const fs::path copied = dir_ / "copied";
   fs::copy(run2, copied, fs::copy_options::recursive);
-  // The first two data rows (after the header) swapped: row 2 holds the plan's second point.
+  // The first two data rows (after the header) swapped: the first row holds the plan's second point.
   std::ifstream csv_in(copied / "toolpath" / "probing_plan.csv");
   std::vector<std::string> lines;
   for (std::string line; std::getline(csv_in, line);) lines.push_back(line);
   csv_in.close();
-  ASSERT_GE(lines.size(), 3u);
-  std::swap(lines[1], lines[2]);
+  // The header is the first line that is no '#' comment (formloop's marker line comes first).
+  std::size_t header = 0;
+  while (header < lines.size() && !lines[header].empty() && lines[header][0] == '#') ++header;
+  ASSERT_GE(lines.size(), header + 3);
+  std::swap(lines[header + 1], lines[header + 2]);
   std::string csv;
   for (const auto& line : lines) csv += line + "\n";
   ASSERT_TRUE(WriteFileAtomic(copied / "toolpath" / "probing_plan.csv", csv).ok());
@@ -245,12 +248,11 @@ TEST_F(SeparatingExperimentTest, ThePartsReadingsTellTheRadiiApart) {
               d["alias_groups"].dump().c_str());
   for (const auto& g : d["alias_groups"]) {
     const std::string members = g["members"].dump();
-    EXPECT_FALSE(members.find("tool_radius") != std::string::npos &&
-                 members.find("probe_radius") != std::string::npos)
+    EXPECT_FALSE(members.find("tool_radius") != std::string::npos && members.find("probe_radius") != std::string::npos)
         << "the readings split the radii: " << d["alias_groups"].dump();
   }
   const std::map<std::string, std::pair<std::string, double>> truth = {{"tool_radius", {"delta_r_um", 10.0}},
-                                                                      {"probe_radius", {"delta_r_eff_um", 8.0}}};
+                                                                       {"probe_radius", {"delta_r_eff_um", 8.0}}};
   for (const auto& [effect, parameter] : truth) {
     bool named = false;
     for (const auto& c : d["causes"]) {
@@ -305,8 +307,9 @@ TEST_F(SeparatingExperimentTest, ThePartsReadingsTellTheRadiiApart) {
   refused(7, "bad.json", "direct_measurements");
   refused(Json::array({{{"effect", "tool_radius"}, {"parameter", "delta_r_um"}, {"sigma", 1}}}), "bad.json",
           "direct_measurements[0].value");
-  refused(Json::array({{{"effect", "setup_offset"}, {"parameter", "tz_um"}, {"value", 3}, {"sigma", 1}, {"part", "B"}}}),
-          "bad.json", "direct_measurements[0].part");
+  refused(
+      Json::array({{{"effect", "setup_offset"}, {"parameter", "tz_um"}, {"value", 3}, {"sigma", 1}, {"part", "B"}}}),
+      "bad.json", "direct_measurements[0].part");
   Json wrong_sigma = readings;
   wrong_sigma["direct_measurements"][1]["sigma"] = 0;
   ASSERT_TRUE(WriteJsonFile(dir_ / "bad_readings.json", wrong_sigma).ok());

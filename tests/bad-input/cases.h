@@ -522,6 +522,12 @@ inline std::vector<Case> AllCases() {
       C("run_kb_missing", "case library", "run {F}/part.json --kb nokb.sqlite --out r", 2, {"nokb.sqlite"}),
       C("run_kb_not_sqlite", "case library", "run {F}/part.json --kb kb.sqlite --out r", 2, {"kb.sqlite"})
           .File("kb.sqlite", "this is not a database\n"),
+      // A retrieval concept that is not in the taxonomies: refused before the run folder exists (it used to
+      // fail after the surface fit, leaving r.failed).
+      C("run_kb_shape_family_unknown", "part JSON", "run p.json --kb kb.sqlite --out r --no-retain", 2,
+        {"p.json", "shape_family", "sadle"})
+          .File("p.json", PartWith("/shape_family", "sadle"))
+          .Copy("kb.sqlite"),
       // A part record the library holds but a pooled run cannot read (issue 20): refused naming the case and field.
       C("run_kb_part_record_damaged", "case library", "run b.json --kb kb.sqlite --out r --no-report", 2,
         {"kb.sqlite", "case lean-a", "d_radius", "--pool-cases 0"})

@@ -36,6 +36,10 @@ TEST_F(OutputFileTest, RecognisesTheMarkerOfEveryFormat) {
   EXPECT_TRUE(Marked("0 BEGIN PGM FORMLOOP MM\n1 ; formloop nc probe Q.step\n2 ;\n"));  // Heidenhain
   EXPECT_TRUE(Marked("; formloop nc path Q.step\nG71 G90\n"));                          // Sinumerik
   EXPECT_TRUE(Marked("%\r\n(formloop nc post tp.csv)\r\n"));                            // CR LF
+  // The machine side of the link (formloop link program): the comment after the program number.
+  EXPECT_TRUE(Marked("%\nO1000 (FORMLOOP MEASURING PROGRAM 36 POINTS)\n#900=0\n"));
+  EXPECT_FALSE(Marked("%\nO1000 (SHOP PROGRAM)\n(formloopish)\n"));
+  EXPECT_FALSE(Marked("%\nOX (FORMLOOP)\n"));
   // '#'-commented text: CSV, XYZ, probe logs, tool paths, side files.
   EXPECT_TRUE(Marked("# formloop point file\nx,y,z\n1,2,3\n"));
   EXPECT_TRUE(Marked("\xEF\xBB\xBF# formloop probe log: ball centre\nid,x,y,z,ax,ay,az,t\n"));

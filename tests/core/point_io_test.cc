@@ -79,6 +79,11 @@ TEST(PointIoFormatTest, ParseDouble) {
   for (const char* bad : {"", " 1", "1 ", "1x", "1,5", "+", "-", "+-1", "++1", "0x10", "1e400"}) {
     EXPECT_FALSE(ParseDouble(bad, &value)) << "'" << bad << "'";
   }
+  // A number a double cannot hold is told apart from text that is no number (the readers say which).
+  for (const char* huge : {"1e400", "-1e400", "+1e400", "1e-400"}) EXPECT_TRUE(NumberBeyondDoubleRange(huge)) << huge;
+  for (const char* other : {"1.5", "1e300", "abc", "1e400x", "", "+-1e400"}) {
+    EXPECT_FALSE(NumberBeyondDoubleRange(other)) << other;
+  }
 }
 
 TEST(PointIoFormatTest, FormatFixedIgnoresGermanLocale) {

@@ -110,6 +110,24 @@ TEST_F(CadIoTest, ListsFacesWithNamesAndTypes) {
     names.insert(info.name);
   }
   EXPECT_EQ(names, (std::set<std::string>{"face_0", "face_1", "face_2", "face_3", "face_4", "face_5"}));
+  // Each face's box, area and the way it looks (away from the material): the 10 x 20 x 30 box's faces
+  // look along ±x, ±y, ±z, so one looks up, one down and four sideways.
+  double area = 0;
+  std::vector<double> normal_z;
+  for (const CadFaceInfo& info : *faces) {
+    area += info.area_mm2;
+    normal_z.push_back(std::round(info.mean_normal_z * 1e9) / 1e9);
+    for (int a = 0; a < 3; ++a) {
+      EXPECT_GE(info.box_min_mm[a], -1e-3);
+      EXPECT_LE(info.box_max_mm[a], (a == 0 ? 10 : a == 1 ? 20 : 30) + 1e-3);
+    }
+    if (normal_z.back() == 1) {
+      EXPECT_NEAR(info.box_min_mm[2], 30, 1e-3);
+    }
+  }
+  EXPECT_NEAR(area, 2 * (10 * 20 + 20 * 30 + 10 * 30), 1e-6);
+  std::sort(normal_z.begin(), normal_z.end());
+  EXPECT_EQ(normal_z, (std::vector<double>{-1, 0, 0, 0, 0, 1}));
 }
 
 TEST_F(CadIoTest, ChoosesAFaceByNameOrIndexAndConvertsPlanes) {
