@@ -204,14 +204,7 @@ Status PlanAndPost(const PathArgs& input) {
   log::Info("nc path: {} CL points in {} passes at raster angle {} deg{}{}", path.points.size(), path.passes,
             args.path.raster_angle_deg, args.out.empty() ? "" : ", " + args.machine.dialect + " program -> " + args.out,
             args.toolpath.empty() ? "" : ", tool path -> " + args.toolpath);
-  if (path.lifted_points > 0) {
-    log::Warn(
-        "nc path: Q is concave below the ball radius at {} CL points: {} CL points are lifted out of Q (by up to "
-        "{:.3f} mm) and the region they cover (x {:.2f} to {:.2f}, y {:.2f} to {:.2f} mm) is left uncut (see "
-        "--report)",
-        path.gouge_risk_points, path.lifted_points, path.max_lift_mm, path.lifted_box_min.x(), path.lifted_box_max.x(),
-        path.lifted_box_min.y(), path.lifted_box_max.y());
-  }
+  if (path.lifted_points > 0) log::Warn("nc path: {} (see --report)", path.UncutRegionText());
   return Status::Ok();
 }
 

@@ -79,14 +79,7 @@ Status RunStages(const PartSpec& given_part, const RunOptions& options, RunFolde
   summary->uncut_min = nominal.lifted_box_min;
   summary->uncut_max = nominal.lifted_box_max;
   summary->max_lift_mm = nominal.max_lift_mm;
-  if (nominal.lifted_points > 0) {
-    log::Warn(
-        "[nc] Q is concave below the ball radius ({} mm) at {} CL points: {} CL points are lifted out of Q (by up to "
-        "{:.3f} mm), and the region they cover (x {:.2f} to {:.2f}, y {:.2f} to {:.2f} mm) is left uncut; a "
-        "smaller ball cuts it (toolpath/toolpath.json)",
-        plan.tool.radius_mm, nominal.gouge_risk_points, nominal.lifted_points, nominal.max_lift_mm,
-        nominal.lifted_box_min.x(), nominal.lifted_box_max.x(), nominal.lifted_box_min.y(), nominal.lifted_box_max.y());
-  }
+  if (nominal.lifted_points > 0) log::Warn("[nc] {} (toolpath/toolpath.json)", nominal.UncutRegionText());
 
   FL_RETURN_IF_ERROR(folder.Begin("6/9: precompensation"));
   FL_ASSIGN_OR_RETURN(stages::FirstCut cut,

@@ -18,6 +18,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include <fmt/format.h>
 #include <Eigen/Cholesky>
 #include <Eigen/Geometry>
 #include <Eigen/LU>
@@ -462,6 +463,14 @@ double MinPlaneStep(const std::vector<Section>& pieces) {
   double step = 1e300;
   for (const Section& p : pieces) step = std::min(step, p.min_plane_step);
   return step;
+}
+
+// True when a plane only touches Q (at a corner of its outline) or misses it: no pass runs across Q there.
+bool OnlyTouches(const std::vector<Section>& pieces) {
+  for (const Section& p : pieces) {
+    if (p.uv.size() >= 2 && p.arc.back() > 1e-9) return false;
+  }
+  return true;
 }
 
 // A lead at a pass end: a quarter circle in the plane of the path direction t (away from the pass) and
@@ -948,6 +957,13 @@ Result<Toolpath> PlanRaster(const recon::BSplineSurface& q, const ToolpathOption
       c_next = std::min(c_max, c + step);
       FL_ASSIGN_OR_RETURN(next, TraceSection(surface, dom, frame, c_next, r, h));
     }
+    // A face narrower than a step-over across the planes whose first and last planes only touch it (at
+    // corners of its outline): a pass half-way between them, else nothing of it would be cut.
+    if (c_next >= c_max && OnlyTouches(sections) && OnlyTouches(next) && c_max - c > 1e-9) {
+      c_next = 0.5 * (c + c_max);
+      step = c_next - c;
+      FL_ASSIGN_OR_RETURN(next, TraceSection(surface, dom, frame, c_next, r, h));
+    }
     path.min_step_over_mm = std::min(path.min_step_over_mm, step);
     path.max_step_over_mm = std::max(path.max_step_over_mm, step);
     c = (c_next >= c_max - 1e-9) ? c_max : c_next;
@@ -1000,8 +1016,26 @@ Result<Toolpath> PlanRaster(const recon::BSplineSurface& q, const ToolpathOption
   }
   path.passes = pass;
   if (path.points.empty()) {
-    return domain.trimmed() ? Status::Failed("PlanRaster: no part of the trimmed face is reachable by the ball")
-                            : Status::Internal("PlanRaster: no section plane met Q");
+    if (!domain.trimmed() && !domain.has_neighbours()) return Status::Internal("PlanRaster: no section plane met Q");
+    // Every sample of every section was clipped: outside the trim, or where the ball would touch a
+    // neighbouring face (a fillet or a narrow face between walls narrower than the ball).
+    Eigen::AlignedBox3d box;
+    for (int j = 0; j <= 16; ++j) {
+      for (int i = 0; i <= 16; ++i)
+        box.extend(surface.Point(dom.u_min + dom.u_span() * i / 16, dom.v_min + dom.v_span() * j / 16));
+    }
+    const Eigen::Vector3d size = box.sizes();
+    return Status::BadInput(
+        Where{.field = "tool.radius_mm"},
+        fmt::format("a ball of radius {:g} mm reaches no part of the face ({:.3g} x {:.3g} x {:.3g} mm){}", r, size.x(),
+                    size.y(), size.z(),
+                    path.neighbour_blocked_samples > 0
+                        ? fmt::format(": at each of the {} samples inside it the ball would touch a neighbouring face",
+                                      path.neighbour_blocked_samples)
+                        : std::string(": no sample of the raster lies inside the trim")),
+        std::string(
+            "choose a smaller ball (tool.radius_mm, --tool-radius-mm) or machine this face from another set-up") +
+            (size.maxCoeff() < 1.0 ? "; a face this small may also mean the CAD file's unit is not what it says" : ""));
   }
   if (path.min_step_over_mm > path.max_step_over_mm) path.min_step_over_mm = path.max_step_over_mm = 0;
   SummariseLifted(&path);
@@ -1043,6 +1077,16 @@ void UpdateCutterLocations(Toolpath* path) {
   path->total_time_s = length / feed_mm_per_s;
   path->safe_z_mm = max_tip_z + path->options.clearance_mm;
   if (std::isfinite(path->min_safe_z_mm)) path->safe_z_mm = std::max(path->safe_z_mm, path->min_safe_z_mm);
+}
+
+std::string Toolpath::UncutRegionText() const {
+  if (lifted_points == 0) return "";
+  return fmt::format(
+      "Q is concave below the ball radius ({} mm) at {} CL points: {} CL points are lifted out of Q (by up to "
+      "{:.3f} mm), and the region they cover (x {:.2f} to {:.2f}, y {:.2f} to {:.2f} mm) is left uncut; a smaller "
+      "ball cuts it",
+      options.tool.radius_mm, gouge_risk_points, lifted_points, max_lift_mm, lifted_box_min.x(), lifted_box_max.x(),
+      lifted_box_min.y(), lifted_box_max.y());
 }
 
 nlohmann::json Toolpath::ReportJson() const {

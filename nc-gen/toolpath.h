@@ -125,6 +125,9 @@ struct Toolpath {
   int leads_along_normal = 0, leads_vertical = 0;
   double min_safe_z_mm = std::numeric_limits<double>::quiet_NaN();
   nlohmann::json ReportJson() const;
+  // The region left uncut, in words for a warning ("" when nothing is lifted): the gouge-risk and lifted
+  // counts, the largest lift, the x/y range of the lifted CC points and that a smaller ball cuts it.
+  std::string UncutRegionText() const;
 };
 
 // A ball nearer than r − this to a neighbouring face counts as touching it (mm).

@@ -13,8 +13,12 @@
 
 #include <unistd.h>
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <Geom_BSplineSurface.hxx>
+#include <TColStd_Array1OfInteger.hxx>
+#include <TColStd_Array1OfReal.hxx>
+#include <TColgp_Array2OfPnt.hxx>
 #include <gp_Pnt.hxx>
 
 #include "nc-gen/cutter_locations.h"
@@ -86,6 +90,7 @@ TEST_P(ReferenceSurfaceToolpathTest, ScallopWithinTargetPlusChordAndNoGouge) {
   EXPECT_GT(c.max_scallop_um, 0.5 * o.scallop_um) << "the windows must catch scallop peaks";
   EXPECT_EQ(path->gouge_risk_points, 0);
   EXPECT_EQ(path->lifted_points, 0);
+  EXPECT_EQ(path->UncutRegionText(), "");
   // Per plane the step-over follows the curvature across it (egg_box's bumps repeat along every plane,
   // so its per-plane minimum hardly varies; franke's and the sphere cap's do).
   if (GetParam() == "sphere_cap" || GetParam() == "franke") {
@@ -153,6 +158,13 @@ TEST(ToolpathGougeTest, ConcaveBowlBelowTheBallRadiusIsLiftedFlaggedAndNotGouged
   EXPECT_LE(c.max_gouge_um, 1.0);
   const nlohmann::json j = path->ReportJson();
   EXPECT_EQ(j.at("lifted_points").get<int>(), path->lifted_points);
+  // The warning `formloop run` and `nc path` give: the counts, the ball and the box of the lifted region.
+  const std::string uncut = path->UncutRegionText();
+  for (const std::string& part :
+       {std::to_string(path->lifted_points) + " CL points are lifted", std::string("ball radius (3 mm)"),
+        fmt::format("x {:.2f} to", path->lifted_box_min.x()), std::string("left uncut")}) {
+    EXPECT_NE(uncut.find(part), std::string::npos) << part << " in: " << uncut;
+  }
 
   // The tool-path file keeps every CL point exactly and rebuilds the lifted region from lift_mm.
   std::ostringstream name;
@@ -396,6 +408,38 @@ TEST(ToolpathFacingTest, ANextPartThatCannotBePlannedIsSkippedWithTheReason) {
   ASSERT_TRUE(fine.ok());
   EXPECT_FALSE(fine->empty());
   EXPECT_TRUE(skipped.empty()) << skipped;
+}
+
+// A face narrower than a step-over across the planes, whose outline meets the first and the last plane
+// only at corners (a flat parallelogram 10 mm long, 0.3 mm across the planes; the step-over is 0.35
+// mm): one pass half-way between them. Before, the first and last planes touched a corner each, two
+// one-point passes, and nothing between them was cut.
+TEST(ToolpathEdgeTest, AFaceNarrowerThanAStepOverGetsAPassAcrossIt) {
+  TColgp_Array2OfPnt poles(1, 2, 1, 2);
+  poles(1, 1) = gp_Pnt(0, 0, 0);
+  poles(2, 1) = gp_Pnt(10, 0.1, 0);
+  poles(1, 2) = gp_Pnt(0, 0.2, 0);
+  poles(2, 2) = gp_Pnt(10, 0.3, 0);
+  TColStd_Array1OfReal knots(1, 2);
+  knots(1) = 0;
+  knots(2) = 1;
+  TColStd_Array1OfInteger mults(1, 2);
+  mults(1) = mults(2) = 2;
+  const recon::BSplineSurface q(new Geom_BSplineSurface(poles, knots, knots, mults, mults, 1, 1));
+  const ToolpathOptions o = Options();
+  const auto path = PlanRaster(q, o);
+  ASSERT_TRUE(path.ok()) << path.status().ToString();
+  int cuts = 0;
+  for (const ClPoint& cl : path->points) cuts += cl.kind == ClKind::kCut;
+  EXPECT_GT(cuts, 20);
+  // Every point of the strip within the scallop target of what the ball leaves (0.15 mm from the pass at
+  // the far corners: 0.15² / (2 · 3) mm = 3.75 µm).
+  const CheckResult c = Check(q, *path, 1, 1.0, 1.0, 0.005, 0.02, 0.0);
+  std::printf("[checker] strip 10 x 0.3 mm: %d passes, %d cut points, max scallop %.2f um, max gouge %.3f um\n",
+              path->passes, cuts, c.max_scallop_um, c.max_gouge_um);
+  EXPECT_EQ(c.uncovered, 0);
+  EXPECT_LE(c.max_scallop_um, o.scallop_um + o.chord_tolerance_um);
+  EXPECT_LE(c.max_gouge_um, 1.0);
 }
 
 }  // namespace

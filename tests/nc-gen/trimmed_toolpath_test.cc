@@ -14,8 +14,10 @@
 #include <filesystem>
 
 #include <gtest/gtest.h>
+#include <BRepBuilderAPI_MakeFace.hxx>
 #include <BRepTopAdaptor_FClass2d.hxx>
 #include <STEPControl_Reader.hxx>
+#include <gp_Pln.hxx>
 
 #include "nc-gen/toolpath.h"
 #include "nc-gen/toolpath_io.h"
@@ -191,6 +193,34 @@ TEST_F(TrimmedToolpathTest, ABallTooLargeForTheGapStopsShortOfThePin) {
   std::printf("[measured] r = 5 mm: %d samples blocked by the pin, nearest ball %.4f mm, leads changed %d + %d\n",
               path->neighbour_blocked_samples, nearest, path->leads_along_normal, path->leads_vertical);
   EXPECT_GE(nearest, 5.0 - 1e-3);
+}
+
+// A face the ball reaches nowhere (a ceiling at z = 8 mm over a face from z = 0 to 5.7, nearer than the ball's
+// diameter everywhere) is refused naming the tool radius and the face's size; before, the planner
+// stopped with "internal error: no section plane met Q" when the blocking faces were not a trim (public
+// CAD files: a 0.3 mm fillet of OCCT's linkrods.step with a 0.5 mm ball).
+TEST_F(TrimmedToolpathTest, AFaceTheBallReachesNowhereIsRefusedNamingTheToolRadius) {
+  const fs::path step = dir_ / "under_a_ceiling.step";
+  const TopoDS_Face ceiling = BRepBuilderAPI_MakeFace(gp_Pln(gp_Pnt(0, 0, 8), gp_Dir(0, 0, -1)), -60, 60, -60, 60);
+  ASSERT_TRUE(formloop::testing::WriteStepFaces(step, {formloop::testing::MakeHoledFace(), ceiling}, {"top", "lid"}));
+  const auto face = recon::ReadCadFace(step, recon::CadFaceSelector{.name = "top"});
+  ASSERT_TRUE(face.ok()) << face.status().ToString();
+  ToolpathOptions o = Options();
+  o.tool.radius_mm = 5;
+  o.scallop_um = 50;
+  const auto path = PlanRaster(face->surface, o);
+  ASSERT_FALSE(path.ok());
+  EXPECT_EQ(path.status().code(), StatusCode::kBadInput) << path.status().ToString();
+  for (const char* text :
+       {"tool.radius_mm", "a ball of radius 5 mm reaches no part of the face", "neighbouring face", "smaller ball"}) {
+    EXPECT_NE(path.status().ToString().find(text), std::string::npos) << text << ": " << path.status().ToString();
+  }
+  // The same face alone is planned.
+  const fs::path alone = dir_ / "alone.step";
+  ASSERT_TRUE(formloop::testing::WriteStepFaces(alone, {formloop::testing::MakeHoledFace()}, {"top"}));
+  const auto free_face = recon::ReadCadFace(alone, recon::CadFaceSelector{.name = "top"});
+  ASSERT_TRUE(free_face.ok());
+  EXPECT_TRUE(PlanRaster(free_face->surface, o).ok());
 }
 
 }  // namespace
