@@ -249,7 +249,9 @@ Status CheckRunInputs(const PartSpec& part, const RunOptions& options) {
     if (!linuxcnc && (spec != "virtual" || !part.effects)) {
       const std::string profile = spec == "virtual" ? part.machine_name : spec.substr(8);
       const Status read = ReadMachineProfile(profile, data_dir).status();
-      if (spec == "virtual" && read.code() == StatusCode::kBadInput &&
+      // (A machine.name that is a path to a .json file and missing gets ReadMachineProfile's "not found".)
+      const bool a_name = std::filesystem::path(profile).extension() != ".json";
+      if (spec == "virtual" && a_name && read.code() == StatusCode::kBadInput &&
           !std::filesystem::exists(data_dir / "machines" / (profile + ".json"))) {
         // The part names no effects and its machine has no profile: say which field and what to give.
         std::string names;

@@ -42,31 +42,37 @@ std::string FormatExact(double value) {
   return std::string(buffer, result.ptr);
 }
 
-bool ParseDouble(std::string_view text, double* value) {
+namespace {
+
+enum class Parsed { kNumber, kOutOfRange, kNotANumber };
+
+// The whole of `text` as a double in ParseDouble's syntax (std::from_chars, with one leading '+').
+Parsed ParseWhole(std::string_view text, double* value) {
   const char* first = text.data();
   const char* last = text.data() + text.size();
   if (first != last && *first == '+') {
     ++first;
-    if (first != last && (*first == '-' || *first == '+')) return false;
+    if (first != last && (*first == '-' || *first == '+')) return Parsed::kNotANumber;
   }
-  if (first == last) return false;
+  if (first == last) return Parsed::kNotANumber;
+  const auto [ptr, ec] = std::from_chars(first, last, *value);
+  if (ptr != last) return Parsed::kNotANumber;
+  if (ec == std::errc::result_out_of_range) return Parsed::kOutOfRange;
+  return ec == std::errc() ? Parsed::kNumber : Parsed::kNotANumber;
+}
+
+}  // namespace
+
+bool ParseDouble(std::string_view text, double* value) {
   double parsed = 0;
-  const auto [ptr, ec] = std::from_chars(first, last, parsed);
-  if (ec != std::errc() || ptr != last) return false;
+  if (ParseWhole(text, &parsed) != Parsed::kNumber) return false;
   *value = parsed;
   return true;
 }
 
 bool NumberBeyondDoubleRange(std::string_view text) {
-  const char* first = text.data();
-  const char* last = text.data() + text.size();
-  if (first != last && *first == '+') {
-    ++first;
-    if (first != last && (*first == '-' || *first == '+')) return false;
-  }
   double parsed = 0;
-  const auto [ptr, ec] = std::from_chars(first, last, parsed);
-  return ec == std::errc::result_out_of_range && ptr == last;
+  return ParseWhole(text, &parsed) == Parsed::kOutOfRange;
 }
 
 }  // namespace formloop

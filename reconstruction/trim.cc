@@ -3,11 +3,21 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <list>
+#include <mutex>
 
 #include <Eigen/LU>
 
+// CGAL's AABB tree (header-only, in doubles: no exact kernel, so no -frounding-math) bounds the distance
+// to a neighbouring face from its triangulation before the exact distance is asked of OpenCASCADE.
+#include <CGAL/AABB_traits.h>
+#include <CGAL/AABB_tree.h>
+#include <CGAL/AABB_triangle_primitive.h>
+#include <CGAL/Simple_cartesian.h>
+
 #include <BRepAdaptor_Curve.hxx>
 #include <BRepBndLib.hxx>
+#include <BRepBuilderAPI_Copy.hxx>
 #include <BRepBuilderAPI_MakeEdge.hxx>
 #include <BRepBuilderAPI_MakeFace.hxx>
 #include <BRepBuilderAPI_MakeVertex.hxx>
@@ -15,6 +25,7 @@
 #include <BRepExtrema_DistShapeShape.hxx>
 #include <BRepGProp.hxx>
 #include <BRepLib.hxx>
+#include <BRepMesh_IncrementalMesh.hxx>
 #include <BRepTools.hxx>
 #include <BRepTools_WireExplorer.hxx>
 #include <BRepTopAdaptor_FClass2d.hxx>
@@ -25,10 +36,12 @@
 #include <Geom2dAPI_Interpolate.hxx>
 #include <Geom2d_BSplineCurve.hxx>
 #include <Geom2d_Curve.hxx>
+#include <Poly_Triangulation.hxx>
 #include <ShapeFix_Face.hxx>
 #include <Standard_Failure.hxx>
 #include <TColgp_HArray1OfPnt2d.hxx>
 #include <TopExp_Explorer.hxx>
+#include <TopLoc_Location.hxx>
 #include <TopoDS.hxx>
 #include <TopoDS_Edge.hxx>
 #include <TopoDS_Wire.hxx>
@@ -40,11 +53,33 @@
 
 namespace formloop::recon {
 
+namespace {
+
+using MeshKernel = CGAL::Simple_cartesian<double>;
+using MeshTriangles = std::list<MeshKernel::Triangle_3>;
+using MeshTree =
+    CGAL::AABB_tree<CGAL::AABB_traits<MeshKernel, CGAL::AABB_triangle_primitive<MeshKernel, MeshTriangles::iterator>>>;
+
+// A neighbouring face's triangulation in an AABB tree, and how far the face may lie from it (`slack`,
+// mm): the distance to the mesh less the slack is a lower bound of the distance to the face. Without a
+// usable triangulation `tree` is null and every query is exact.
+struct NeighbourMesh {
+  MeshTriangles triangles;
+  std::unique_ptr<MeshTree> tree;
+  double slack = 0;
+};
+
+}  // namespace
+
 struct Trim::Impl {
   std::unique_ptr<BRepTopAdaptor_FClass2d> classifier;
   std::vector<Bnd_Box> neighbour_boxes;
   // Loop polylines as segments (start, end) for the edge distance.
   std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> segments;
+  // The neighbours' triangulations, built on the first distance query (a face only read or fitted never
+  // meshes them); one per neighbour.
+  mutable std::once_flag meshed;
+  mutable std::vector<NeighbourMesh> meshes;
 };
 
 namespace {
@@ -198,15 +233,63 @@ double Trim::EdgeDistanceMm(const Eigen::Vector3d& p) const {
   return best;
 }
 
+namespace {
+
+// Triangulates `face` (a copy: the caller's shape keeps its own triangulation) with a linear deflection
+// of a thousandth of its box's diagonal (1 µm to 1 mm) and indexes the triangles. The slack is twice the
+// deflection plus 1 µm: BRepMesh aims at the deflection, it does not prove it, hence the factor.
+NeighbourMesh MeshOf(const TopoDS_Face& face, const Bnd_Box& box) {
+  NeighbourMesh mesh;
+  try {
+    const double diagonal = box.IsVoid() ? 0.0 : std::sqrt(box.SquareExtent());
+    const double deflection = std::clamp(1e-3 * diagonal, 1e-3, 1.0);
+    const TopoDS_Face copy = TopoDS::Face(BRepBuilderAPI_Copy(face, Standard_True, Standard_False).Shape());
+    BRepMesh_IncrementalMesh mesher(copy, deflection, Standard_False, 0.5, Standard_False);
+    TopLoc_Location location;
+    const Handle(Poly_Triangulation) triangulation = BRep_Tool::Triangulation(copy, location);
+    if (!mesher.IsDone() || triangulation.IsNull() || triangulation->NbTriangles() == 0) return mesh;
+    const gp_Trsf to_world = location.Transformation();
+    const auto node = [&](int i) {
+      const gp_Pnt n = triangulation->Node(i).Transformed(to_world);
+      return MeshKernel::Point_3(n.X(), n.Y(), n.Z());
+    };
+    for (int t = 1; t <= triangulation->NbTriangles(); ++t) {
+      int a = 0, b = 0, c = 0;
+      triangulation->Triangle(t).Get(a, b, c);
+      const MeshKernel::Triangle_3 triangle(node(a), node(b), node(c));
+      if (!triangle.is_degenerate()) mesh.triangles.push_back(triangle);
+    }
+    if (mesh.triangles.empty()) return mesh;
+    mesh.tree = std::make_unique<MeshTree>(mesh.triangles.begin(), mesh.triangles.end());
+    mesh.tree->accelerate_distance_queries();
+    mesh.slack = 2 * deflection + 1e-3;
+  } catch (const Standard_Failure&) {
+    mesh.tree.reset();  // exact queries only
+  }
+  return mesh;
+}
+
+}  // namespace
+
 double Trim::NeighbourDistanceMm(const Eigen::Vector3d& p, double reach) const {
   double best = reach;
   if (neighbours_.empty()) return best;
+  std::call_once(impl_->meshed, [&] {
+    for (std::size_t k = 0; k < neighbours_.size(); ++k)
+      impl_->meshes.push_back(MeshOf(neighbours_[k], impl_->neighbour_boxes[k]));
+  });
   const gp_Pnt point(p.x(), p.y(), p.z());
   TopoDS_Vertex vertex;
   for (std::size_t k = 0; k < neighbours_.size(); ++k) {
     Bnd_Box box = impl_->neighbour_boxes[k];
     box.Enlarge(best);
     if (box.IsOut(point)) continue;
+    // Farther from the triangulation than the slack beyond `best`: the face is too (no exact query).
+    const NeighbourMesh& mesh = impl_->meshes[k];
+    if (mesh.tree != nullptr &&
+        std::sqrt(mesh.tree->squared_distance(MeshKernel::Point_3(p.x(), p.y(), p.z()))) - mesh.slack >= best) {
+      continue;
+    }
     if (vertex.IsNull()) vertex = BRepBuilderAPI_MakeVertex(point).Vertex();
     try {
       BRepExtrema_DistShapeShape distance(vertex, neighbours_[k]);

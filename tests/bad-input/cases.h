@@ -397,6 +397,16 @@ inline std::vector<Case> AllCases() {
                   part["machine"].erase("effects");
                   return part.dump(2) + "\n";
                 }()),
+      // ... and a machine.name that is a path to a profile file that is not there: that file named.
+      C("part_machine_profile_path_missing", "part JSON", "run p.json --out r", 2,
+        {"nowhere/mill.json", "machine profile not found"})
+          .File("p.json",
+                [] {
+                  nlohmann::json part = nlohmann::json::parse(LeanPart());
+                  part["machine"].erase("effects");
+                  part["machine"]["name"] = "nowhere/mill.json";
+                  return part.dump(2) + "\n";
+                }()),
       // A reader past the time limit (--cad-timeout-s; 1 us expires before any reader answers) and a limit
       // that is no number of seconds.
       C("step_reader_time_limit_fit", "STEP/IGES", "--cad-timeout-s 0.000001 fit c.step --out q.step", 2,

@@ -157,6 +157,10 @@ TEST_F(TrimTest, EdgeAndNeighbourDistancesAgreeWithIndependentOnes) {
     const double to_pin = std::abs(HoledDomain::PinAxisDistance(x, y) - HoledDomain::kPinR);
     EXPECT_NEAR(trim.NeighbourDistanceMm(above, 1e9), to_pin, 1e-6) << x << " " << y;
     EXPECT_EQ(trim.NeighbourDistanceMm(above, 0.5 * to_pin), 0.5 * to_pin) << "capped at the reach asked for";
+    // A reach just beyond the pin: its exact distance. The bound from the pin's triangulation (a polygon
+    // inside the cylinder, up to its deflection nearer the axis) must not skip the exact query there.
+    EXPECT_NEAR(trim.NeighbourDistanceMm(above, to_pin + 1e-4), to_pin, 1e-6) << x << " " << y;
+    EXPECT_EQ(trim.NeighbourDistanceMm(above, to_pin - 1e-4), to_pin - 1e-4) << x << " " << y;
   }
   // Sampling the exact loops every ~0.007 mm leaves up to ~0.0035 mm between samples.
   std::printf("[measured] edge distance: worst difference from the exact-loop reference %.2e mm\n", worst);
