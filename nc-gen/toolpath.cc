@@ -392,6 +392,13 @@ Section PieceGeometry(const MemoSurface& q, const RasterFrame& f, double c, std:
       const Eigen::Vector2d ae = param(m_t / m_t_norm);
       const double kappa_across = NormalCurvature(d, ae.x(), ae.y());
       sec.min_plane_step = std::min(sec.min_plane_step, m_t_norm * StepOver(h, r, kappa_across));
+    } else {
+      // Q is tangent to the plane here (its normal along m: a silhouette, where the planes start or end on
+      // a face that turns vertical): a plane a little further crosses Q far from here, so the next one
+      // comes a thousandth of a flat step-over on, and the planes after it take their own steps. Without
+      // this such a point set no bound, and the next plane went as far as the planes allowed (OCCT
+      // hammer.iges face 9, 2,989 mm across: the last one, two one-point passes, exit 0).
+      sec.min_plane_step = std::min(sec.min_plane_step, 1e-3 * StepOver(h, r, 0.0));
     }
     const Eigen::Vector3d centre = d.p + r * normal;
     sec.arc.push_back(sec.arc.empty() ? 0.0 : sec.arc.back() + (centre - previous_centre).norm());
@@ -471,6 +478,47 @@ bool OnlyTouches(const std::vector<Section>& pieces) {
     if (p.uv.size() >= 2 && p.arc.back() > 1e-9) return false;
   }
   return true;
+}
+
+// True when the passes meet an edge of Q's parameter box at a slant (its xy direction neither along d
+// nor along m, by more than 0.06°, anywhere on it). Ends of neighbouring passes on such an edge are
+// farther apart than the step-over, and on one side of each pass the foot of a point on the edge falls
+// beyond the pass's end: the edge is left with up to twice the scallop target (a 5 µm target at 45°:
+// 11 µm measured on the sphere cap), and the first and last planes only touch corners.
+bool SlantedEdges(const MemoSurface& q, const recon::ParamDomain& dom, const RasterFrame& f) {
+  constexpr int kSamples = 32;
+  for (const auto& edge : DomainEdges(dom)) {
+    Eigen::Vector3d previous = q.Point(edge[0].x(), edge[0].y());
+    for (int i = 1; i <= kSamples; ++i) {
+      const Eigen::Vector2d uv = edge[0] + (static_cast<double>(i) / kSamples) * (edge[1] - edge[0]);
+      const Eigen::Vector3d p = q.Point(uv.x(), uv.y());
+      const Eigen::Vector3d step = p - previous;
+      previous = p;
+      const double length = step.head<2>().norm();
+      if (!(length > 1e-12)) continue;
+      if (std::min(std::abs(step.dot(f.d)), std::abs(step.dot(f.m))) > 1e-3 * length) return true;
+    }
+  }
+  return false;
+}
+
+// The boundary of Q's parameter box as one closed loop of (u, v) samples, about 0.05 mm apart (at
+// least 64 and at most 20,000 per edge), from (u_min, v_min) on; the start is not repeated at the end.
+std::vector<Eigen::Vector2d> BoxLoop(const MemoSurface& q, const recon::ParamDomain& dom) {
+  std::vector<Eigen::Vector2d> loop;
+  for (const auto& edge : DomainEdges(dom)) {
+    double length = 0;
+    Eigen::Vector3d previous = q.Point(edge[0].x(), edge[0].y());
+    for (int i = 1; i <= 64; ++i) {
+      const Eigen::Vector2d uv = edge[0] + (i / 64.0) * (edge[1] - edge[0]);
+      const Eigen::Vector3d p = q.Point(uv.x(), uv.y());
+      length += (p - previous).norm();
+      previous = p;
+    }
+    const int n = std::clamp(static_cast<int>(std::ceil(length / 0.05)), 64, 20000);
+    for (int i = 0; i < n; ++i) loop.push_back(edge[0] + (static_cast<double>(i) / n) * (edge[1] - edge[0]));
+  }
+  return loop;
 }
 
 // A lead at a pass end: a quarter circle in the plane of the path direction t (away from the pass) and
@@ -948,8 +996,9 @@ Result<Toolpath> PlanRaster(const recon::BSplineSurface& q, const ToolpathOption
       FL_RETURN_IF_ERROR(finish_pass(std::move(cut), reversed ? Eigen::Vector3d(-frame.d) : frame.d, at_risk));
     }
     if (c >= c_max) break;
-    // Across the passes: the smallest plane spacing that keeps the scallop on this plane and the next.
-    double step = std::min(MinPlaneStep(sections), c_max - c + 1.0);
+    // Across the passes: the smallest plane spacing that keeps the scallop on this plane and the next,
+    // never more than the widest step-over anywhere (a section whose points set no bound).
+    double step = std::min({MinPlaneStep(sections), c_max - c + 1.0, StepOver(h, r, -1e300)});
     double c_next = std::min(c_max, c + step);
     FL_ASSIGN_OR_RETURN(std::vector<Section> next, TraceSection(surface, dom, frame, c_next, r, h));
     if (MinPlaneStep(next) < step) {
@@ -970,48 +1019,54 @@ Result<Toolpath> PlanRaster(const recon::BSplineSurface& q, const ToolpathOption
     sections = std::move(next);
   }
 
-  // Contour passes along the trimming loops (outer first, then the holes), split where the ball would
+  // Contour passes along the trimming loops (outer first, then the holes), or, on an untrimmed Q whose
+  // edges the passes meet at a slant, along the boundary of its parameter box; split where the ball would
   // reach a neighbouring face.
+  std::vector<std::vector<Eigen::Vector2d>> contours;
   if (domain.trimmed()) {
-    for (const recon::TrimLoop& loop : domain.trim()->loops()) {
-      const std::size_t n = loop.uv.size();
-      std::vector<char> usable(n);
-      std::size_t first_blocked = n;
-      for (std::size_t i = 0; i < n; ++i) {
-        const recon::SurfaceDerivatives d = surface.Derivatives(std::clamp(loop.uv[i].x(), dom.u_min, dom.u_max),
-                                                                std::clamp(loop.uv[i].y(), dom.v_min, dom.v_max));
-        usable[i] = domain.BallClear(d.p + r * recon::NormalFromDerivatives(d)) ? 1 : 0;
-        if (!usable[i] && first_blocked == n) first_blocked = i;
-      }
-      std::vector<std::vector<Eigen::Vector2d>> runs;
-      if (first_blocked == n) {
-        std::vector<Eigen::Vector2d> closed(loop.uv.begin(), loop.uv.end());
-        closed.push_back(loop.uv.front());  // around and back to the start
-        runs.push_back(std::move(closed));
-      } else {
-        std::vector<Eigen::Vector2d> run;
-        for (std::size_t k = 1; k <= n; ++k) {  // from just after a blocked sample, once around
-          const std::size_t i = (first_blocked + k) % n;
-          if (usable[i]) {
-            run.push_back(loop.uv[i]);
-          } else if (!run.empty()) {
-            runs.push_back(std::move(run));
-            run.clear();
-          }
+    for (const recon::TrimLoop& loop : domain.trim()->loops()) contours.push_back(loop.uv);
+  } else if (SlantedEdges(surface, dom, frame)) {
+    contours.push_back(BoxLoop(surface, dom));
+    path.boundary_contour = true;
+  }
+  for (const std::vector<Eigen::Vector2d>& loop : contours) {
+    const std::size_t n = loop.size();
+    std::vector<char> usable(n);
+    std::size_t first_blocked = n;
+    for (std::size_t i = 0; i < n; ++i) {
+      const recon::SurfaceDerivatives d = surface.Derivatives(std::clamp(loop[i].x(), dom.u_min, dom.u_max),
+                                                              std::clamp(loop[i].y(), dom.v_min, dom.v_max));
+      usable[i] = domain.BallClear(d.p + r * recon::NormalFromDerivatives(d)) ? 1 : 0;
+      if (!usable[i] && first_blocked == n) first_blocked = i;
+    }
+    std::vector<std::vector<Eigen::Vector2d>> runs;
+    if (first_blocked == n) {
+      std::vector<Eigen::Vector2d> closed(loop.begin(), loop.end());
+      closed.push_back(loop.front());  // around and back to the start
+      runs.push_back(std::move(closed));
+    } else {
+      std::vector<Eigen::Vector2d> run;
+      for (std::size_t k = 1; k <= n; ++k) {  // from just after a blocked sample, once around
+        const std::size_t i = (first_blocked + k) % n;
+        if (usable[i]) {
+          run.push_back(loop[i]);
+        } else if (!run.empty()) {
+          runs.push_back(std::move(run));
+          run.clear();
         }
-        if (!run.empty()) runs.push_back(std::move(run));
       }
-      for (const std::vector<Eigen::Vector2d>& run : runs) {
-        std::vector<Eigen::Vector2d> uv = ThinContour(surface, run, r, chord, options.max_point_spacing_mm);
-        for (Eigen::Vector2d& p : uv) {
-          p = Eigen::Vector2d(std::clamp(p.x(), dom.u_min, dom.u_max), std::clamp(p.y(), dom.v_min, dom.v_max));
-        }
-        const bool at_risk = near_concave(uv);
-        std::vector<ClPoint> cut;
-        for (const Eigen::Vector2d& p : uv) cut.push_back(cut_point(p.x(), p.y(), at_risk));
-        FL_RETURN_IF_ERROR(finish_pass(std::move(cut), frame.d, at_risk));
-        ++path.contour_passes;
+      if (!run.empty()) runs.push_back(std::move(run));
+    }
+    for (const std::vector<Eigen::Vector2d>& run : runs) {
+      std::vector<Eigen::Vector2d> uv = ThinContour(surface, run, r, chord, options.max_point_spacing_mm);
+      for (Eigen::Vector2d& p : uv) {
+        p = Eigen::Vector2d(std::clamp(p.x(), dom.u_min, dom.u_max), std::clamp(p.y(), dom.v_min, dom.v_max));
       }
+      const bool at_risk = near_concave(uv);
+      std::vector<ClPoint> cut;
+      for (const Eigen::Vector2d& p : uv) cut.push_back(cut_point(p.x(), p.y(), at_risk));
+      FL_RETURN_IF_ERROR(finish_pass(std::move(cut), frame.d, at_risk));
+      ++path.contour_passes;
     }
   }
   path.passes = pass;
@@ -1126,6 +1181,13 @@ nlohmann::json Toolpath::ReportJson() const {
                    {"leads_along_normal", leads_along_normal},
                    {"leads_vertical", leads_vertical},
                    {"min_safe_z_mm", std::isfinite(min_safe_z_mm) ? nlohmann::json(min_safe_z_mm) : nlohmann::json()}};
+  }
+  if (boundary_contour) {
+    out["boundary_contour"] = {
+        {"note",
+         "the passes meet the edges of Q's parameter box at a slant: one contour pass along its boundary keeps "
+         "the scallop target there"},
+        {"contour_passes", contour_passes}};
   }
   return out;
 }

@@ -117,6 +117,9 @@ struct Toolpath {
   // Trimmed Q: passes clipped to the trim, contour passes along its loops (header comment).
   bool trimmed = false;
   int contour_passes = 0;
+  // Untrimmed Q whose edges the passes meet at a slant: a contour pass along its parameter box's boundary
+  // (counted in contour_passes), so the edges keep the scallop target.
+  bool boundary_contour = false;
   // Neighbouring faces: usable-looking samples dropped because the ball would reach a neighbour, leads
   // changed to leave along the normal or vertically, and the lowest safe Z they allow (NaN: no neighbours
   // within reach).
