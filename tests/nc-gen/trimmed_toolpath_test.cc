@@ -196,9 +196,10 @@ TEST_F(TrimmedToolpathTest, ABallTooLargeForTheGapStopsShortOfThePin) {
 }
 
 // A face the ball reaches nowhere (a ceiling at z = 8 mm over a face from z = 0 to 5.7, nearer than the ball's
-// diameter everywhere) is refused naming the tool radius and the face's size; before, the planner
-// stopped with "internal error: no section plane met Q" when the blocking faces were not a trim (public
-// CAD files: a 0.3 mm fillet of OCCT's linkrods.step with a 0.5 mm ball).
+// diameter everywhere) is refused naming the tool radius and the face's size. Before, this trimmed face
+// gave "failed: no part of the trimmed face is reachable by the ball", and a face without a trim of its
+// own "internal error: no section plane met Q" (public CAD files: a 0.3 mm fillet of OCCT's
+// linkrods.step with a 0.5 mm ball).
 TEST_F(TrimmedToolpathTest, AFaceTheBallReachesNowhereIsRefusedNamingTheToolRadius) {
   const fs::path step = dir_ / "under_a_ceiling.step";
   const TopoDS_Face ceiling = BRepBuilderAPI_MakeFace(gp_Pln(gp_Pnt(0, 0, 8), gp_Dir(0, 0, -1)), -60, 60, -60, 60);
